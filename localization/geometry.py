@@ -1,0 +1,208 @@
+"""Rigid transforms and the pinhole camera: the conventions every other module relies on.
+
+Conventions (documented once, here, and tested against renders in ``tests/sim``):
+
+* Rigid transforms are 4x4 float64 arrays named ``b_from_a``; ``b_from_a @ p_a`` gives ``p_b``
+  for homogeneous points. The paper's (R, t) is ``cam_from_world``; the camera centre is
+  ``C = -R.T @ t``.
+* Camera frame: OpenCV (x right, y down, z forward).
+* Pixels: ``(u, v)`` with ``u`` to the right and ``v`` down; the centre of the pixel in column
+  ``i`` and row ``j`` is at ``(u, v) = (i, j)`` exactly (integer pixel centres, as in OpenCV).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "as_points",
+    "camera_center",
+    "check_intrinsics",
+    "check_transform",
+    "invert",
+    "look_at",
+    "make_transform",
+    "matrix_from_quat_wxyz",
+    "project",
+    "quat_wxyz_from_matrix",
+    "rotation_angle_deg",
+    "transform_points",
+]
+
+
+def as_points(name: str, points: ArrayLike, dim: int) -> NDArray[np.float64]:
+    """Return ``points`` as a float64 ``(N, dim)`` array, or raise naming ``name``.
+
+    Raises:
+        TypeError: if ``points`` is not numeric.
+        ValueError: if the shape is not ``(N, dim)``.
+    """
+    arr = np.asarray(points)
+    if arr.dtype == object or not (
+        np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_
+    ):
+        raise TypeError(f"{name} must be a numeric array of shape (N, {dim}), got dtype {arr.dtype}")
+    if arr.ndim == 1 and arr.size == 0:
+        arr = arr.reshape(0, dim)
+    if arr.ndim != 2 or arr.shape[1] != dim:
+        raise ValueError(f"{name} must have shape (N, {dim}), got {arr.shape}")
+    return arr.astype(np.float64, copy=False)
+
+
+def check_transform(name: str, transform: ArrayLike) -> NDArray[np.float64]:
+    """Return ``transform`` as a float64 4x4 rigid transform, or raise naming ``name``.
+
+    Raises:
+        TypeError: if it is not numeric.
+        ValueError: if it is not 4x4, not finite, its last row is not ``[0, 0, 0, 1]`` or its
+            rotation block is not orthonormal with determinant +1 (tolerance 1e-6).
+    """
+    arr = np.asarray(transform)
+    if arr.dtype == object or not np.issubdtype(arr.dtype, np.number):
+        raise TypeError(f"{name} must be a numeric 4x4 array, got dtype {arr.dtype}")
+    if arr.shape != (4, 4):
+        raise ValueError(f"{name} must have shape (4, 4), got {arr.shape}")
+    arr = arr.astype(np.float64, copy=False)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+    if not np.allclose(arr[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise ValueError(f"{name} last row must be [0, 0, 0, 1], got {arr[3].tolist()}")
+    rot = arr[:3, :3]
+    if not np.allclose(rot.T @ rot, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+        raise ValueError(f"{name} rotation block must be a proper rotation, got {rot.tolist()}")
+    return arr
+
+
+def check_intrinsics(name: str, K: ArrayLike) -> NDArray[np.float64]:
+    """Return ``K`` as a float64 3x3 pinhole intrinsic matrix, or raise naming ``name``.
+
+    Raises:
+        TypeError: if it is not numeric.
+        ValueError: if it is not 3x3, not finite, has non-positive focal lengths or a last row
+            other than ``[0, 0, 1]``.
+    """
+    arr = np.asarray(K)
+    if arr.dtype == object or not np.issubdtype(arr.dtype, np.number):
+        raise TypeError(f"{name} must be a numeric 3x3 array, got dtype {arr.dtype}")
+    if arr.shape != (3, 3):
+        raise ValueError(f"{name} must have shape (3, 3), got {arr.shape}")
+    arr = arr.astype(np.float64, copy=False)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+    if arr[0, 0] <= 0 or arr[1, 1] <= 0:
+        raise ValueError(f"{name} focal lengths must be positive, got fx={arr[0, 0]}, fy={arr[1, 1]}")
+    if not np.allclose(arr[2], [0.0, 0.0, 1.0]) or arr[1, 0] != 0:
+        raise ValueError(f"{name} must be upper triangular with last row [0, 0, 1], got {arr.tolist()}")
+    return arr
+
+
+def make_transform(rotation: ArrayLike, translation: ArrayLike) -> NDArray[np.float64]:
+    """Build a 4x4 ``b_from_a`` from a 3x3 rotation and a translation (3,)."""
+    out = np.eye(4)
+    out[:3, :3] = np.asarray(rotation, dtype=np.float64)
+    out[:3, 3] = np.asarray(translation, dtype=np.float64).reshape(3)
+    return out
+
+
+def invert(b_from_a: ArrayLike) -> NDArray[np.float64]:
+    """Invert a rigid transform exactly (``R.T``, ``-R.T t``), returning ``a_from_b``."""
+    T = np.asarray(b_from_a, dtype=np.float64)
+    R = T[:3, :3]
+    out = np.eye(4)
+    out[:3, :3] = R.T
+    out[:3, 3] = -R.T @ T[:3, 3]
+    return out
+
+
+def transform_points(b_from_a: ArrayLike, points_a: ArrayLike) -> NDArray[np.float64]:
+    """Apply a 4x4 rigid transform to points ``(N, 3)`` and return ``(N, 3)``."""
+    T = np.asarray(b_from_a, dtype=np.float64)
+    pts = np.asarray(points_a, dtype=np.float64).reshape(-1, 3)
+    return pts @ T[:3, :3].T + T[:3, 3]
+
+
+def camera_center(cam_from_world: ArrayLike) -> NDArray[np.float64]:
+    """Camera centre in the world frame, ``C = -R.T t``, shape (3,)."""
+    T = np.asarray(cam_from_world, dtype=np.float64)
+    return -T[:3, :3].T @ T[:3, 3]
+
+
+def project(
+    K: ArrayLike, cam_from_world: ArrayLike, points_world: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Project world points with the pinhole model.
+
+    Args:
+        K: (3, 3) intrinsics.
+        cam_from_world: (4, 4) rigid transform.
+        points_world: (N, 3) points in the world (project) frame, metres.
+
+    Returns:
+        ``(uv, depth)``: (N, 2) pixel coordinates (integer pixel centres) and (N,) depth along the
+        optical axis in metres. Points with ``depth <= 0`` are behind the camera; their ``uv`` is
+        still computed (and meaningless) unless ``depth == 0``, where it is NaN.
+    """
+    K = np.asarray(K, dtype=np.float64)
+    pts_cam = transform_points(cam_from_world, points_world)
+    depth = pts_cam[:, 2].copy()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xy = pts_cam[:, :2] / depth[:, None]
+    uv = xy @ K[:2, :2].T + K[:2, 2]
+    uv[depth == 0] = np.nan
+    return uv, depth
+
+
+def look_at(
+    eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)
+) -> NDArray[np.float64]:
+    """``cam_from_world`` of an OpenCV camera at ``eye`` looking at ``target``, image up ~ ``up``.
+
+    Raises:
+        ValueError: if ``eye == target`` or the viewing direction is parallel to ``up``.
+    """
+    eye = np.asarray(eye, dtype=np.float64).reshape(3)
+    target = np.asarray(target, dtype=np.float64).reshape(3)
+    up = np.asarray(up, dtype=np.float64).reshape(3)
+    forward = target - eye
+    norm = np.linalg.norm(forward)
+    if norm < 1e-12:
+        raise ValueError(f"look_at needs eye != target, got eye={eye.tolist()}")
+    z = forward / norm
+    x = np.cross(z, up)  # image right = forward x up
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError(
+            f"look_at viewing direction {z.tolist()} is parallel to up={up.tolist()}; pass another up"
+        )
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)  # image down
+    world_from_cam = np.eye(4)
+    world_from_cam[:3, 0] = x
+    world_from_cam[:3, 1] = y
+    world_from_cam[:3, 2] = z
+    world_from_cam[:3, 3] = eye
+    return invert(world_from_cam)
+
+
+def rotation_angle_deg(R_a: ArrayLike, R_b: ArrayLike) -> float:
+    """Geodesic angle between two rotations, ``angle(R_a.T @ R_b)``, in degrees."""
+    R = np.asarray(R_a, dtype=np.float64)[:3, :3].T @ np.asarray(R_b, dtype=np.float64)[:3, :3]
+    cos = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    return float(np.degrees(np.arccos(cos)))
+
+
+def quat_wxyz_from_matrix(R: ArrayLike) -> NDArray[np.float64]:
+    """Unit quaternion (w, x, y, z) with ``w >= 0`` of a rotation matrix (3x3 or the 4x4's block)."""
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = Rotation.from_matrix(np.asarray(R, dtype=np.float64)[:3, :3]).as_quat()
+    q = np.array([w, x, y, z])
+    return q if w >= 0 else -q
+
+
+def matrix_from_quat_wxyz(q: ArrayLike) -> NDArray[np.float64]:
+    """3x3 rotation matrix of a quaternion (w, x, y, z); the quaternion is normalised first."""
+    from scipy.spatial.transform import Rotation
+
+    w, x, y, z = np.asarray(q, dtype=np.float64).reshape(4)
+    return Rotation.from_quat([x, y, z, w]).as_matrix()

@@ -1,0 +1,19 @@
+"""The project's small exception hierarchy (after gymnasium.error)."""
+
+from __future__ import annotations
+
+
+class UavStructError(Exception):
+    """Base class of every error this project raises on purpose."""
+
+
+class SiteGeometryError(UavStructError, ValueError):
+    """A building description that cannot exist (overlaps, non-positive sizes, duplicates)."""
+
+
+class ConfigError(UavStructError, ValueError):
+    """An unknown or out-of-range configuration value."""
+
+
+class RendererUnavailableError(UavStructError, RuntimeError):
+    """A requested rendering backend cannot start on this machine."""
