@@ -1,0 +1,108 @@
+import math
+
+import numpy as np
+import pytest
+
+from uav_struct_env.errors import ConfigError
+from uav_struct_env.sim.sensors import GnssInsNoise, NoNoise, PaperNoise, Reading, make_noise
+
+POS = np.array([10.0, -20.0, 15.0])
+ATT = np.array([0.0, 0.4, 1.0])
+
+
+def reading(i=0, k=0, clearance=math.inf, dt=0.0, att=ATT):
+    return Reading(i, k, POS, att, clearance, dt)
+
+
+def test_paper_noise_magnitudes_and_documented_sign_pattern():
+    m = PaperNoise()
+    rng = np.random.default_rng(0)
+    gnss, att = m.measure(m.start(rng, 4), rng, reading(0, 0))
+    np.testing.assert_allclose(gnss - POS, [3, -3, 3])
+    np.testing.assert_allclose(np.degrees(att - ATT), [2, -2, 5])
+    for i in range(4):
+        for k in range(10):
+            g, a = m.measure(None, rng, reading(i, k))
+            s = (-1) ** (i + k)
+            np.testing.assert_allclose(g - POS, s * np.array([3, -3, 3]))
+            np.testing.assert_allclose(np.degrees(a - ATT), s * np.array([2, -2, 5]))
+
+
+def test_paper_noise_signs_balance_over_the_study_and_draw_nothing():
+    m = PaperNoise()
+    signs = [m.sign(i, k) for i in range(4) for k in range(10)]
+    assert sum(signs) == 0
+    rng = np.random.default_rng(5)
+    before = rng.bit_generator.state
+    m.measure(None, rng, reading(1, 3))
+    assert rng.bit_generator.state == before
+
+
+def test_angles_are_wrapped():
+    m = PaperNoise()
+    _, att = m.measure(
+        None, np.random.default_rng(0), reading(0, 0, att=np.array([0.0, 0.0, math.pi - 0.01]))
+    )
+    assert -math.pi <= att[2] < math.pi
+
+
+def test_gnss_ins_statistics_match_parameters():
+    m = GnssInsNoise()
+    rng = np.random.default_rng(1)
+    n = 4000
+    state = m.start(rng, n)
+    errs = np.array([m.measure(state, rng, reading(i))[0] - POS for i in range(n)])
+    expected = np.hypot(m.gnss_bias_sigma, m.gnss_white_sigma)
+    np.testing.assert_allclose(errs.std(axis=0), expected, rtol=0.06)
+    atts = np.array([m.measure(state, rng, reading(i))[1] - ATT for i in range(n)])
+    np.testing.assert_allclose(
+        atts.std(axis=0), np.hypot(m.attitude_bias_sigma, m.attitude_white_sigma), rtol=0.06
+    )
+
+
+def test_gnss_ins_bias_drifts_slowly_and_is_stationary():
+    m = GnssInsNoise(gnss_white_sigma=(0, 0, 0), near_structure_gain=0.0)
+    rng = np.random.default_rng(2)
+    state = m.start(rng, 1)
+    series = np.array([m.measure(state, rng, reading(0, dt=0.5))[0] - POS for _ in range(20000)])
+    # consecutive readings 0.5 s apart are almost equal (tau = 120 s)...
+    lag1 = np.corrcoef(series[:-1, 0], series[1:, 0])[0, 1]
+    assert lag1 == pytest.approx(math.exp(-0.5 / 120), abs=0.01)
+    # ...and the process keeps its stationary sigma
+    assert series[:, 0].std() == pytest.approx(m.gnss_bias_sigma[0], rel=0.3)
+
+
+def test_gnss_ins_error_grows_near_the_structure():
+    m = GnssInsNoise()
+    assert m.multipath_factor(0.0) == pytest.approx(3.0)
+    assert m.multipath_factor(1e9) == pytest.approx(1.0)
+    rng_a, rng_b = np.random.default_rng(3), np.random.default_rng(3)
+    sa, sb = m.start(rng_a, 1), m.start(rng_b, 1)
+    far = m.measure(sa, rng_a, reading(clearance=1e9))[0] - POS
+    near = m.measure(sb, rng_b, reading(clearance=0.0))[0] - POS
+    np.testing.assert_allclose(near, 3.0 * far)
+
+
+def test_seeded_generator_reproduces_readings():
+    m = GnssInsNoise()
+    out = []
+    for _ in range(2):
+        rng = np.random.default_rng(7)
+        st = m.start(rng, 2)
+        out.append([m.measure(st, rng, reading(i % 2, dt=0.5)) for i in range(10)])
+    for (g1, a1), (g2, a2) in zip(*out):
+        assert np.array_equal(g1, g2) and np.array_equal(a1, a2)
+
+
+def test_make_noise():
+    assert isinstance(make_noise("paper"), PaperNoise)
+    assert isinstance(make_noise("gnss_ins"), GnssInsNoise)
+    assert isinstance(make_noise("none"), NoNoise)
+    custom = PaperNoise(position_offset=1.0)
+    assert make_noise(custom) is custom
+    with pytest.raises(ConfigError, match="'gps'"):
+        make_noise("gps")
+    with pytest.raises(ConfigError, match="gnss_bias_sigma"):
+        GnssInsNoise(gnss_bias_sigma=(1.0, -1.0, 1.0))
+    with pytest.raises(ConfigError, match="position_pattern"):
+        PaperNoise(position_pattern=(1, 2, 1))

@@ -1,0 +1,295 @@
+"""Onboard pose sensors: noisy GNSS camera position and noisy camera attitude.
+
+Sensor models are small frozen dataclasses (their parameters) with two methods, after
+dm_control's observables that carry a noise function taking the random state:
+
+* ``start(rng, n_agents) -> state`` draws whatever is random per episode (biases);
+* ``measure(state, rng, reading) -> (gnss (3,), attitude (3,))`` returns one noisy reading of
+  the true camera position and (roll, pitch, yaw) and advances the state by ``reading.dt``.
+
+All randomness comes from the ``numpy.random.Generator`` passed in, in a fixed order, so a seeded
+generator reproduces every reading. Angles are rad; attitudes follow
+:mod:`uav_struct_env.sim.attitude` and the returned angles are wrapped to [-pi, pi).
+
+Models: :class:`PaperNoise` (the paper's deterministic offsets), :class:`GnssInsNoise` (white
+noise + Gauss-Markov bias, growing near the structure) and :class:`NoNoise`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from uav_struct_env.errors import ConfigError
+
+__all__ = [
+    "NOISE_MODELS",
+    "GnssInsNoise",
+    "NoNoise",
+    "PaperNoise",
+    "Reading",
+    "SensorModel",
+    "make_noise",
+]
+
+
+@dataclass(frozen=True)
+class Reading:
+    """What a sensor model may look at for one agent at one instant.
+
+    Attributes:
+        agent_index: index of the agent in ``possible_agents``.
+        viewpoint_index: the viewpoint counter used by :class:`PaperNoise` for its sign pattern
+            (the scripted viewpoint ``k`` at a scripted reset, plus one per step).
+        position: (3,) true camera position, m.
+        attitude: (3,) true camera (roll, pitch, yaw), rad.
+        clearance: distance from the camera to the nearest structural element, m.
+        dt: time since this agent's previous reading, s (0 at reset).
+    """
+
+    agent_index: int
+    viewpoint_index: int
+    position: NDArray[np.float64]
+    attitude: NDArray[np.float64]
+    clearance: float = math.inf
+    dt: float = 0.0
+
+
+@runtime_checkable
+class SensorModel(Protocol):
+    """The interface every sensor model implements."""
+
+    name: str
+
+    def start(self, rng: np.random.Generator, n_agents: int) -> Any:
+        """Draw the per-episode state (e.g. biases) for ``n_agents`` agents."""
+        ...
+
+    def measure(
+        self, state: Any, rng: np.random.Generator, reading: Reading
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Noisy ``(gnss (3,), attitude (3,))`` of one agent; advances ``state``."""
+        ...
+
+
+def _wrap(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+@dataclass(frozen=True)
+class NoNoise:
+    """Perfect sensors: the reading is the truth (for debugging and upper bounds)."""
+
+    name: str = "none"
+
+    def start(self, rng: np.random.Generator, n_agents: int) -> None:
+        """Nothing to draw."""
+        return None
+
+    def measure(self, state: None, rng: np.random.Generator, reading: Reading):
+        """The true position and attitude."""
+        return np.array(reading.position, dtype=np.float64), _wrap(
+            np.array(reading.attitude, dtype=np.float64)
+        )
+
+
+@dataclass(frozen=True)
+class PaperNoise:
+    """The paper's rough onboard pose (section III): fixed offsets with alternating signs.
+
+    GNSS = true position + ``s * position_offset * position_pattern`` and
+    attitude = true (roll, pitch, yaw) + ``s * (roll_offset, pitch_offset, yaw_offset) *
+    attitude_pattern`` with ``s = (-1) ** (agent_index + viewpoint_index)``.
+
+    With the default patterns, UAV 0 at viewpoint 0 reads ``(+3, -3, +3)`` m and
+    ``(+2, -2, +5)`` deg; UAV 1 at viewpoint 0 and UAV 0 at viewpoint 1 read the opposite signs,
+    so across the study's 4 x 10 images every axis is off by +offset in half the images and by
+    -offset in the other half. Deterministic: it draws nothing from the generator.
+    """
+
+    position_offset: float = 3.0
+    roll_offset: float = math.radians(2.0)
+    pitch_offset: float = math.radians(2.0)
+    yaw_offset: float = math.radians(5.0)
+    position_pattern: tuple[int, int, int] = (1, -1, 1)
+    attitude_pattern: tuple[int, int, int] = (1, -1, 1)
+    name: str = "paper"
+
+    def __post_init__(self) -> None:
+        for pname in ("position_pattern", "attitude_pattern"):
+            pattern = getattr(self, pname)
+            if len(pattern) != 3 or any(p not in (-1, 0, 1) for p in pattern):
+                raise ConfigError(f"PaperNoise.{pname} must be three of -1, 0, +1, got {pattern!r}")
+
+    @staticmethod
+    def sign(agent_index: int, viewpoint_index: int) -> int:
+        """The alternating sign ``(-1) ** (agent_index + viewpoint_index)``."""
+        return 1 if (agent_index + viewpoint_index) % 2 == 0 else -1
+
+    def offsets(
+        self, agent_index: int, viewpoint_index: int
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(position offset (3,) m, attitude offset (3,) rad)`` for one agent and viewpoint."""
+        s = self.sign(agent_index, viewpoint_index)
+        dp = s * self.position_offset * np.asarray(self.position_pattern, dtype=np.float64)
+        da = (
+            s
+            * np.array([self.roll_offset, self.pitch_offset, self.yaw_offset])
+            * np.asarray(self.attitude_pattern, dtype=np.float64)
+        )
+        return dp, da
+
+    def start(self, rng: np.random.Generator, n_agents: int) -> None:
+        """Nothing to draw."""
+        return None
+
+    def measure(self, state: None, rng: np.random.Generator, reading: Reading):
+        """Truth plus the signed offsets of this agent and viewpoint."""
+        dp, da = self.offsets(reading.agent_index, reading.viewpoint_index)
+        return (
+            np.asarray(reading.position, dtype=np.float64) + dp,
+            _wrap(np.asarray(reading.attitude, dtype=np.float64) + da),
+        )
+
+
+@dataclass
+class GnssInsState:
+    """Per-episode state of :class:`GnssInsNoise`: unit-variance GNSS bias processes (n, 3) and
+    the constant attitude biases (n, 3), rad.
+    """
+
+    gnss_bias_unit: NDArray[np.float64]
+    attitude_bias: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class GnssInsNoise:
+    """Consumer GNSS + AHRS errors: white noise plus slowly drifting bias, worse near structure.
+
+    GNSS position (per axis x, y, z, metres)::
+
+        gnss = p + m(c) * (bias_sigma * b + white_sigma * n),   n ~ N(0, 1)
+        b_{k+1} = phi * b_k + sqrt(1 - phi**2) * w,   phi = exp(-dt / bias_tau),  w ~ N(0, 1)
+        m(c) = 1 + near_structure_gain * exp(-c / near_structure_scale)
+
+    ``b`` is a first-order Gauss-Markov process with unit stationary variance, started from its
+    stationary distribution at reset; ``c`` is the camera's clearance from the structure, and
+    ``m(c)`` (3x at contact, ~1.7x at 10 m, ~1.3x at 20 m with the defaults) stands for multipath
+    and blocked sky near the building.
+
+    Attitude (roll, pitch, yaw, rad)::
+
+        attitude = truth + attitude_bias + attitude_white_sigma * n,
+        attitude_bias ~ N(0, attitude_bias_sigma**2) drawn once per episode.
+
+    Defaults and where they come from:
+
+    * GNSS: a u-blox M8-class single-frequency receiver specifies 2.5 m CEP horizontal (GPS)
+      ~ 2.1 m 1-sigma per horizontal axis; DJI specifies the Mavic 2 Pro's GPS hover accuracy as
+      +-1.5 m horizontal and +-0.5 m vertical (barometer-aided). Vertical GNSS error is typically
+      1.5-2x horizontal. Here: bias 1.5 / 1.5 / 2.5 m and white 0.4 / 0.4 / 0.7 m (x / y / z),
+      bias correlation time 120 s (GNSS error correlation times of minutes are standard in
+      Gauss-Markov error models, e.g. Groves, *Principles of GNSS, Inertial, and Multisensor
+      Integrated Navigation Systems*, 2nd ed., 2013).
+    * Attitude: MEMS AHRS datasheets (e.g. VectorNav VN-100: 0.5 deg static / 1 deg dynamic
+      pitch-roll, 2 deg magnetic heading) and the paper's own 2 deg / 5 deg budget. Here: bias
+      1.0 / 1.0 / 2.5 deg and white 0.2 / 0.2 / 0.5 deg (roll / pitch / yaw). Heading is worst
+      because it relies on the magnetometer, which steel reinforcement disturbs.
+    """
+
+    gnss_bias_sigma: tuple[float, float, float] = (1.5, 1.5, 2.5)
+    gnss_white_sigma: tuple[float, float, float] = (0.4, 0.4, 0.7)
+    gnss_bias_tau: float = 120.0
+    near_structure_gain: float = 2.0
+    near_structure_scale: float = 10.0
+    attitude_bias_sigma: tuple[float, float, float] = tuple(
+        math.radians(d) for d in (1.0, 1.0, 2.5)
+    )
+    attitude_white_sigma: tuple[float, float, float] = tuple(
+        math.radians(d) for d in (0.2, 0.2, 0.5)
+    )
+    name: str = "gnss_ins"
+
+    def __post_init__(self) -> None:
+        for pname in (
+            "gnss_bias_sigma",
+            "gnss_white_sigma",
+            "attitude_bias_sigma",
+            "attitude_white_sigma",
+        ):
+            v = getattr(self, pname)
+            if len(v) != 3 or any(not math.isfinite(x) or x < 0 for x in v):
+                raise ConfigError(
+                    f"GnssInsNoise.{pname} must be three non-negative numbers, got {v!r}"
+                )
+            object.__setattr__(self, pname, tuple(float(x) for x in v))
+        for pname in ("gnss_bias_tau", "near_structure_scale"):
+            v = getattr(self, pname)
+            if not math.isfinite(v) or v <= 0:
+                raise ConfigError(f"GnssInsNoise.{pname} must be positive, got {v!r}")
+        if not math.isfinite(self.near_structure_gain) or self.near_structure_gain < 0:
+            raise ConfigError(
+                f"GnssInsNoise.near_structure_gain must be >= 0, got {self.near_structure_gain!r}"
+            )
+
+    def multipath_factor(self, clearance: float) -> float:
+        """Error multiplier ``m(c)`` at clearance ``c`` m from the structure."""
+        c = max(float(clearance), 0.0)
+        return 1.0 + self.near_structure_gain * math.exp(-c / self.near_structure_scale)
+
+    def start(self, rng: np.random.Generator, n_agents: int) -> GnssInsState:
+        """Stationary GNSS biases and per-episode attitude biases for every agent."""
+        unit = rng.standard_normal((n_agents, 3))
+        att = rng.standard_normal((n_agents, 3)) * np.asarray(self.attitude_bias_sigma)
+        return GnssInsState(unit, att)
+
+    def measure(self, state: GnssInsState, rng: np.random.Generator, reading: Reading):
+        """One noisy reading; first advances the agent's GNSS bias by ``reading.dt``."""
+        i = reading.agent_index
+        if reading.dt > 0:
+            phi = math.exp(-reading.dt / self.gnss_bias_tau)
+            state.gnss_bias_unit[i] = phi * state.gnss_bias_unit[i] + math.sqrt(
+                1.0 - phi * phi
+            ) * rng.standard_normal(3)
+        white = rng.standard_normal(6)
+        m = self.multipath_factor(reading.clearance)
+        gnss = np.asarray(reading.position, dtype=np.float64) + m * (
+            np.asarray(self.gnss_bias_sigma) * state.gnss_bias_unit[i]
+            + np.asarray(self.gnss_white_sigma) * white[:3]
+        )
+        attitude = (
+            np.asarray(reading.attitude, dtype=np.float64)
+            + state.attitude_bias[i]
+            + np.asarray(self.attitude_white_sigma) * white[3:]
+        )
+        return gnss, _wrap(attitude)
+
+
+NOISE_MODELS: dict[str, SensorModel] = {
+    "paper": PaperNoise(),
+    "gnss_ins": GnssInsNoise(),
+    "none": NoNoise(),
+}
+
+
+def make_noise(noise: str | SensorModel) -> SensorModel:
+    """Resolve a noise argument: a model name (``"paper"``, ``"gnss_ins"``, ``"none"``) or a model.
+
+    Raises:
+        ConfigError: for an unknown name or an object that is not a sensor model.
+    """
+    if isinstance(noise, str):
+        if noise not in NOISE_MODELS:
+            raise ConfigError(
+                f"noise must be one of {sorted(NOISE_MODELS)} or a sensor model, got {noise!r}"
+            )
+        return NOISE_MODELS[noise]
+    if isinstance(noise, SensorModel):
+        return noise
+    raise ConfigError(
+        f"noise must be one of {sorted(NOISE_MODELS)} or a sensor model, got {noise!r}"
+    )

@@ -1,0 +1,257 @@
+"""Kinematic camera UAV: state, normalized viewpoint commands, geofence and collision geometry.
+
+Viewpoint planning, not flight control: a UAV is its camera centre, a heading and a stabilized
+gimbal pitch; commands are velocities held for one control period (explicit Euler). The camera
+sits at the UAV's position (the Mavic 2 Pro's ~0.1 m gimbal offset is ignored) and the gimbal
+keeps the camera roll at zero, so the true attitude is ``(0, gimbal_pitch, yaw)`` in the
+convention of :mod:`uav_struct_env.sim.attitude` (positive pitch looks down).
+
+Action (float32 (5,), each in [-1, 1], see :data:`ACTION_COMPONENTS`):
+
+====  ======================  =================================================================
+idx   component               scaling (defaults of :class:`FlightLimits`)
+====  ======================  =================================================================
+0     ``forward``             horizontal velocity along the heading, x ``max_horizontal_speed``
+1     ``left``                horizontal velocity 90 deg left of the heading, same scale; the
+                              (forward, left) pair is clipped to the unit disc first
+2     ``up``                  vertical velocity: +1 -> ``max_ascent_speed``,
+                              -1 -> ``max_descent_speed`` downwards
+3     ``yaw_rate``            heading rate, counter-clockwise seen from above, x ``max_yaw_rate``
+4     ``gimbal_pitch_rate``   camera pitch rate, positive tilts the camera *down*,
+                              x ``max_gimbal_rate``; pitch clipped to the gimbal range
+====  ======================  =================================================================
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from uav_struct_env.errors import ConfigError
+from uav_struct_env.sim.attitude import world_from_cam_from_attitude
+from uav_struct_env.site import Site
+
+__all__ = [
+    "ACTION_COMPONENTS",
+    "FlightLimits",
+    "Geofence",
+    "Obstacles",
+    "UavState",
+    "step_uav",
+    "wrap_angle",
+]
+
+ACTION_COMPONENTS = ("forward", "left", "up", "yaw_rate", "gimbal_pitch_rate")
+
+
+def wrap_angle(a: ArrayLike) -> NDArray[np.float64] | float:
+    """Wrap angles (rad) to [-pi, pi)."""
+    out = (np.asarray(a, dtype=np.float64) + np.pi) % (2.0 * np.pi) - np.pi
+    return float(out) if out.ndim == 0 else out
+
+
+def _check_positive(owner: str, name: str, value: float) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ConfigError(f"{owner}.{name} must be a number, got {value!r}")
+    if not math.isfinite(value) or value <= 0:
+        raise ConfigError(f"{owner}.{name} must be positive and finite, got {value!r}")
+
+
+@dataclass(frozen=True)
+class FlightLimits:
+    """Command limits of a DJI Mavic 2 Pro class camera UAV (SI units, rad).
+
+    DJI's published Mavic 2 Pro specifications: max speed 72 km/h (20 m/s) in S-mode, max ascent
+    5 m/s (S-mode) / 4 m/s (P-mode), max descent 3 m/s, max angular velocity 200 deg/s, gimbal
+    controllable tilt -90 deg (down) to +30 deg (up), max tilt control speed 120 deg/s.
+    The defaults are the calmer P-mode-like values a viewpoint survey would fly: 10 m/s
+    horizontal, 4 m/s up, 3 m/s down, 100 deg/s yaw, 90 deg/s gimbal. In this project's attitude
+    convention positive pitch looks down, so DJI's tilt range -90..+30 deg is camera pitch
+    ``-30 deg .. +90 deg``.
+    """
+
+    max_horizontal_speed: float = 10.0
+    max_ascent_speed: float = 4.0
+    max_descent_speed: float = 3.0
+    max_yaw_rate: float = math.radians(100.0)
+    max_gimbal_rate: float = math.radians(90.0)
+    gimbal_pitch_min: float = math.radians(-30.0)
+    gimbal_pitch_max: float = math.radians(90.0)
+
+    def __post_init__(self) -> None:
+        for name in (
+            "max_horizontal_speed",
+            "max_ascent_speed",
+            "max_descent_speed",
+            "max_yaw_rate",
+            "max_gimbal_rate",
+        ):
+            _check_positive("FlightLimits", name, getattr(self, name))
+        lo, hi = self.gimbal_pitch_min, self.gimbal_pitch_max
+        if not (-math.pi / 2 <= lo < hi <= math.pi / 2):
+            raise ConfigError(
+                f"FlightLimits gimbal pitch range must satisfy -pi/2 <= min < max <= pi/2 rad, "
+                f"got ({lo!r}, {hi!r})"
+            )
+
+
+@dataclass(frozen=True)
+class Geofence:
+    """The flight area: camera altitude above ground in ``[min_altitude, max_altitude]`` m and
+    horizontal distance from the site centre at most ``max_distance`` m.
+
+    Defaults: 2 m above ground, 120 m (the common EU/US limit for open-category flights), and
+    60 m from the building centre (the paper's viewpoints are 15-35 m out).
+    """
+
+    min_altitude: float = 2.0
+    max_altitude: float = 120.0
+    max_distance: float = 60.0
+
+    def __post_init__(self) -> None:
+        for name in ("min_altitude", "max_altitude", "max_distance"):
+            _check_positive("Geofence", name, getattr(self, name))
+        if self.min_altitude >= self.max_altitude:
+            raise ConfigError(
+                f"Geofence.min_altitude ({self.min_altitude}) must be below max_altitude "
+                f"({self.max_altitude})"
+            )
+
+    def violation(self, position: ArrayLike, center_xy: ArrayLike) -> str | None:
+        """Why ``position`` (3,) is outside the fence (``"below_min_altitude"`` ...), or None."""
+        p = np.asarray(position, dtype=np.float64)
+        if p[2] < self.min_altitude:
+            return "below_min_altitude"
+        if p[2] > self.max_altitude:
+            return "above_max_altitude"
+        if float(np.hypot(*(p[:2] - np.asarray(center_xy, dtype=np.float64)))) > self.max_distance:
+            return "beyond_max_distance"
+        return None
+
+
+@dataclass(frozen=True)
+class UavState:
+    """Kinematic state: camera centre (3,) in the project frame, heading and gimbal pitch (rad)."""
+
+    position: tuple[float, float, float]
+    yaw: float
+    pitch: float
+
+    @classmethod
+    def make(cls, position: ArrayLike, yaw: float, pitch: float) -> UavState:
+        """Build from an array position; the yaw is wrapped to [-pi, pi)."""
+        p = np.asarray(position, dtype=np.float64).reshape(3)
+        return cls((float(p[0]), float(p[1]), float(p[2])), float(wrap_angle(yaw)), float(pitch))
+
+    @property
+    def xyz(self) -> NDArray[np.float64]:
+        """Position as a float64 (3,) array."""
+        return np.array(self.position)
+
+    @property
+    def attitude(self) -> NDArray[np.float64]:
+        """True camera (roll, pitch, yaw), rad; roll is held at 0 by the gimbal."""
+        return np.array([0.0, self.pitch, self.yaw])
+
+    @property
+    def world_from_cam(self) -> NDArray[np.float64]:
+        """Ground-truth 4x4 ``world_from_cam``."""
+        return world_from_cam_from_attitude(self.position, self.attitude)
+
+
+def step_uav(
+    state: UavState, action: NDArray[np.floating], limits: FlightLimits, dt: float
+) -> UavState:
+    """Advance one control period ``dt`` (s) under a normalized action (5,) already in [-1, 1].
+
+    Velocities are expressed in the heading frame at the start of the period (explicit Euler).
+    """
+    a = np.asarray(action, dtype=np.float64)
+    horizontal = a[:2]
+    norm = float(np.hypot(horizontal[0], horizontal[1]))
+    if norm > 1.0:
+        horizontal = horizontal / norm
+    v_fwd, v_left = horizontal * limits.max_horizontal_speed
+    v_up = a[2] * (limits.max_ascent_speed if a[2] >= 0 else limits.max_descent_speed)
+    c, s = math.cos(state.yaw), math.sin(state.yaw)
+    velocity = np.array([c * v_fwd - s * v_left, s * v_fwd + c * v_left, v_up])
+    position = state.xyz + dt * velocity
+    yaw = state.yaw + dt * a[3] * limits.max_yaw_rate
+    pitch = float(
+        np.clip(
+            state.pitch + dt * a[4] * limits.max_gimbal_rate,
+            limits.gimbal_pitch_min,
+            limits.gimbal_pitch_max,
+        )
+    )
+    return UavState.make(position, yaw, pitch)
+
+
+@dataclass(frozen=True, eq=False)
+class Obstacles:
+    """The structure as axis-aligned boxes ``lo`` (B, 3), ``hi`` (B, 3), with names (B,).
+
+    Built from a :class:`~uav_struct_env.site.Site`: every cast column, and each slab cut into
+    boxes around its openings (a UAV may pass through the stair opening). Markers lie flat on the
+    ground and are not obstacles; the ground is handled by the geofence's minimum altitude.
+    """
+
+    lo: NDArray[np.float64]
+    hi: NDArray[np.float64]
+    names: tuple[str, ...]
+
+    @classmethod
+    def from_site(cls, site: Site) -> Obstacles:
+        """The site's cast columns and slabs as boxes."""
+        lo, hi, names = [], [], []
+        for col in site.columns:
+            sx, sy = col.section
+            lo.append((col.x - sx / 2, col.y - sy / 2, col.z_bottom))
+            hi.append((col.x + sx / 2, col.y + sy / 2, col.z_top))
+            names.append(col.name)
+        for slab in site.slabs:
+            z0, z1 = slab.z_top - slab.thickness, slab.z_top
+            xmin, ymin, xmax, ymax = slab.bounds
+            xs = sorted({xmin, xmax, *(b for op in slab.openings for b in op.bounds[0::2])})
+            ys = sorted({ymin, ymax, *(b for op in slab.openings for b in op.bounds[1::2])})
+            for x0, x1 in zip(xs[:-1], xs[1:]):
+                for y0, y1 in zip(ys[:-1], ys[1:]):
+                    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+                    if any(
+                        o[0] < cx < o[2] and o[1] < cy < o[3]
+                        for o in (op.bounds for op in slab.openings)
+                    ):
+                        continue
+                    lo.append((x0, y0, z0))
+                    hi.append((x1, y1, z1))
+                    names.append(slab.name)
+        return cls(
+            np.array(lo, dtype=np.float64).reshape(-1, 3),
+            np.array(hi, dtype=np.float64).reshape(-1, 3),
+            tuple(names),
+        )
+
+    @cached_property
+    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Overall bounding box ``(lo (3,), hi (3,))`` of the structure."""
+        return self.lo.min(axis=0), self.hi.max(axis=0)
+
+    def distances(self, points: ArrayLike) -> NDArray[np.float64]:
+        """Euclidean distance (N,) from each point (N, 3) to the nearest box (0 inside one)."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 1, 3)
+        if len(self.lo) == 0:
+            return np.full(p.shape[0], np.inf)
+        gap = np.maximum(np.maximum(self.lo[None] - p, p - self.hi[None]), 0.0)
+        return np.sqrt((gap**2).sum(axis=2)).min(axis=1)
+
+    def nearest(self, point: ArrayLike) -> tuple[float, str]:
+        """``(distance, name)`` of the box nearest to one point (3,)."""
+        p = np.asarray(point, dtype=np.float64).reshape(1, 3)
+        gap = np.maximum(np.maximum(self.lo - p, p - self.hi), 0.0)
+        d = np.sqrt((gap**2).sum(axis=1))
+        k = int(np.argmin(d))
+        return float(d[k]), self.names[k]
