@@ -1,0 +1,182 @@
+"""Environment configuration: one frozen dataclass, named presets and keyword overrides.
+
+``EnvConfig`` holds every knob of :class:`~uav_struct_env.envs.uav_struct.UavStructParallelEnv`.
+Build one with :func:`make_config` (``preset`` plus keyword overrides), which is what
+``uav_struct_env.parallel_env(**config)`` does. Presets (:data:`PRESETS`):
+
+* ``"paper"`` (default): the paper's camera (1280 x 720, fx = fy = 1108.5 px), the paper's
+  noise (3 m, 2 deg roll/pitch, 5 deg yaw, alternating signs), 1.0 m ArUco markers.
+* ``"train"``: the same field of view at 128 x 72 px, the ``gnss_ins`` noise model, no
+  landmark truth in ``info`` (saves the per-step projections), for RL training.
+
+Keys with a stable meaning (DESIGN.md): ``stage``, ``image_size``, ``marker_size``, ``noise``,
+``renderer``, ``max_cycles``, ``render_mode``. The rest may grow.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from uav_struct_env.errors import ConfigError
+from uav_struct_env.sim.schedule import ScheduleSpec
+from uav_struct_env.sim.sensors import SensorModel, make_noise
+from uav_struct_env.sim.uav import FlightLimits, Geofence
+from uav_struct_env.site import LANDMARK_SETS, STAGES, Site
+
+__all__ = ["PRESETS", "RENDER_MODES", "RENDERERS", "EnvConfig", "make_config"]
+
+RENDER_MODES = ("rgb_array",)
+RENDERERS = ("auto", "tiny", "egl")
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Configuration of the four-UAV environment. Units: metres, seconds, radians, pixels.
+
+    Attributes:
+        stage: construction stage, ``"slab"`` or ``"columns"``.
+        site: ``"paper"``, ``"random"`` (drawn once per env from ``site_seed``) or a
+            :class:`~uav_struct_env.site.Site`.
+        marker_size: ArUco marker side (m), or None for no markers.
+        image_size: ``(W, H)`` of the observed images. The intrinsics are the paper's camera
+            scaled to this size (same field of view).
+        noise: onboard sensor model: ``"paper"``, ``"gnss_ins"``, ``"none"`` or a model object
+            from :mod:`uav_struct_env.sim.sensors`.
+        renderer: ``"auto"`` (EGL if it starts, else TinyRenderer), ``"tiny"`` or ``"egl"``.
+        max_cycles: steps after which every live agent is truncated.
+        render_mode: None or ``"rgb_array"``.
+        n_agents: number of UAVs (``uav_0`` ... ``uav_{n-1}``), one per side sector.
+        control_period: seconds each action is held.
+        limits: command limits (:class:`~uav_struct_env.sim.uav.FlightLimits`).
+        geofence: flight area (:class:`~uav_struct_env.sim.uav.Geofence`).
+        uav_radius: collision radius of a UAV, m (Mavic 2 Pro diagonal 354 mm + margin).
+        schedule: the scripted viewpoint schedule's parameters (its ``seed`` fixes it per env).
+        landmark_sets: landmark sets whose ground truth goes in ``info["landmarks"]``; ``()``
+            skips the projections.
+        observe_depth: add ``obs["depth"]`` (float32 (H, W), metres along the optical axis).
+        texture_seed: seed of the per-env concrete textures (and of ``site="random"``).
+        render_view_height: height in pixels of each agent's tile in ``render()``.
+        render_fps: frame rate stored in ``metadata`` and used by the video helper.
+    """
+
+    stage: str = "columns"
+    site: str | Site = "paper"
+    marker_size: float | None = 1.0
+    image_size: tuple[int, int] = (1280, 720)
+    noise: str | SensorModel = "paper"
+    renderer: str = "auto"
+    max_cycles: int = 100
+    render_mode: str | None = None
+    n_agents: int = 4
+    control_period: float = 0.5
+    limits: FlightLimits = field(default_factory=FlightLimits)
+    geofence: Geofence = field(default_factory=Geofence)
+    uav_radius: float = 0.5
+    schedule: ScheduleSpec = field(default_factory=ScheduleSpec)
+    landmark_sets: tuple[str, ...] = LANDMARK_SETS
+    observe_depth: bool = False
+    texture_seed: int = 0
+    render_view_height: int = 180
+    render_fps: int = 2
+
+    def __post_init__(self) -> None:
+        if self.stage not in STAGES:
+            raise ConfigError(f"stage must be one of {STAGES}, got {self.stage!r}")
+        if not (isinstance(self.site, Site) or self.site in ("paper", "random")):
+            raise ConfigError(f"site must be 'paper', 'random' or a Site, got {self.site!r}")
+        if self.marker_size is not None:
+            if (
+                isinstance(self.marker_size, bool)
+                or not isinstance(self.marker_size, (int, float))
+                or not math.isfinite(self.marker_size)
+                or self.marker_size <= 0
+            ):
+                raise ConfigError(
+                    f"marker_size must be a positive side length in metres or None, got {self.marker_size!r}"
+                )
+        size = self.image_size
+        if (
+            not isinstance(size, (tuple, list))
+            or len(size) != 2
+            or any(
+                isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 16 for v in size
+            )
+        ):
+            raise ConfigError(f"image_size must be (width, height) ints >= 16, got {size!r}")
+        object.__setattr__(self, "image_size", (int(size[0]), int(size[1])))
+        object.__setattr__(self, "noise", make_noise(self.noise))
+        if self.renderer not in RENDERERS:
+            raise ConfigError(f"renderer must be one of {RENDERERS}, got {self.renderer!r}")
+        for name in ("max_cycles", "n_agents", "render_view_height", "render_fps"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ConfigError(f"{name} must be a positive int, got {v!r}")
+        if self.render_mode is not None and self.render_mode not in (*RENDER_MODES, "human"):
+            raise ConfigError(
+                f"render_mode must be None or one of {list(RENDER_MODES)}, got {self.render_mode!r}"
+            )
+        for name in ("control_period", "uav_radius"):
+            v = getattr(self, name)
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, (int, float))
+                or not math.isfinite(v)
+                or v <= 0
+            ):
+                raise ConfigError(f"{name} must be a positive number, got {v!r}")
+        sets = tuple(self.landmark_sets)
+        unknown = [s for s in sets if s not in LANDMARK_SETS]
+        if unknown:
+            raise ConfigError(
+                f"landmark_sets must be drawn from {LANDMARK_SETS}, got unknown {unknown}"
+            )
+        object.__setattr__(self, "landmark_sets", sets)
+        for name, cls in (
+            ("limits", FlightLimits),
+            ("geofence", Geofence),
+            ("schedule", ScheduleSpec),
+        ):
+            if not isinstance(getattr(self, name), cls):
+                raise ConfigError(f"{name} must be a {cls.__name__}, got {getattr(self, name)!r}")
+
+    def replace(self, **overrides: Any) -> EnvConfig:
+        """A copy with some fields replaced (validated again)."""
+        return _replace(self, overrides)
+
+
+def _replace(config: EnvConfig, overrides: dict[str, Any]) -> EnvConfig:
+    names = {f.name for f in dataclasses.fields(EnvConfig)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise ConfigError(f"unknown config keys {unknown}; valid keys are {sorted(names)}")
+    if "image_size" in overrides and isinstance(overrides["image_size"], list):
+        overrides = {**overrides, "image_size": tuple(overrides["image_size"])}
+    return dataclasses.replace(config, **overrides)
+
+
+PRESETS: dict[str, EnvConfig] = {
+    "paper": EnvConfig(),
+    "train": EnvConfig(image_size=(128, 72), noise="gnss_ins", landmark_sets=(), max_cycles=200),
+}
+
+
+def make_config(preset: str | EnvConfig = "paper", **overrides: Any) -> EnvConfig:
+    """A preset (name or :class:`EnvConfig`) with keyword overrides.
+
+    Raises:
+        ConfigError: for an unknown preset, an unknown key or an invalid value.
+    """
+    if isinstance(preset, EnvConfig):
+        base = preset
+    elif preset in PRESETS:
+        base = PRESETS[preset]
+    else:
+        raise ConfigError(
+            f"preset must be one of {sorted(PRESETS)} or an EnvConfig, got {preset!r}"
+        )
+    return _replace(base, overrides) if overrides else base

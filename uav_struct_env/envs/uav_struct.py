@@ -1,0 +1,389 @@
+"""The four-UAV PettingZoo parallel environment (``uav_struct_v0``).
+
+A thin adapter over :mod:`uav_struct_env.sim`: the site (:mod:`uav_struct_env.site`), one
+pybullet :class:`~uav_struct_env.sim.world.SiteWorld` per env (built at the first ``reset`` and
+reused; a reset only moves the UAVs), kinematic UAVs (:mod:`uav_struct_env.sim.uav`), onboard
+sensor models (:mod:`uav_struct_env.sim.sensors`) and the scripted viewpoint schedule
+(:mod:`uav_struct_env.sim.schedule`).
+
+Per agent and step:
+
+* observation ``{"image": uint8 (H, W, 3), "gnss": float32 (3,), "attitude": float32 (3,)}``
+  (+ ``"depth"`` float32 (H, W) with ``observe_depth``); attitude is (roll, pitch, yaw) rad in
+  the convention of :mod:`uav_struct_env.sim.attitude` (ZYX, body FLU, positive pitch looks
+  down), each wrapped to [-pi, pi);
+* info ``world_from_cam`` (ground truth), ``prior_world_from_cam`` (exactly
+  ``world_from_cam_from_attitude(obs["gnss"], obs["attitude"])`` in float64), ``intrinsics``
+  (3x3 K of the observed image), ``landmarks`` (per configured set: ids, xyz, uv, in_frame,
+  visible), ``viewpoint`` (k right after ``reset(options={"viewpoint": k})``, else -1),
+  ``noise_index`` (the viewpoint counter the paper noise's sign uses) and
+  ``termination_reason`` (None, ``"collision_structure"``, ``"collision_uav"``,
+  ``"below_min_altitude"``, ``"above_max_altitude"``, ``"beyond_max_distance"``);
+* reward ``0.0``: the base env has no localization and no task; the LocalizationWrapper adds
+  the reward. ``info["reward_terms"]`` is an empty dict that sums to it.
+
+Episode: a crash (structure within ``uav_radius``, another UAV within ``2 * uav_radius``) or
+leaving the geofence terminates that agent (it leaves ``env.agents``); after ``max_cycles``
+steps every remaining agent is truncated.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+from pettingzoo import ParallelEnv
+
+from localization.geometry import invert
+from uav_struct_env.envs.config import EnvConfig, make_config
+from uav_struct_env.envs.render import MapView, UavMarker, compose_frame, draw_site_map
+from uav_struct_env.sim.attitude import world_from_cam_from_attitude
+from uav_struct_env.sim.camera import Camera
+from uav_struct_env.sim.schedule import (
+    ViewpointSchedule,
+    _ViewTargets,
+    make_schedule,
+    sample_viewpoint,
+)
+from uav_struct_env.sim.sensors import Reading
+from uav_struct_env.sim.uav import ACTION_COMPONENTS, Obstacles, UavState, step_uav
+from uav_struct_env.site import Site, make_site
+
+__all__ = ["ACTION_COMPONENTS", "UavStructParallelEnv"]
+
+#: Bound on the gnss observation box (m); far outside any reachable geofence.
+GNSS_BOUND = 1.0e4
+
+
+class UavStructParallelEnv(ParallelEnv):
+    """Four camera UAVs around a construction site; see the module docstring.
+
+    Args:
+        config: an :class:`EnvConfig` or a preset name (``"paper"``, ``"train"``); default
+            ``"paper"``.
+        **overrides: :class:`EnvConfig` fields to override.
+    """
+
+    metadata = {
+        "name": "uav_struct_v0",
+        "render_modes": ["rgb_array"],
+        "render_fps": 2,
+        "is_parallelizable": True,
+    }
+
+    def __init__(self, config: EnvConfig | str | None = None, **overrides: Any) -> None:
+        self.config: EnvConfig = make_config("paper" if config is None else config, **overrides)
+        cfg = self.config
+        if cfg.render_mode == "human":
+            warnings.warn(
+                "render_mode='human' is not supported (no window); render() will return None. "
+                "Use render_mode='rgb_array' and the video helper instead.",
+                stacklevel=2,
+            )
+        self.render_mode = cfg.render_mode
+        self.metadata = {**type(self).metadata, "render_fps": cfg.render_fps}
+        self.max_cycles = cfg.max_cycles
+        self.possible_agents = [f"uav_{i}" for i in range(cfg.n_agents)]
+        self.agents: list[str] = []
+        self._index = {a: i for i, a in enumerate(self.possible_agents)}
+
+        self.site: Site = make_site(
+            cfg.site, cfg.stage, cfg.marker_size, rng=np.random.default_rng(cfg.texture_seed)
+        )
+        w, h = cfg.image_size
+        self.camera = Camera().scaled(w, h)
+        self.obstacles = Obstacles.from_site(self.site)
+        self.viewpoint_schedule: ViewpointSchedule = make_schedule(
+            self.site, cfg.n_agents, cfg.schedule
+        )
+        self._targets = _ViewTargets.from_site(self.site)
+        self._world = None
+
+        obs = {
+            "image": spaces.Box(0, 255, (h, w, 3), np.uint8),
+            "gnss": spaces.Box(-GNSS_BOUND, GNSS_BOUND, (3,), np.float32),
+            "attitude": spaces.Box(-np.pi, np.pi, (3,), np.float32),
+        }
+        if cfg.observe_depth:
+            obs["depth"] = spaces.Box(0.0, np.float32(self.camera.far), (h, w), np.float32)
+        self._observation_space = spaces.Dict(obs)
+        self._action_space = spaces.Box(-1.0, 1.0, (len(ACTION_COMPONENTS),), np.float32)
+
+        self._rng = np.random.default_rng()
+        self._states: dict[str, UavState] = {}
+        self._sensor_state: Any = None
+        self._viewpoint_base = 0
+        self._scripted_viewpoint = -1
+        self.num_cycles = 0
+        self._last_images: dict[str, NDArray[np.uint8]] = {}
+        self._priors: dict[str, NDArray[np.float64]] = {}
+        self._alive: dict[str, bool] = {}
+        self._map_view: MapView | None = None
+
+    # ------------------------------------------------------------------ spaces
+    def _check_agent(self, agent: str) -> None:
+        if agent not in self._index:
+            raise ValueError(f"unknown agent {agent!r}; agents are {self.possible_agents}")
+
+    def observation_space(self, agent: str) -> spaces.Dict:
+        """The (cached, shared) observation space; the same object for every agent."""
+        self._check_agent(agent)
+        return self._observation_space
+
+    def action_space(self, agent: str) -> spaces.Box:
+        """The (cached, shared) action space: Box(-1, 1, (5,), float32), see ``ACTION_COMPONENTS``."""
+        self._check_agent(agent)
+        return self._action_space
+
+    # ------------------------------------------------------------------ world
+    @property
+    def world(self):
+        """The env's :class:`~uav_struct_env.sim.world.SiteWorld` (built on first use)."""
+        if self._world is None:
+            from uav_struct_env.sim.world import SiteWorld
+
+            self._world = SiteWorld(
+                self.site,
+                renderer=self.config.renderer,
+                image_size=self.config.image_size,
+                rng=np.random.default_rng(self.config.texture_seed),
+            )
+        return self._world
+
+    # ------------------------------------------------------------------ reset / step
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        """Start an episode.
+
+        Args:
+            seed: seeds the env's generator (``0`` is a seed); None continues the stream.
+            options: ``{"viewpoint": k}`` places every UAV at viewpoint ``k`` of
+                ``env.viewpoint_schedule`` (and the paper noise uses ``k`` as its viewpoint
+                index). Without it each UAV starts at a random viewpoint on its own side drawn
+                from the schedule's ranges. Other keys are ignored (PettingZoo's API test
+                passes arbitrary options).
+
+        Raises:
+            ValueError: if ``viewpoint`` is not an int in ``[0, n_viewpoints)``.
+        """
+        if seed is not None:
+            self._rng = np.random.default_rng(seed)
+        viewpoint = None if options is None else options.get("viewpoint")
+        n = self.config.n_agents
+        if viewpoint is not None:
+            nv = self.viewpoint_schedule.n_viewpoints
+            if (
+                isinstance(viewpoint, bool)
+                or not isinstance(viewpoint, (int, np.integer))
+                or not 0 <= viewpoint < nv
+            ):
+                raise ValueError(
+                    f"options['viewpoint'] must be an int in [0, {nv}), got {viewpoint!r}"
+                )
+            k = int(viewpoint)
+            self._states = {
+                a: self.viewpoint_schedule.state(i, k) for i, a in enumerate(self.possible_agents)
+            }
+            self._viewpoint_base = k
+            self._scripted_viewpoint = k
+        else:
+            self._states = {
+                a: sample_viewpoint(self._targets, i, n, self._rng, self.config.schedule)[0]
+                for i, a in enumerate(self.possible_agents)
+            }
+            self._viewpoint_base = 0
+            self._scripted_viewpoint = -1
+        self._sensor_state = self.config.noise.start(self._rng, n)
+        self.agents = list(self.possible_agents)
+        self._alive = dict.fromkeys(self.agents, True)
+        self.num_cycles = 0
+        observations, infos = self._observe(self.agents, dt=0.0, reasons=dict.fromkeys(self.agents))
+        return observations, infos
+
+    def _validate_action(self, agent: Any, action: Any) -> NDArray[np.float64]:
+        if agent not in self._index:
+            raise ValueError(
+                f"action addressed to unknown agent {agent!r}; agents are {self.possible_agents}"
+            )
+        if agent not in self.agents:
+            raise ValueError(
+                f"action addressed to finished agent {agent!r} (terminated or truncated); "
+                f"live agents are {self.agents}, got action {action!r}"
+            )
+        arr = np.asarray(action) if action is not None else None
+        if arr is None or arr.dtype.kind not in "fiu":
+            raise ValueError(
+                f"action for {agent!r} must be a real numeric array of shape (5,) "
+                f"({', '.join(ACTION_COMPONENTS)}), got {action!r} with dtype "
+                f"{None if arr is None else arr.dtype}"
+            )
+        if arr.shape != self._action_space.shape:
+            raise ValueError(
+                f"action for {agent!r} must have shape {self._action_space.shape} "
+                f"({', '.join(ACTION_COMPONENTS)}), got shape {arr.shape}: {action!r}"
+            )
+        arr = arr.astype(np.float64)
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"action for {agent!r} must be finite, got {arr.tolist()}")
+        return np.clip(arr, -1.0, 1.0)
+
+    def step(self, actions: dict[str, Any]):
+        """Apply one action per live agent (missing agents hover) for ``control_period`` s.
+
+        Actions are validated before anything moves; values outside [-1, 1] are clipped.
+
+        Raises:
+            ValueError: for an action to an unknown or finished agent, or one that is NaN/inf,
+                of the wrong shape or of a non-numeric dtype (message names agent and value).
+        """
+        if not isinstance(actions, dict):
+            raise ValueError(
+                f"actions must be a dict mapping agent names to actions, got {type(actions).__name__}"
+            )
+        cleaned = {agent: self._validate_action(agent, a) for agent, a in actions.items()}
+        live = list(self.agents)
+        if not live:
+            return {}, {}, {}, {}, {}
+        cfg = self.config
+        hover = np.zeros(len(ACTION_COMPONENTS))
+        for agent in live:
+            self._states[agent] = step_uav(
+                self._states[agent], cleaned.get(agent, hover), cfg.limits, cfg.control_period
+            )
+        reasons = self._crashes(live)
+        self.num_cycles += 1
+        self._scripted_viewpoint = -1
+        observations, infos = self._observe(live, dt=cfg.control_period, reasons=reasons)
+        terminations = {a: reasons[a] is not None for a in live}
+        truncations = {
+            a: (not terminations[a]) and self.num_cycles >= self.max_cycles for a in live
+        }
+        rewards = dict.fromkeys(live, 0.0)
+        self.agents = [a for a in live if not (terminations[a] or truncations[a])]
+        for a in live:
+            self._alive[a] = a in self.agents
+        return observations, rewards, terminations, truncations, infos
+
+    def _crashes(self, live: list[str]) -> dict[str, str | None]:
+        """Termination reason per live agent (None: still flying)."""
+        cfg = self.config
+        center = self.site.center[:2]
+        pos = np.array([self._states[a].xyz for a in live])
+        reasons: dict[str, str | None] = {}
+        clearance = self.obstacles.distances(pos)
+        for k, a in enumerate(live):
+            fence = cfg.geofence.violation(pos[k], center)
+            reasons[a] = (
+                fence
+                if fence is not None
+                else ("collision_structure" if clearance[k] < cfg.uav_radius else None)
+            )
+        for k, a in enumerate(live):
+            if reasons[a] is None:
+                others = np.delete(pos, k, axis=0)
+                if (
+                    len(others)
+                    and np.min(np.linalg.norm(others - pos[k], axis=1)) < 2 * cfg.uav_radius
+                ):
+                    reasons[a] = "collision_uav"
+        return reasons
+
+    def _observe(self, agents: list[str], dt: float, reasons: dict[str, str | None]):
+        cfg = self.config
+        world = self.world
+        need_depth = cfg.observe_depth or bool(cfg.landmark_sets)
+        K = self.camera.K
+        observations: dict[str, dict[str, NDArray]] = {}
+        infos: dict[str, dict[str, Any]] = {}
+        clearance = self.obstacles.distances(np.array([self._states[a].xyz for a in agents]))
+        for k, agent in enumerate(agents):
+            i = self._index[agent]
+            state = self._states[agent]
+            noise_index = self._viewpoint_base + self.num_cycles
+            gnss, attitude = cfg.noise.measure(
+                self._sensor_state,
+                self._rng,
+                Reading(i, noise_index, state.xyz, state.attitude, float(clearance[k]), dt),
+            )
+            gnss32 = np.clip(gnss, -GNSS_BOUND, GNSS_BOUND).astype(np.float32)
+            att32 = np.clip(attitude, -np.pi, np.pi).astype(np.float32)
+            world_from_cam = state.world_from_cam
+            cam_from_world = invert(world_from_cam)
+            result = world.render(cam_from_world, self.camera, depth=need_depth)
+            obs = {"image": result.rgb, "gnss": gnss32, "attitude": att32}
+            if cfg.observe_depth:
+                obs["depth"] = np.asarray(result.depth, dtype=np.float32)
+            prior = world_from_cam_from_attitude(
+                gnss32.astype(np.float64), att32.astype(np.float64)
+            )
+            landmarks = {
+                name: world.landmark_truth(name, cam_from_world, self.camera, result.depth)
+                for name in cfg.landmark_sets
+            }
+            observations[agent] = obs
+            infos[agent] = {
+                "world_from_cam": world_from_cam,
+                "prior_world_from_cam": prior,
+                "intrinsics": K.copy(),
+                "landmarks": landmarks,
+                "viewpoint": self._scripted_viewpoint,
+                "noise_index": noise_index,
+                "termination_reason": reasons.get(agent),
+                "reward_terms": {},
+            }
+            self._last_images[agent] = result.rgb
+            self._priors[agent] = prior
+        return observations, infos
+
+    # ------------------------------------------------------------------ render / close
+    def render(self) -> NDArray[np.uint8] | None:
+        """The ``rgb_array`` frame: views side by side plus the top-down map (None otherwise)."""
+        if self.render_mode is None:
+            warnings.warn(
+                "render() called with render_mode=None; pass render_mode='rgb_array'", stacklevel=2
+            )
+            return None
+        if self.render_mode != "rgb_array":
+            return None
+        cfg = self.config
+        if self._map_view is None:
+            sched = self.viewpoint_schedule
+            reach = float(np.max(sched.horizontal_distances)) + 8.0
+            c = self.site.center
+            self._map_view = MapView((float(c[0]), float(c[1])), reach, 2 * cfg.render_view_height)
+        markers = [
+            UavMarker(
+                a,
+                self._states[a].xyz,
+                self._states[a].yaw,
+                self._priors[a][:3, 3] if a in self._priors else None,
+                self._alive.get(a, False),
+            )
+            for a in self.possible_agents
+            if a in self._states
+        ]
+        site_map = draw_site_map(self.site, markers, self._map_view)
+        views = {a: self._last_images.get(a) for a in self.possible_agents}
+        w, h = cfg.image_size
+        return compose_frame(views, site_map, cfg.render_view_height, w / h)
+
+    def close(self) -> None:
+        """Release the pybullet client."""
+        if self._world is not None:
+            self._world.close()
+            self._world = None
+
+    # ------------------------------------------------------------------ helpers for scripts
+    def uav_state(self, agent: str) -> UavState:
+        """The kinematic state of one agent (ground truth)."""
+        self._check_agent(agent)
+        return self._states[agent]
+
+    def __repr__(self) -> str:
+        c = self.config
+        return (
+            f"UavStructParallelEnv(stage={c.stage!r}, image_size={c.image_size}, noise={c.noise.name!r}, "
+            f"n_agents={c.n_agents}, max_cycles={self.max_cycles})"
+        )
