@@ -1,4 +1,61 @@
 """Localization from BIM structural landmarks: detect, associate, PnP, ArUco baseline, metrics.
 
 Pure numpy / scipy / OpenCV; usable on images and poses that did not come from the simulator.
+
+    from localization import Localizer
+    loc = Localizer(landmarks_xyz, K, association="robust")   # or "paper"
+    est = loc.localize(detections_uv, prior_cam_from_world)
+    est.success, est.cam_from_world, est.assignment
+
+One stage per module: :mod:`~localization.detect`, :mod:`~localization.associate`,
+:mod:`~localization.pnp`, :mod:`~localization.aruco`, :mod:`~localization.metrics`, composed in
+:mod:`~localization.pipeline`. Conventions: :mod:`~localization.geometry`.
 """
+
+from localization.associate import Association, assign, associate_paper, associate_robust
+from localization.detect import Detections, Detector, ProjectionDetector
+from localization.metrics import (
+    AssociationScores,
+    CramerRaoBound,
+    ErrorSummary,
+    association_scores,
+    cramer_rao_bound,
+    detection_rate,
+    latency_summary,
+    pose_errors,
+    recall_at,
+    rotation_error_deg,
+    summarize_errors,
+    translation_error_m,
+)
+from localization.pipeline import ASSOCIATION_METHODS, Localizer, PoseEstimate
+from localization.pnp import PnPResult, PriorSigmas, pose_covariance, solve_pnp
+
+__all__ = [
+    "ASSOCIATION_METHODS",
+    "Association",
+    "AssociationScores",
+    "CramerRaoBound",
+    "Detections",
+    "Detector",
+    "ErrorSummary",
+    "Localizer",
+    "PnPResult",
+    "PoseEstimate",
+    "PriorSigmas",
+    "ProjectionDetector",
+    "assign",
+    "associate_paper",
+    "associate_robust",
+    "association_scores",
+    "cramer_rao_bound",
+    "detection_rate",
+    "latency_summary",
+    "pose_covariance",
+    "pose_errors",
+    "recall_at",
+    "rotation_error_deg",
+    "solve_pnp",
+    "summarize_errors",
+    "translation_error_m",
+]

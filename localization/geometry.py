@@ -27,6 +27,9 @@ __all__ = [
     "project",
     "quat_wxyz_from_matrix",
     "rotation_angle_deg",
+    "skew",
+    "so3_exp",
+    "so3_log",
     "transform_points",
 ]
 
@@ -206,3 +209,40 @@ def matrix_from_quat_wxyz(q: ArrayLike) -> NDArray[np.float64]:
 
     w, x, y, z = np.asarray(q, dtype=np.float64).reshape(4)
     return Rotation.from_quat([x, y, z, w]).as_matrix()
+
+
+def skew(v: ArrayLike) -> NDArray[np.float64]:
+    """3x3 cross-product matrix ``[v]x`` with ``skew(v) @ w == np.cross(v, w)``."""
+    x, y, z = np.asarray(v, dtype=np.float64).reshape(3)
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def so3_exp(rotvec: ArrayLike) -> NDArray[np.float64]:
+    """Rotation matrix of a rotation vector (axis * angle, rad), Rodrigues' formula."""
+    w = np.asarray(rotvec, dtype=np.float64).reshape(3)
+    theta = float(np.linalg.norm(w))
+    W = skew(w)
+    if theta < 1e-8:
+        return np.eye(3) + W + 0.5 * W @ W
+    return (
+        np.eye(3)
+        + (np.sin(theta) / theta) * W
+        + ((1.0 - np.cos(theta)) / theta**2) * W @ W
+    )
+
+
+def so3_log(R: ArrayLike) -> NDArray[np.float64]:
+    """Rotation vector (axis * angle, rad, angle in [0, pi]) of a rotation matrix."""
+    R = np.asarray(R, dtype=np.float64)[:3, :3]
+    cos = float(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if cos > 0.99:  # small angles: sin(theta) ~ |w| / 2, stable
+        s = 0.5 * float(np.linalg.norm(w))
+        theta = float(np.arcsin(min(s, 1.0)))
+        return w * (0.5 if s < 1e-12 else theta / (2.0 * s))
+    if cos > -0.99:
+        theta = float(np.arccos(cos))
+        return w * (theta / (2.0 * np.sin(theta)))
+    from scipy.spatial.transform import Rotation  # near pi: let scipy handle the sign
+
+    return Rotation.from_matrix(R).as_rotvec()

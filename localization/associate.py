@@ -1,0 +1,450 @@
+"""Stage 2, association: anonymous detections + BIM landmarks + rough prior pose -> identities.
+
+Two methods:
+
+``paper`` (:func:`associate_paper`)
+    The paper's method: project the BIM landmarks with the prior pose, keep those in front of the
+    camera and near the image, and solve the rectangular minimum-cost one-to-one assignment on
+    squared pixel distance (``scipy.optimize.linear_sum_assignment``, Crouse 2016). Every detection
+    is assigned whenever there are at least as many projected landmarks; nothing is gated.
+
+``robust`` (:func:`associate_robust`)
+    Goes beyond it for a detector that misses landmarks and reports clutter and a prior that is off
+    by metres and degrees:
+
+    1. *Hypotheses.* The prior's error mostly shifts the projected layout in the image and
+       scales it (distance error). For a few scales, every (detection, projected landmark) pair
+       proposes a 2D shift; maps are ranked by how many other pairs agree with them (a Hough
+       vote), and the best distinct ones, plus the unchanged prior, each give a gated assignment.
+    2. *Re-association.* Each hypothesis is turned into a pose (PnP, candidates chosen with the
+       prior as tie-breaker), the landmarks are re-projected with that pose and re-assigned with
+       a gate that tightens to ``gate_px``, until the assignment is stable.
+    3. *Scoring.* Each final hypothesis is scored by a negative log-likelihood: squared residuals
+       of the inliers over ``pixel_sigma^2``, a fixed cost per unassigned detection (clutter) and
+       per landmark predicted inside the image but not detected (miss), plus the squared
+       Mahalanobis distance of the pose from the prior (sigmas 3 m, 2/2/5 degrees by default).
+       The prior term is what decides between assignments that fit equally well, such as the
+       permutations of four coplanar corners.
+
+    Gating means a detection (clutter) or a landmark (miss, occlusion) may stay unassigned.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import linear_sum_assignment
+
+from localization.geometry import project
+from localization.pnp import (
+    PriorSigmas,
+    is_coplanar,
+    pnp_candidates,
+    prior_mahalanobis_sq,
+    refine_pose,
+    reprojection_residuals,
+    solve_pnp,
+)
+
+__all__ = [
+    "Association",
+    "assign",
+    "associate_paper",
+    "associate_robust",
+    "candidate_landmarks",
+]
+
+_BIG = 1e12
+
+
+@dataclass(frozen=True)
+class Association:
+    """Result of an association.
+
+    Attributes:
+        assignment: (N,) model landmark index of each detection, -1 when unassigned.
+        cam_from_world: (4, 4) the pose the final assignment was computed against (the prior for
+            ``paper``; the best hypothesis' refined pose for ``robust``).
+        cost: sum of squared pixel distances of the assigned pairs at that pose, px^2.
+        score: the hypothesis score (``robust``: negative log-likelihood; ``paper``: ``cost``).
+        n_hypotheses: number of distinct hypotheses evaluated.
+        failure_reason: set when nothing could be assigned (e.g. no landmark in front of the
+            camera), else None.
+    """
+
+    assignment: NDArray[np.int64]
+    cam_from_world: NDArray[np.float64]
+    cost: float
+    score: float
+    n_hypotheses: int = 1
+    failure_reason: str | None = None
+
+    @property
+    def n_assigned(self) -> int:
+        """Number of detections with a model landmark."""
+        return int(np.sum(self.assignment >= 0))
+
+
+def candidate_landmarks(
+    landmarks_xyz: NDArray[np.float64],
+    K: NDArray[np.float64],
+    cam_from_world: NDArray[np.float64],
+    image_size: tuple[int, int],
+    margin_px: float,
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Indices and projections of the landmarks in front of the camera and near the image.
+
+    "Near" means within ``margin_px`` of the image rectangle ``[-0.5, W - 0.5] x [-0.5, H - 0.5]``.
+    """
+    uv, depth = project(K, cam_from_world, landmarks_xyz)
+    w, h = image_size
+    ok = (depth > 1e-6) & np.isfinite(uv).all(axis=1)
+    ok &= (uv[:, 0] >= -0.5 - margin_px) & (uv[:, 0] <= w - 0.5 + margin_px)
+    ok &= (uv[:, 1] >= -0.5 - margin_px) & (uv[:, 1] <= h - 0.5 + margin_px)
+    idx = np.flatnonzero(ok)
+    return idx, uv[idx]
+
+
+def assign(
+    det_uv: NDArray[np.float64], model_uv: NDArray[np.float64], gate_px: float | None = None
+) -> NDArray[np.int64]:
+    """Minimum total squared distance one-to-one assignment of detections to model points.
+
+    Args:
+        det_uv: (N, 2) detections.
+        model_uv: (M, 2) projected model points.
+        gate_px: if given, a pair farther apart than this is never made, and a detection may stay
+            unassigned (each unassigned detection costs ``gate_px^2``, so a pair is only made when
+            it is within the gate); if None, the plain rectangular assignment (the paper's).
+
+    Returns:
+        (N,) index into ``model_uv`` per detection, -1 when unassigned.
+    """
+    n, m = det_uv.shape[0], model_uv.shape[0]
+    out = np.full(n, -1, dtype=np.int64)
+    if n == 0 or m == 0:
+        return out
+    d2 = np.sum((det_uv[:, None, :] - model_uv[None, :, :]) ** 2, axis=2)
+    d2 = np.where(np.isfinite(d2), d2, _BIG)
+    if gate_px is None:
+        rows, cols = linear_sum_assignment(d2)
+        out[rows] = cols
+        return out
+    g2 = float(gate_px) ** 2
+    cost = np.where(d2 <= g2, d2, _BIG)
+    # dummy column per detection: "unassigned" at cost g2
+    dummy = np.full((n, n), _BIG)
+    np.fill_diagonal(dummy, g2)
+    rows, cols = linear_sum_assignment(np.hstack([cost, dummy]))
+    real = cols < m
+    real &= cost[rows, np.minimum(cols, m - 1)] < _BIG
+    out[rows[real]] = cols[real]
+    return out
+
+
+def associate_paper(
+    detections_uv: NDArray[np.float64],
+    landmarks_xyz: NDArray[np.float64],
+    K: NDArray[np.float64],
+    prior_cam_from_world: NDArray[np.float64],
+    image_size: tuple[int, int],
+    margin_px: float,
+) -> Association:
+    """The paper's association: plain rectangular linear assignment at the prior projection.
+
+    Inputs are assumed validated (see :class:`localization.pipeline.Localizer`); detections with
+    NaN coordinates stay unassigned.
+    """
+    n = detections_uv.shape[0]
+    out = np.full(n, -1, dtype=np.int64)
+    idx, proj = candidate_landmarks(landmarks_xyz, K, prior_cam_from_world, image_size, margin_px)
+    if idx.size == 0:
+        return Association(out, prior_cam_from_world, 0.0, 0.0, 1,
+                           "no landmark projects in front of the prior camera near the image")
+    good = np.flatnonzero(np.isfinite(detections_uv).all(axis=1))
+    local = assign(detections_uv[good], proj, None)
+    ok = local >= 0
+    out[good[ok]] = idx[local[ok]]
+    a = out >= 0
+    cost = float(np.sum((detections_uv[a] - project(K, prior_cam_from_world, landmarks_xyz[out[a]])[0]) ** 2))
+    return Association(out, prior_cam_from_world, cost, cost, 1, None)
+
+
+def _layout_hypotheses(
+    det: NDArray, proj: NDArray, center: NDArray, scales: tuple[float, ...], vote_px: float, k: int
+) -> list[tuple[float, NDArray]]:
+    """Up to ``k`` distinct (scale, shift) maps of the projected layout onto the detections.
+
+    The prior's error mostly shifts the projected layout (attitude, lateral position) and scales it
+    about the principal point (distance). For each scale, every (detection, scaled projection)
+    pair proposes a shift; shifts are binned in cells of ``vote_px`` and a cell's vote is the
+    number of shifts in it and its eight neighbours (a Hough vote, O(N M) per scale). The
+    best-voted distinct hypotheses over all scales are returned, ties broken towards scale 1 and
+    small shifts (the prior is right on average); each shift is the mean of the shifts within
+    ``vote_px`` of its cell's mean.
+    """
+    cands = []
+    offsets = np.array([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)])
+    per_scale = {}
+    for scale in scales:
+        p = center + scale * (proj - center)
+        shifts = (det[:, None, :] - p[None, :, :]).reshape(-1, 2)
+        cells = np.floor(shifts / vote_px).astype(np.int64)
+        keys = (cells[:, 0] + 2**20) * 2**21 + (cells[:, 1] + 2**20)
+        ukeys, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+        votes = np.zeros(ukeys.size, dtype=np.int64)
+        ucells = np.stack([ukeys // 2**21 - 2**20, ukeys % 2**21 - 2**20], axis=1)
+        for off in offsets:
+            nk = (ucells[:, 0] + off[0] + 2**20) * 2**21 + (ucells[:, 1] + off[1] + 2**20)
+            pos = np.searchsorted(ukeys, nk)
+            pos = np.minimum(pos, ukeys.size - 1)
+            votes += np.where(ukeys[pos] == nk, counts[pos], 0)
+        per_scale[scale] = (shifts, inverse)
+        top = np.argsort(-votes, kind="stable")[: 2 * k]
+        for c in top:
+            mean = shifts[inverse.reshape(-1) == c].mean(axis=0)
+            cands.append((int(votes[c]), abs(np.log(scale)), float(mean @ mean), scale, mean))
+    cands.sort(key=lambda c: (-c[0], c[1], c[2]))
+    chosen: list[tuple[float, NDArray]] = []
+    for _, _, _, scale, mean in cands:
+        shifts, _ = per_scale[scale]
+        near = np.sum((shifts - mean) ** 2, axis=1) <= vote_px**2
+        shift = shifts[near].mean(axis=0) if near.any() else mean
+        if all(sc != scale or np.sum((shift - sh) ** 2) > (0.5 * vote_px) ** 2 for sc, sh in chosen):
+            chosen.append((scale, shift))
+            if len(chosen) >= k:
+                break
+    return chosen
+
+
+def _exhaustive_hypotheses(
+    det: NDArray,
+    good: NDArray,
+    idx: NDArray,
+    landmarks_xyz: NDArray,
+    K: NDArray,
+    prior: NDArray,
+    need: int,
+    pixel_sigma: float,
+    gate_px: float,
+    sig: PriorSigmas,
+    limit: int,
+    keep: int,
+) -> list[NDArray] | None:
+    """Every one-to-one assignment of the largest size, scored by PnP fit + prior; None if too many.
+
+    For small sets (a slab's four corners) the layout vote is weak (the corners spread over the
+    whole image, so distance and perspective errors of the prior exceed the coarse gate), and
+    enumerating is cheap: each assignment gets its IPPE/SQPnP candidates, scored by
+    ``sum r^2 / sigma^2 + prior Mahalanobis^2 + (unused detections) * gate^2 / sigma^2``; the best
+    ``keep`` go on to re-association.
+    """
+    n_good, m = good.size, idx.size
+    k = min(n_good, m)
+    if k < need:
+        return []
+    count = math.comb(n_good, k) * math.perm(m, k)
+    if count > limit:
+        return None
+    coplanar = is_coplanar(landmarks_xyz[idx])
+    unused_cost = (n_good - k) * (gate_px / pixel_sigma) ** 2
+    scored: list[tuple[float, NDArray]] = []
+    for dsub in itertools.combinations(range(n_good), k):
+        u = det[good[list(dsub)]]
+        for msub in itertools.permutations(range(m), k):
+            X = landmarks_xyz[idx[list(msub)]]
+            best = np.inf
+            for T in pnp_candidates(X, u, K, coplanar=coplanar):
+                res, depth = reprojection_residuals(K, T, X, u)
+                if not np.all(depth > 0):
+                    continue
+                score = float(np.sum(res**2)) / pixel_sigma**2 + prior_mahalanobis_sq(T, prior, sig)
+                best = min(best, score)
+            if np.isfinite(best):
+                a = np.full(det.shape[0], -1, dtype=np.int64)
+                a[good[list(dsub)]] = idx[list(msub)]
+                scored.append((best + unused_cost, a))
+    scored.sort(key=lambda t: t[0])
+    return [a for _, a in scored[:keep]]
+
+
+def _nll(
+    det: NDArray,
+    landmarks_xyz: NDArray,
+    K: NDArray,
+    T: NDArray,
+    assignment: NDArray,
+    prior: NDArray,
+    image_size: tuple[int, int],
+    pixel_sigma: float,
+    gate_px: float,
+    miss_cost: float,
+    prior_sigmas: PriorSigmas,
+) -> float:
+    a = assignment >= 0
+    res, _ = reprojection_residuals(K, T, landmarks_xyz[assignment[a]], det[a])
+    inlier = float(np.sum(res**2)) / pixel_sigma**2
+    n_unassigned = int(np.sum(~a))
+    idx, _ = candidate_landmarks(landmarks_xyz, K, T, image_size, 0.0)
+    n_missed = int(np.setdiff1d(idx, assignment[a]).size)
+    return (
+        inlier
+        + n_unassigned * (gate_px / pixel_sigma) ** 2
+        + n_missed * miss_cost
+        + prior_mahalanobis_sq(T, prior, prior_sigmas)
+    )
+
+
+def associate_robust(
+    detections_uv: NDArray[np.float64],
+    landmarks_xyz: NDArray[np.float64],
+    K: NDArray[np.float64],
+    prior_cam_from_world: NDArray[np.float64],
+    image_size: tuple[int, int],
+    margin_px: float,
+    *,
+    pixel_sigma: float = 1.0,
+    gate_px: float | None = None,
+    coarse_gate_px: float = 40.0,
+    max_hypotheses: int = 8,
+    max_iterations: int = 6,
+    min_correspondences: int = 4,
+    miss_cost: float = 4.0,
+    prior_sigmas: PriorSigmas | None = None,
+    max_prior_mahalanobis_sq: float | None = 22.46,
+    scales: tuple[float, ...] = (0.8, 0.9, 1.0, 1.1, 1.25),
+    exhaustive_limit: int = 150,
+) -> Association:
+    """Robust association: shift hypotheses, re-association after each PnP, likelihood scoring.
+
+    Args:
+        detections_uv, landmarks_xyz, K, prior_cam_from_world, image_size, margin_px: as for
+            :func:`associate_paper` (validated inputs).
+        pixel_sigma: detector noise, px.
+        gate_px: final inlier gate, px; default ``max(5 * pixel_sigma, 3)``.
+        coarse_gate_px: gate of the first assignment of each shift hypothesis, px.
+        max_hypotheses: number of shift hypotheses tried (besides the unshifted prior).
+        max_iterations: PnP / re-association rounds per hypothesis.
+        min_correspondences: a hypothesis needs this many pairs to be turned into a pose.
+        miss_cost: cost of a landmark predicted inside the image but not detected (about
+            ``-2 log`` of the miss odds).
+        prior_sigmas: prior uncertainty (default: 3 m, 2/2/5 degrees).
+        max_prior_mahalanobis_sq: hypotheses whose pose is farther from the prior than this
+            (squared Mahalanobis distance, 6 dof; default the chi-square 99.9 % quantile 22.46)
+            are rejected; None keeps all.
+        scales: image scale factors (about the principal point) tried for the layout, standing
+            for the prior's distance error.
+        exhaustive_limit: when the number of largest one-to-one assignments between the finite
+            detections and the candidate landmarks is at most this, all of them are tried
+            (small sets such as four corners) instead of the layout vote.
+    """
+    sig = prior_sigmas or PriorSigmas()
+    gate = float(gate_px) if gate_px is not None else max(5.0 * pixel_sigma, 3.0)
+    n = detections_uv.shape[0]
+    empty = np.full(n, -1, dtype=np.int64)
+    prior = prior_cam_from_world
+    idx, proj = candidate_landmarks(landmarks_xyz, K, prior, image_size, margin_px)
+    if idx.size == 0:
+        return Association(empty, prior, 0.0, np.inf, 0,
+                           "no landmark projects in front of the prior camera near the image")
+    good = np.flatnonzero(np.isfinite(detections_uv).all(axis=1))
+    if good.size == 0:
+        return Association(empty, prior, 0.0, np.inf, 0, "no finite detection")
+    det = detections_uv
+    coplanar = is_coplanar(landmarks_xyz)
+    need = max(min_correspondences, 3)
+
+    # 1. coarse hypotheses from image shifts
+    center = K[:2, 2]
+    coarse: list[NDArray] = []
+    seen: set[bytes] = set()
+    exhaustive = _exhaustive_hypotheses(
+        det, good, idx, landmarks_xyz, K, prior, need, pixel_sigma, gate, sig,
+        exhaustive_limit, min(max(max_hypotheses, 1), 3))
+    if exhaustive is not None:
+        coarse.extend(exhaustive)
+        seen.update(a.tobytes() for a in exhaustive)
+        maps = []
+    else:
+        maps = [(1.0, np.zeros(2))] + _layout_hypotheses(
+            det[good], proj, center, scales, coarse_gate_px, max_hypotheses)
+    for scale, shift in maps:
+        local = assign(det[good], center + scale * (proj - center) + shift, coarse_gate_px)
+        a = np.full(n, -1, dtype=np.int64)
+        ok = local >= 0
+        a[good[ok]] = idx[local[ok]]
+        key = a.tobytes()
+        if ok.sum() >= need and key not in seen:
+            seen.add(key)
+            coarse.append(a)
+
+    # 2. re-association after each pose refinement
+    finals: dict[bytes, tuple[NDArray, NDArray]] = {}
+    rejected_by_prior = 0
+    for a in coarse:
+        T = None
+        current = a
+        for it in range(max_iterations):
+            m = current >= 0
+            if m.sum() < need:
+                T = None
+                break
+            if T is None:
+                res = solve_pnp(
+                    landmarks_xyz[current[m]], det[m], K, prior, rule="prior",
+                    min_points=need, pixel_sigma=pixel_sigma, prior_sigmas=sig,
+                    ransac=m.sum() >= 6, ransac_threshold_px=max(gate, coarse_gate_px / 4),
+                )
+                if not res.success:
+                    break
+                T = res.cam_from_world
+                if not res.inliers.all():
+                    # drop RANSAC outliers before re-assigning
+                    keep = np.flatnonzero(m)[res.inliers]
+                    current = np.full(n, -1, dtype=np.int64)
+                    current[keep] = a[keep]
+            else:
+                T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, T, max_iterations=10)
+            step_gate = max(gate, coarse_gate_px / 2 ** (it + 1))
+            cidx, cproj = candidate_landmarks(landmarks_xyz, K, T, image_size, margin_px)
+            local = assign(det[good], cproj, step_gate)
+            new = np.full(n, -1, dtype=np.int64)
+            ok = local >= 0
+            new[good[ok]] = cidx[local[ok]]
+            if np.array_equal(new, current) and step_gate == gate:
+                break
+            current = new
+        if T is None:
+            continue
+        m = current >= 0
+        if m.sum() < need:
+            continue
+        T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, T, max_iterations=10)
+        if (max_prior_mahalanobis_sq is not None
+                and prior_mahalanobis_sq(T, prior, sig) > max_prior_mahalanobis_sq):
+            rejected_by_prior += 1
+            continue
+        finals.setdefault(current.tobytes(), (current, T))
+
+    if not finals:
+        if rejected_by_prior:
+            reason = (f"all {rejected_by_prior} association hypotheses give poses inconsistent with "
+                      f"the prior (Mahalanobis^2 > {max_prior_mahalanobis_sq})")
+        else:
+            reason = f"no association hypothesis with {need} or more consistent correspondences"
+        return Association(empty, prior, 0.0, np.inf, len(coarse), reason)
+
+    # 3. scoring
+    best = None
+    for a, T in finals.values():
+        score = _nll(det, landmarks_xyz, K, T, a, prior, image_size, pixel_sigma, gate, miss_cost, sig)
+        if best is None or score < best[0]:
+            best = (score, a, T)
+    score, a, T = best
+    m = a >= 0
+    res, _ = reprojection_residuals(K, T, landmarks_xyz[a[m]], det[m])
+    return Association(a, T, float(np.sum(res**2)), float(score), len(finals), None)

@@ -1,0 +1,311 @@
+"""Stage composition: anonymous detections + prior pose -> :class:`PoseEstimate`.
+
+    from localization import Localizer
+    loc = Localizer(landmarks_xyz, K, association="robust")
+    est = loc.localize(detections_uv, prior_cam_from_world)
+    est.success, est.cam_from_world, est.assignment
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from localization.associate import Association, associate_paper, associate_robust
+from localization.detect import Detections, check_image_size
+from localization.geometry import (
+    as_points,
+    camera_center,
+    check_intrinsics,
+    check_transform,
+    invert,
+    project,
+)
+from localization.pnp import (
+    PriorSigmas,
+    is_coplanar,
+    pose_covariance,
+    prior_mahalanobis_sq,
+    refine_pose,
+    reprojection_residuals,
+    solve_pnp,
+)
+
+__all__ = ["ASSOCIATION_METHODS", "Localizer", "PoseEstimate"]
+
+ASSOCIATION_METHODS = ("paper", "robust")
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """A camera pose estimate with its quality.
+
+    Attributes:
+        success: True when a pose was estimated from at least ``min_correspondences`` inliers.
+        cam_from_world: (4, 4) the estimate; when not successful, the prior (a valid fallback).
+        assignment: (N,) model landmark index of each detection, -1 if unassigned or an outlier.
+        reprojection_rmse_px: RMSE of the inliers at the estimate, px (inf when failed).
+        n_inliers: number of correspondences in the final pose.
+        covariance: (6, 6) pose covariance from the Jacobian at the estimate and the localizer's
+            ``pixel_sigma``. Parameterization: first 3 = camera centre in the project frame [m],
+            last 3 = small rotation vector [rad] in the project frame perturbing
+            ``world_from_cam`` (``R' = exp([dtheta]x) R``). All inf when unknown.
+        failure_reason: why it failed, or None.
+        timings: seconds per stage (``validate``, ``associate``, ``pnp``, ``covariance``,
+            ``total``). ``associate`` includes the PnP runs made inside robust association.
+        prior_mahalanobis_sq: squared Mahalanobis distance of the estimate from the prior.
+        n_hypotheses: association hypotheses evaluated.
+    """
+
+    success: bool
+    cam_from_world: NDArray[np.float64]
+    assignment: NDArray[np.int64]
+    reprojection_rmse_px: float = float("inf")
+    n_inliers: int = 0
+    covariance: NDArray[np.float64] = field(default_factory=lambda: np.full((6, 6), np.inf))
+    failure_reason: str | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+    prior_mahalanobis_sq: float = float("nan")
+    n_hypotheses: int = 0
+
+    @property
+    def world_from_cam(self) -> NDArray[np.float64]:
+        """(4, 4) inverse of ``cam_from_world``."""
+        return invert(self.cam_from_world)
+
+    @property
+    def position(self) -> NDArray[np.float64]:
+        """(3,) camera centre in the project frame, metres."""
+        return camera_center(self.cam_from_world)
+
+    @property
+    def pose_std(self) -> NDArray[np.float64]:
+        """(6,) standard deviations from ``covariance``: position x, y, z [m], rotation [rad]."""
+        return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
+
+
+def _positive_number(name: str, value: object, allow_zero: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a number, got {value!r}")
+    v = float(value)
+    if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        raise ValueError(f"{name} must be finite and {'>=' if allow_zero else '>'} 0, got {value!r}")
+    return v
+
+
+class Localizer:
+    """Structural-landmark localizer: association with the BIM, then PnP.
+
+    Args:
+        landmarks_xyz: (M, 3) model landmarks in the project frame, metres.
+        K: (3, 3) camera intrinsics.
+        association: ``"robust"`` (default) or ``"paper"`` (see :mod:`localization.associate`).
+        pixel_sigma: detector noise, px (gates and the covariance).
+        image_size: (W, H) for the "near the image" filter; default ``(round(2 cx), round(2 cy))``.
+        margin_px: how far outside the image a prior projection may fall and still be a
+            candidate; default a quarter of the larger image side.
+        min_correspondences: fewer inliers fail (>= 3; the paper and the default use 4).
+        gate_px: robust final inlier gate, px; default ``max(5 * pixel_sigma, 3)``.
+        coarse_gate_px: robust first-assignment gate, px.
+        max_hypotheses: robust shift hypotheses.
+        prior_sigmas: :class:`~localization.pnp.PriorSigmas` or a 2-tuple
+            ``(position_m, (tilt_x_deg, tilt_y_deg, yaw_deg))``; default 3 m and 2, 2, 5 degrees.
+        ransac: in ``paper`` mode, reject outliers with RANSAC before LM when >= 6 pairs.
+        ransac_threshold_px: RANSAC inlier threshold, px.
+        max_position_std_m: if set, a pose whose covariance gives a position std (largest axis)
+            above this fails as ill-conditioned.
+
+    Raises:
+        TypeError, ValueError: on bad arguments, naming the value and what was expected.
+    """
+
+    def __init__(
+        self,
+        landmarks_xyz: ArrayLike,
+        K: ArrayLike,
+        association: str = "robust",
+        *,
+        pixel_sigma: float = 1.0,
+        image_size: Sequence[int] | None = None,
+        margin_px: float | None = None,
+        min_correspondences: int = 4,
+        gate_px: float | None = None,
+        coarse_gate_px: float = 40.0,
+        max_hypotheses: int = 8,
+        prior_sigmas: PriorSigmas | tuple | None = None,
+        ransac: bool = False,
+        ransac_threshold_px: float = 8.0,
+        max_position_std_m: float | None = None,
+    ) -> None:
+        X = as_points("landmarks_xyz", landmarks_xyz, 3)
+        if X.shape[0] == 0:
+            raise ValueError("landmarks_xyz must hold at least one landmark, got shape (0, 3)")
+        if not np.all(np.isfinite(X)):
+            raise ValueError("landmarks_xyz must be finite")
+        self.landmarks_xyz = X
+        self.K = check_intrinsics("K", K)
+        if not isinstance(association, str):
+            raise TypeError(f"association must be one of {ASSOCIATION_METHODS}, got {association!r}")
+        if association not in ASSOCIATION_METHODS:
+            raise ValueError(f"association must be one of {ASSOCIATION_METHODS}, got {association!r}")
+        self.association = association
+        self.pixel_sigma = _positive_number("pixel_sigma", pixel_sigma)
+        if image_size is None:
+            image_size = (int(round(2 * self.K[0, 2])), int(round(2 * self.K[1, 2])))
+            if image_size[0] <= 0 or image_size[1] <= 0:
+                raise ValueError(f"cannot infer image_size from K's principal point; pass image_size")
+        self.image_size = check_image_size("image_size", image_size)
+        self.margin_px = (
+            0.25 * max(self.image_size) if margin_px is None
+            else _positive_number("margin_px", margin_px, allow_zero=True)
+        )
+        if isinstance(min_correspondences, bool) or not isinstance(min_correspondences, (int, np.integer)):
+            raise TypeError(f"min_correspondences must be an int, got {min_correspondences!r}")
+        if min_correspondences < 3:
+            raise ValueError(f"min_correspondences must be >= 3, got {min_correspondences}")
+        self.min_correspondences = int(min_correspondences)
+        self.gate_px = None if gate_px is None else _positive_number("gate_px", gate_px)
+        self.coarse_gate_px = _positive_number("coarse_gate_px", coarse_gate_px)
+        if isinstance(max_hypotheses, bool) or not isinstance(max_hypotheses, (int, np.integer)) or max_hypotheses < 0:
+            raise ValueError(f"max_hypotheses must be an int >= 0, got {max_hypotheses!r}")
+        self.max_hypotheses = int(max_hypotheses)
+        self.prior_sigmas = self._prior_sigmas(prior_sigmas)
+        self.ransac = bool(ransac)
+        self.ransac_threshold_px = _positive_number("ransac_threshold_px", ransac_threshold_px)
+        self.max_position_std_m = (
+            None if max_position_std_m is None else _positive_number("max_position_std_m", max_position_std_m)
+        )
+        self.coplanar = is_coplanar(X)
+
+    @staticmethod
+    def _prior_sigmas(value: PriorSigmas | tuple | None) -> PriorSigmas:
+        if value is None:
+            return PriorSigmas()
+        if isinstance(value, PriorSigmas):
+            return value
+        try:
+            pos, rot_deg = value
+            pos = np.broadcast_to(np.asarray(pos, dtype=float), (3,))
+            rot = np.radians(np.broadcast_to(np.asarray(rot_deg, dtype=float), (3,)))
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"prior_sigmas must be PriorSigmas or (position_m, (tilt_x_deg, tilt_y_deg, yaw_deg)), got {value!r}"
+            ) from None
+        if not (np.all(pos > 0) and np.all(rot > 0) and np.all(np.isfinite(pos)) and np.all(np.isfinite(rot))):
+            raise ValueError(f"prior_sigmas must be positive and finite, got {value!r}")
+        return PriorSigmas(tuple(pos.tolist()), tuple(rot.tolist()))
+
+    # ----------------------------------------------------------------------------------------
+
+    def associate(self, detections_uv: NDArray[np.float64], prior: NDArray[np.float64]) -> Association:
+        """Run the configured association only (validated inputs)."""
+        if self.association == "paper":
+            return associate_paper(detections_uv, self.landmarks_xyz, self.K, prior,
+                                   self.image_size, self.margin_px)
+        return associate_robust(
+            detections_uv, self.landmarks_xyz, self.K, prior, self.image_size, self.margin_px,
+            pixel_sigma=self.pixel_sigma, gate_px=self.gate_px, coarse_gate_px=self.coarse_gate_px,
+            max_hypotheses=self.max_hypotheses, min_correspondences=self.min_correspondences,
+            prior_sigmas=self.prior_sigmas,
+        )
+
+    def localize(
+        self, detections_uv: ArrayLike | Detections, prior_cam_from_world: ArrayLike
+    ) -> PoseEstimate:
+        """Estimate ``cam_from_world`` from anonymous detections and a rough prior pose.
+
+        Args:
+            detections_uv: (N, 2) pixel detections (or a :class:`Detections`); rows with NaN are
+                ignored (assignment -1).
+            prior_cam_from_world: (4, 4) rough pose from GNSS + attitude.
+
+        Returns:
+            A :class:`PoseEstimate`. Degenerate input (too few usable detections or
+            correspondences, no landmark in front of the camera) gives ``success=False`` with a
+            ``failure_reason`` and the prior as ``cam_from_world``.
+
+        Raises:
+            TypeError, ValueError: if the detections are not (N, 2) numbers or the prior is not a
+                4x4 rigid transform.
+        """
+        t0 = time.perf_counter()
+        timings: dict[str, float] = {}
+        if isinstance(detections_uv, Detections):
+            detections_uv = detections_uv.uv
+        det = as_points("detections_uv", detections_uv, 2)
+        prior = check_transform("prior_cam_from_world", prior_cam_from_world)
+        n = det.shape[0]
+        unassigned = np.full(n, -1, dtype=np.int64)
+        t1 = time.perf_counter()
+        timings["validate"] = t1 - t0
+
+        def fail(reason: str, assignment: NDArray[np.int64] | None = None, n_hyp: int = 0) -> PoseEstimate:
+            timings["total"] = time.perf_counter() - t0
+            return PoseEstimate(
+                success=False, cam_from_world=prior.copy(),
+                assignment=unassigned if assignment is None else assignment,
+                failure_reason=reason, timings=timings, prior_mahalanobis_sq=0.0,
+                n_hypotheses=n_hyp,
+            )
+
+        usable = np.isfinite(det).all(axis=1)
+        need = self.min_correspondences
+        if usable.sum() < need:
+            timings.update(associate=0.0, pnp=0.0, covariance=0.0)
+            what = "no detections" if n == 0 else f"{int(usable.sum())} usable (finite) detections"
+            return fail(f"too few detections: {what}, need {need}")
+
+        assoc = self.associate(det, prior)
+        t2 = time.perf_counter()
+        timings["associate"] = t2 - t1
+        if assoc.failure_reason is not None:
+            timings.update(pnp=0.0, covariance=0.0)
+            return fail(assoc.failure_reason, n_hyp=assoc.n_hypotheses)
+        a = assoc.assignment.copy()
+        m = a >= 0
+        if m.sum() < need:
+            timings.update(pnp=0.0, covariance=0.0)
+            return fail(f"too few correspondences: {int(m.sum())} assigned, need {need}", a,
+                        assoc.n_hypotheses)
+
+        X, u = self.landmarks_xyz[a[m]], det[m]
+        if self.association == "paper":
+            res = solve_pnp(X, u, self.K, prior, rule="paper", min_points=need,
+                            pixel_sigma=self.pixel_sigma, ransac=self.ransac,
+                            ransac_threshold_px=self.ransac_threshold_px)
+            if not res.success:
+                timings.update(pnp=time.perf_counter() - t2, covariance=0.0)
+                return fail(res.failure_reason or "PnP failed", a, assoc.n_hypotheses)
+            T = res.cam_from_world
+            idx_m = np.flatnonzero(m)
+            a[idx_m[~res.inliers]] = -1
+            m = a >= 0
+            rmse = res.rmse_px
+        else:
+            T, rmse = refine_pose(X, u, self.K, assoc.cam_from_world)
+            _, depth = reprojection_residuals(self.K, T, X, u)
+            if not np.all(depth > 0):
+                timings.update(pnp=time.perf_counter() - t2, covariance=0.0)
+                return fail("refined pose puts landmarks behind the camera", a, assoc.n_hypotheses)
+        t3 = time.perf_counter()
+        timings["pnp"] = t3 - t2
+        cov = pose_covariance(self.K, T, self.landmarks_xyz[a[m]], self.pixel_sigma)
+        timings["covariance"] = time.perf_counter() - t3
+        if not np.all(np.isfinite(T)):
+            return fail("PnP returned a non-finite pose", a, assoc.n_hypotheses)
+        if self.max_position_std_m is not None:
+            std = float(np.sqrt(np.max(np.diag(cov)[:3]))) if np.all(np.isfinite(cov)) else np.inf
+            if std > self.max_position_std_m:
+                return fail(f"ill-conditioned geometry: position std {std:.3g} m > "
+                            f"max_position_std_m={self.max_position_std_m}", a, assoc.n_hypotheses)
+        timings["total"] = time.perf_counter() - t0
+        return PoseEstimate(
+            success=True, cam_from_world=T, assignment=a, reprojection_rmse_px=float(rmse),
+            n_inliers=int(m.sum()), covariance=cov, failure_reason=None, timings=timings,
+            prior_mahalanobis_sq=prior_mahalanobis_sq(T, prior, self.prior_sigmas),
+            n_hypotheses=assoc.n_hypotheses,
+        )

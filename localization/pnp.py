@@ -1,0 +1,466 @@
+"""Stage 3, pose: 2D-3D correspondences in, ``cam_from_world`` out.
+
+* Coplanar landmark sets go through IPPE (``cv2.SOLVEPNP_IPPE``). OpenCV 5.0.0 returns a wrong
+  pose for about half of all point orderings when the plane is not z = 0 (DESIGN.md, "Facts
+  measured"), so the points are first expressed in their own plane frame (z = 0 there) and the
+  pose is mapped back: ``cam_from_world = cam_from_plane @ plane_from_world``.
+* Other sets go through SQPnP (``cv2.SOLVEPNP_SQPNP``).
+* Each candidate keeps only poses with every point in front of the camera; the paper's rule picks
+  the lowest reprojection RMSE and breaks ties with the prior camera position. The ``"prior"``
+  rule instead scores ``n * rmse^2 / sigma^2 + prior Mahalanobis^2`` (used by robust association,
+  where four coplanar points fit any assignment and only the prior can tell).
+* The winner is refined by Levenberg-Marquardt on all inliers (own implementation, analytic
+  Jacobian), which also gives the covariance.
+
+Pose parameterization used for the Jacobian, the LM update and every 6x6 covariance in this
+package: ``(C, dtheta)`` where ``C`` (first 3) is the camera centre in the project frame [m] and
+``dtheta`` (last 3) a small rotation vector [rad] in the world frame perturbing ``world_from_cam``:
+``R_world_from_cam' = exp([dtheta]x) @ R_world_from_cam``. So ``sqrt(diag(cov))[:3]`` are the
+position standard deviations along the project x, y, z axes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from localization.geometry import (
+    as_points,
+    camera_center,
+    check_intrinsics,
+    check_transform,
+    invert,
+    make_transform,
+    so3_exp,
+    so3_log,
+)
+
+__all__ = [
+    "PnPResult",
+    "PriorSigmas",
+    "is_coplanar",
+    "plane_from_world",
+    "pnp_candidates",
+    "pose_covariance",
+    "pose_jacobian",
+    "prior_mahalanobis_sq",
+    "refine_pose",
+    "reprojection_residuals",
+    "select_candidate",
+    "solve_pnp",
+]
+
+
+@dataclass(frozen=True)
+class PriorSigmas:
+    """Standard deviations of the prior (onboard GNSS + attitude) pose error.
+
+    Attributes:
+        position_m: (3,) std of the camera position along project x, y, z, metres.
+        rotation_rad: (3,) std of the rotation error about the project x, y (tilt: roll and pitch)
+            and z (yaw) axes, radians. Defaults: the paper's 3 m and 2, 2, 5 degrees.
+    """
+
+    position_m: tuple[float, float, float] = (3.0, 3.0, 3.0)
+    rotation_rad: tuple[float, float, float] = tuple(np.radians([2.0, 2.0, 5.0]).tolist())
+
+    def as_array(self) -> NDArray[np.float64]:
+        """(6,) sigmas in the package's pose parameterization ``(C, dtheta)``."""
+        return np.concatenate([np.asarray(self.position_m, float), np.asarray(self.rotation_rad, float)])
+
+
+@dataclass(frozen=True)
+class PnPResult:
+    """Outcome of :func:`solve_pnp`.
+
+    Attributes:
+        success: a pose with every inlier in front of the camera was found.
+        cam_from_world: (4, 4) the pose; the prior (or identity) when not successful.
+        rmse_px: reprojection RMSE over the inliers, px (inf when not successful).
+        inliers: (N,) bool mask of the correspondences used in the final refinement.
+        failure_reason: why not, or None.
+        candidates: every candidate pose considered (before refinement).
+    """
+
+    success: bool
+    cam_from_world: NDArray[np.float64]
+    rmse_px: float
+    inliers: NDArray[np.bool_]
+    failure_reason: str | None = None
+    candidates: tuple[NDArray[np.float64], ...] = field(default=(), repr=False)
+
+
+# --------------------------------------------------------------------------------------------
+# geometry helpers
+
+
+def is_coplanar(points_xyz: ArrayLike, rel_tol: float = 1e-3) -> bool:
+    """True when the points' out-of-plane spread is below ``rel_tol`` times their extent.
+
+    Three or fewer points are always coplanar.
+    """
+    X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
+    if X.shape[0] <= 3:
+        return True
+    s = np.linalg.svd(X - X.mean(axis=0), compute_uv=False)
+    return bool(s[0] > 0 and s[2] <= rel_tol * s[0])
+
+
+def plane_from_world(points_xyz: ArrayLike) -> NDArray[np.float64]:
+    """4x4 rigid ``plane_from_world`` whose z = 0 plane best fits the points (origin at centroid)."""
+    X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
+    centroid = X.mean(axis=0)
+    _, _, vt = np.linalg.svd(X - centroid)
+    e1, e2 = vt[0], vt[1]
+    n = np.cross(e1, e2)
+    world_from_plane = make_transform(np.column_stack([e1, e2, n]), centroid)
+    return invert(world_from_plane)
+
+
+def _project(K: NDArray, R_wc: NDArray, C: NDArray, X: NDArray) -> tuple[NDArray, NDArray]:
+    p = (X - C) @ R_wc  # rows: R_wc.T @ (X - C), camera frame
+    z = p[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = K[0, 0] * p[:, 0] / z + K[0, 1] * p[:, 1] / z + K[0, 2]
+        v = K[1, 1] * p[:, 1] / z + K[1, 2]
+    return np.column_stack([u, v]), p
+
+
+def reprojection_residuals(
+    K: ArrayLike, cam_from_world: ArrayLike, points_xyz: ArrayLike, uv: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(residuals (N, 2) = projected - observed, depth (N,))`` of correspondences."""
+    T = np.asarray(cam_from_world, dtype=np.float64)
+    R_wc = T[:3, :3].T
+    C = camera_center(T)
+    proj, p = _project(np.asarray(K, float), R_wc, C, np.asarray(points_xyz, float).reshape(-1, 3))
+    return proj - np.asarray(uv, float).reshape(-1, 2), p[:, 2]
+
+
+def pose_jacobian(
+    K: ArrayLike, cam_from_world: ArrayLike, points_xyz: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Projection Jacobian ``(2N, 6)`` w.r.t. ``(C, dtheta)`` (module docstring) and the (N, 2) uv.
+
+    Row ``2i`` is d u_i, row ``2i+1`` is d v_i.
+    """
+    K = np.asarray(K, dtype=np.float64)
+    T = np.asarray(cam_from_world, dtype=np.float64)
+    R_wc = T[:3, :3].T
+    C = camera_center(T)
+    X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
+    return _jacobian(K, R_wc, C, X)
+
+
+def _jacobian(K: NDArray, R_wc: NDArray, C: NDArray, X: NDArray) -> tuple[NDArray, NDArray]:
+    n = X.shape[0]
+    uv, p = _project(K, R_wc, C, X)
+    x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    fx, fy, s = K[0, 0], K[1, 1], K[0, 1]
+    # d(u, v) / d p_cam, (N, 2, 3)
+    dproj = np.zeros((n, 2, 3))
+    dproj[:, 0, 0] = fx / z
+    dproj[:, 0, 1] = s / z
+    dproj[:, 0, 2] = -(fx * x + s * y) / z**2
+    dproj[:, 1, 1] = fy / z
+    dproj[:, 1, 2] = -fy * y / z**2
+    Rt = R_wc.T
+    a = X - C
+    # d p_cam / d dtheta = R_wc.T [a]x ;  d p_cam / d C = -R_wc.T
+    ax = np.zeros((n, 3, 3))
+    ax[:, 0, 1], ax[:, 0, 2] = -a[:, 2], a[:, 1]
+    ax[:, 1, 0], ax[:, 1, 2] = a[:, 2], -a[:, 0]
+    ax[:, 2, 0], ax[:, 2, 1] = -a[:, 1], a[:, 0]
+    dp = np.empty((n, 3, 6))
+    dp[:, :, :3] = -Rt
+    dp[:, :, 3:] = Rt @ ax
+    J = dproj @ dp  # (N, 2, 6)
+    return J.reshape(2 * n, 6), uv
+
+
+def pose_covariance(
+    K: ArrayLike, cam_from_world: ArrayLike, points_xyz: ArrayLike, pixel_sigma: float = 1.0
+) -> NDArray[np.float64]:
+    """6x6 covariance ``sigma^2 (J^T J)^-1`` of the pose in ``(C, dtheta)`` (module docstring).
+
+    This is the Cramér-Rao bound for isotropic Gaussian pixel noise of ``pixel_sigma`` px with
+    known correspondences. Returns an all-inf matrix when the information is singular (fewer than
+    three points, or a degenerate layout).
+    """
+    J, _ = pose_jacobian(K, cam_from_world, points_xyz)
+    info = J.T @ J
+    if not np.all(np.isfinite(info)):
+        return np.full((6, 6), np.inf)
+    # scale columns so position (m) and angle (rad) are comparable before judging conditioning
+    d = np.sqrt(np.maximum(np.diag(info), 1e-300))
+    scaled = info / np.outer(d, d)
+    if np.linalg.cond(scaled) > 1e12:
+        return np.full((6, 6), np.inf)
+    cov = np.linalg.inv(scaled) / np.outer(d, d)
+    return pixel_sigma**2 * 0.5 * (cov + cov.T)
+
+
+def prior_mahalanobis_sq(
+    cam_from_world: ArrayLike, prior_cam_from_world: ArrayLike, sigmas: PriorSigmas | None = None
+) -> float:
+    """Squared Mahalanobis distance of a pose from the prior, diagonal prior covariance.
+
+    Position difference along project x, y, z; rotation difference as the world-frame rotation
+    vector ``log(R_wc @ R_wc_prior.T)`` divided by ``sigmas.rotation_rad`` about x, y, z.
+    """
+    sig = (sigmas or PriorSigmas()).as_array()
+    T = np.asarray(cam_from_world, dtype=np.float64)
+    P = np.asarray(prior_cam_from_world, dtype=np.float64)
+    dC = camera_center(T) - camera_center(P)
+    dtheta = so3_log(T[:3, :3].T @ P[:3, :3])  # R_wc @ R_wc_prior.T
+    return float(np.sum((np.concatenate([dC, dtheta]) / sig) ** 2))
+
+
+# --------------------------------------------------------------------------------------------
+# solvers
+
+
+def _as_cv(points: NDArray) -> NDArray:
+    return np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 1, points.shape[1])
+
+
+def _pose_from_rt(rvec: NDArray, tvec: NDArray) -> NDArray:
+    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
+    return make_transform(R, np.asarray(tvec, dtype=np.float64).reshape(3))
+
+
+def pnp_candidates(
+    points_xyz: ArrayLike, uv: ArrayLike, K: ArrayLike, coplanar: bool | None = None
+) -> list[NDArray[np.float64]]:
+    """Candidate ``cam_from_world`` poses (unrefined) from IPPE (coplanar) or SQPnP.
+
+    Needs at least 4 coplanar or 3 non-coplanar points; returns [] when the solver fails.
+    """
+    X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
+    u = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    K = np.asarray(K, dtype=np.float64)
+    if coplanar is None:
+        coplanar = is_coplanar(X)
+    out: list[NDArray[np.float64]] = []
+    try:
+        if coplanar:
+            if X.shape[0] < 4:
+                return []
+            p_from_w = plane_from_world(X)
+            Xp = (X @ p_from_w[:3, :3].T + p_from_w[:3, 3]).copy()
+            Xp[:, 2] = 0.0  # exactly on z = 0: the OpenCV 5 IPPE workaround
+            n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+                _as_cv(Xp), _as_cv(u), K, None, flags=cv2.SOLVEPNP_IPPE
+            )
+            for r, t in zip(rvecs[:n], tvecs[:n]):
+                out.append(_pose_from_rt(r, t) @ p_from_w)
+        else:
+            if X.shape[0] < 3:
+                return []
+            n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+                _as_cv(X), _as_cv(u), K, None, flags=cv2.SOLVEPNP_SQPNP
+            )
+            for r, t in zip(rvecs[:n], tvecs[:n]):
+                out.append(_pose_from_rt(r, t))
+    except cv2.error:
+        return []
+    return [T for T in out if np.all(np.isfinite(T))]
+
+
+def refine_pose(
+    points_xyz: ArrayLike,
+    uv: ArrayLike,
+    K: ArrayLike,
+    cam_from_world: ArrayLike,
+    max_iterations: int = 20,
+    tol: float = 1e-10,
+) -> tuple[NDArray[np.float64], float]:
+    """Levenberg-Marquardt refinement of the reprojection error; returns ``(pose, rmse_px)``."""
+    X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
+    u = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    K = np.asarray(K, dtype=np.float64)
+    T = np.asarray(cam_from_world, dtype=np.float64)
+    R_wc = T[:3, :3].T.copy()
+    C = camera_center(T)
+    J, proj = _jacobian(K, R_wc, C, X)
+    r = (proj - u).reshape(-1)
+    cost = float(r @ r)
+    lam = 1e-3
+    for _ in range(max_iterations):
+        if not np.isfinite(cost):
+            break
+        JtJ = J.T @ J
+        g = J.T @ r
+        improved = False
+        for _ in range(10):
+            A = JtJ + lam * np.diag(np.maximum(np.diag(JtJ), 1e-12))
+            try:
+                delta = -np.linalg.solve(A, g)
+            except np.linalg.LinAlgError:
+                lam *= 10
+                continue
+            C_new = C + delta[:3]
+            R_new = so3_exp(delta[3:]) @ R_wc
+            J_new, proj_new = _jacobian(K, R_new, C_new, X)
+            r_new = (proj_new - u).reshape(-1)
+            cost_new = float(r_new @ r_new)
+            if np.isfinite(cost_new) and cost_new <= cost:
+                improved = True
+                rel = (cost - cost_new) / max(cost, 1e-300)
+                C, R_wc, J, r, cost = C_new, R_new, J_new, r_new, cost_new
+                lam = max(lam / 10, 1e-12)
+                break
+            lam *= 10
+        if not improved or rel < tol:
+            break
+    # re-orthonormalize
+    U, _, Vt = np.linalg.svd(R_wc)
+    R_wc = U @ Vt
+    out = make_transform(R_wc.T, -R_wc.T @ C)
+    rmse = float(np.sqrt(cost / max(X.shape[0], 1)))
+    return out, rmse
+
+
+def _rmse_and_depth_ok(K: NDArray, T: NDArray, X: NDArray, u: NDArray) -> tuple[float, bool]:
+    res, depth = reprojection_residuals(K, T, X, u)
+    ok = bool(np.all(depth > 0))
+    rmse = float(np.sqrt(np.mean(np.sum(res**2, axis=1)))) if X.shape[0] else np.inf
+    return (rmse if np.isfinite(rmse) else np.inf), ok
+
+
+def select_candidate(
+    candidates: list[NDArray[np.float64]],
+    points_xyz: ArrayLike,
+    uv: ArrayLike,
+    K: ArrayLike,
+    prior_cam_from_world: ArrayLike | None = None,
+    rule: str = "paper",
+    tie_px: float = 0.5,
+    pixel_sigma: float = 1.0,
+    prior_sigmas: PriorSigmas | None = None,
+) -> int | None:
+    """Index of the chosen candidate, or None when none has every point in front of the camera.
+
+    ``rule="paper"``: lowest RMSE; candidates within ``tie_px`` of it are a tie, broken by the
+    distance of the camera centre to the prior's. ``rule="prior"``: lowest
+    ``n * rmse^2 / pixel_sigma^2 + prior_mahalanobis_sq``.
+    """
+    X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
+    u = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    K = np.asarray(K, dtype=np.float64)
+    scored = []
+    for i, T in enumerate(candidates):
+        rmse, ok = _rmse_and_depth_ok(K, T, X, u)
+        if ok and np.isfinite(rmse):
+            scored.append((i, rmse))
+    if not scored:
+        return None
+    if prior_cam_from_world is None:
+        return min(scored, key=lambda s: s[1])[0]
+    if rule == "prior":
+        n = X.shape[0]
+        return min(
+            scored,
+            key=lambda s: n * s[1] ** 2 / pixel_sigma**2
+            + prior_mahalanobis_sq(candidates[s[0]], prior_cam_from_world, prior_sigmas),
+        )[0]
+    if rule != "paper":
+        raise ValueError(f"rule must be 'paper' or 'prior', got {rule!r}")
+    best = min(s[1] for s in scored)
+    tied = [s for s in scored if s[1] <= best + tie_px]
+    C0 = camera_center(prior_cam_from_world)
+    return min(tied, key=lambda s: float(np.linalg.norm(camera_center(candidates[s[0]]) - C0)))[0]
+
+
+def solve_pnp(
+    points_xyz: ArrayLike,
+    uv: ArrayLike,
+    K: ArrayLike,
+    prior_cam_from_world: ArrayLike | None = None,
+    *,
+    rule: str = "paper",
+    refine: bool = True,
+    min_points: int = 4,
+    pixel_sigma: float = 1.0,
+    prior_sigmas: PriorSigmas | None = None,
+    ransac: bool = False,
+    ransac_threshold_px: float = 8.0,
+    tie_px: float = 0.5,
+) -> PnPResult:
+    """Pose from correspondences: IPPE (coplanar, plane-frame workaround) or SQPnP, then LM.
+
+    Args:
+        points_xyz: (N, 3) model points, project frame, metres.
+        uv: (N, 2) their pixel observations.
+        K: (3, 3) intrinsics.
+        prior_cam_from_world: (4, 4) rough pose breaking candidate ties (optional).
+        rule: candidate choice, ``"paper"`` or ``"prior"`` (see :func:`select_candidate`).
+        refine: run LM on the inliers.
+        min_points: fewer correspondences fail (at least 4 recommended; never below 3).
+        pixel_sigma: pixel noise used by the ``"prior"`` rule.
+        prior_sigmas: prior uncertainty used by the ``"prior"`` rule.
+        ransac: with at least 6 points, first reject outliers with ``cv2.solvePnPRansac``
+            (AP3P minimal solver, ``ransac_threshold_px``).
+        ransac_threshold_px: RANSAC inlier threshold, px.
+        tie_px: RMSE tolerance of a tie under the ``"paper"`` rule.
+
+    Returns:
+        A :class:`PnPResult`; never raises on degenerate geometry.
+
+    Raises:
+        TypeError, ValueError: on arrays of the wrong type or shape.
+    """
+    X = as_points("points_xyz", points_xyz, 3)
+    u = as_points("uv", uv, 2)
+    K = check_intrinsics("K", K)
+    if X.shape[0] != u.shape[0]:
+        raise ValueError(f"points_xyz and uv must have the same length, got {X.shape[0]} and {u.shape[0]}")
+    prior = None if prior_cam_from_world is None else check_transform("prior_cam_from_world", prior_cam_from_world)
+    fallback = prior if prior is not None else np.eye(4)
+    n = X.shape[0]
+    inliers = np.ones(n, dtype=bool)
+
+    def fail(reason: str) -> PnPResult:
+        return PnPResult(False, fallback.copy(), np.inf, np.zeros(n, dtype=bool), reason)
+
+    finite = np.isfinite(X).all(axis=1) & np.isfinite(u).all(axis=1)
+    inliers &= finite
+    if inliers.sum() < max(min_points, 3):
+        return fail(f"too few correspondences: {int(inliers.sum())} usable, need {max(min_points, 3)}")
+    if ransac and inliers.sum() >= 6:
+        idx = np.flatnonzero(inliers)
+        try:
+            ok, rvec, tvec, ransac_in = cv2.solvePnPRansac(
+                _as_cv(X[idx]), _as_cv(u[idx]), K, None,
+                reprojectionError=float(ransac_threshold_px), iterationsCount=200,
+                flags=cv2.SOLVEPNP_AP3P,
+            )
+        except cv2.error:
+            ok, ransac_in = False, None
+        if ok and ransac_in is not None and len(ransac_in) >= max(min_points, 3):
+            keep = np.zeros(n, dtype=bool)
+            keep[idx[np.asarray(ransac_in).reshape(-1)]] = True
+            inliers = keep
+    Xi, ui = X[inliers], u[inliers]
+    coplanar = is_coplanar(Xi)
+    cands = pnp_candidates(Xi, ui, K, coplanar=coplanar)
+    if not cands:
+        return fail("PnP solver found no pose (degenerate layout)")
+    if refine:
+        refined = [refine_pose(Xi, ui, K, T)[0] for T in cands] if rule == "prior" else cands
+    else:
+        refined = cands
+    k = select_candidate(refined, Xi, ui, K, prior, rule=rule, tie_px=tie_px,
+                         pixel_sigma=pixel_sigma, prior_sigmas=prior_sigmas)
+    if k is None:
+        return fail("every PnP candidate puts landmarks behind the camera")
+    T = refined[k]
+    if refine and rule != "prior":
+        T, _ = refine_pose(Xi, ui, K, T)
+    rmse, ok = _rmse_and_depth_ok(K, T, Xi, ui)
+    if not ok or not np.isfinite(rmse):
+        return fail("refined pose puts landmarks behind the camera")
+    return PnPResult(True, T, rmse, inliers, None, tuple(cands))

@@ -1,0 +1,134 @@
+"""Synthetic scenes for tests and benchmarks: the paper's camera, viewpoints, priors, contexts.
+
+Nothing here is needed to localize; it builds the inputs the environment would provide, so the
+package can be exercised and benchmarked without the simulator.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
+
+from localization.geometry import as_points, check_transform, invert, look_at, project
+
+__all__ = [
+    "PAPER_IMAGE_SIZE",
+    "PAPER_K",
+    "landmark_context",
+    "paper_prior",
+    "perturb_attitude",
+    "sample_viewpoints",
+]
+
+#: The paper's camera: 1280x720, fx = fy = 1108.5, cx = 640, cy = 360.
+PAPER_K = np.array([[1108.5, 0.0, 640.0], [0.0, 1108.5, 360.0], [0.0, 0.0, 1.0]])
+PAPER_IMAGE_SIZE = (1280, 720)
+
+# FLU body axes from OpenCV camera axes; the same convention as uav_struct_env/sim/attitude.py
+# (kept here because localization must not import the environment; a test checks they agree).
+_BODY_FROM_CAM = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+
+def perturb_attitude(
+    cam_from_world: ArrayLike, position_offset_m: ArrayLike, attitude_offset_rad: ArrayLike
+) -> NDArray[np.float64]:
+    """Add offsets to a camera's position and (roll, pitch, yaw); return the new ``cam_from_world``.
+
+    Attitude convention as ``uav_struct_env.sim.attitude``: ``world_from_body = Rz(yaw) Ry(pitch)
+    Rx(roll)`` with FLU body axes (x along the optical axis), positive pitch tilting the view down.
+    """
+    T = check_transform("cam_from_world", cam_from_world)
+    world_from_cam = invert(T)
+    world_from_body = world_from_cam[:3, :3] @ _BODY_FROM_CAM.T
+    yaw, pitch, roll = Rotation.from_matrix(world_from_body).as_euler("ZYX")
+    d_roll, d_pitch, d_yaw = np.asarray(attitude_offset_rad, dtype=np.float64).reshape(3)
+    R = Rotation.from_euler("ZYX", [yaw + d_yaw, pitch + d_pitch, roll + d_roll]).as_matrix()
+    out = np.eye(4)
+    out[:3, :3] = R @ _BODY_FROM_CAM
+    out[:3, 3] = world_from_cam[:3, 3] + np.asarray(position_offset_m, dtype=np.float64).reshape(3)
+    return invert(out)
+
+
+def paper_prior(cam_from_world: ArrayLike, index: int) -> NDArray[np.float64]:
+    """The paper's rough onboard pose: truth + 3 m per axis, 2 deg roll/pitch, 5 deg yaw.
+
+    Signs alternate with ``index``: bit k of ``index`` flips position axis k (k = 0, 1, 2), bit 3
+    flips roll, bit 0 pitch, bit 1 yaw, so consecutive images see every combination.
+    """
+    s = [1.0 if (index >> k) & 1 == 0 else -1.0 for k in range(4)]
+    dpos = 3.0 * np.array([s[0], s[1], s[2]])
+    datt = np.radians([2.0 * s[3], 2.0 * -s[0], 5.0 * -s[1]])
+    return perturb_attitude(cam_from_world, dpos, datt)
+
+
+def sample_viewpoints(
+    rng: np.random.Generator,
+    n: int,
+    target: ArrayLike,
+    distance_m: tuple[float, float] = (15.0, 35.0),
+    height_m: tuple[float, float] = (10.0, 25.0),
+    footprint: tuple[float, float, float, float] | None = None,
+    side: int | None = None,
+) -> list[NDArray[np.float64]]:
+    """``n`` cameras around a building, aimed at ``target``; returns ``cam_from_world`` (4, 4) each.
+
+    Viewpoint ``i`` belongs to side ``i % 4`` (0: -y, 1: +x, 2: +y, 3: -x; or ``side`` for all),
+    as the paper's four UAVs, one per side. Its height is uniform in ``height_m``. Its horizontal
+    distance, uniform in ``distance_m``, is measured from ``target`` (the building centre) along
+    an azimuth uniform within the side's 90 degree sector when ``footprint`` is None -- the
+    distribution that reproduces DESIGN.md's Cramér-Rao figures (see :mod:`localization.metrics`);
+    with ``footprint = (xmin, ymin, xmax, ymax)`` it is measured outwards from that side of the
+    footprint instead, at a uniform position along the side.
+    """
+    target = np.asarray(target, dtype=np.float64).reshape(3)
+    out = []
+    for i in range(n):
+        k = (i % 4) if side is None else int(side)
+        d = rng.uniform(*distance_m)
+        h = rng.uniform(*height_m)
+        if footprint is None:
+            azimuth = -0.5 * np.pi + 0.5 * np.pi * k + rng.uniform(-0.25 * np.pi, 0.25 * np.pi)
+            x, y = target[0] + d * np.cos(azimuth), target[1] + d * np.sin(azimuth)
+        else:
+            xmin, ymin, xmax, ymax = footprint
+            if k in (0, 2):
+                x = rng.uniform(xmin, xmax)
+                y = ymin - d if k == 0 else ymax + d
+            else:
+                y = rng.uniform(ymin, ymax)
+                x = xmax + d if k == 1 else xmin - d
+        out.append(look_at([x, y, h], target))
+    return out
+
+
+def landmark_context(
+    K: ArrayLike,
+    cam_from_world: ArrayLike,
+    sets: dict[str, tuple[ArrayLike, ArrayLike]],
+    image_size: tuple[int, int] = PAPER_IMAGE_SIZE,
+) -> dict[str, Any]:
+    """The detector context the environment provides, without occlusion (visible = in frame).
+
+    Args:
+        K: (3, 3) intrinsics.
+        cam_from_world: (4, 4) true pose.
+        sets: name -> (ids (M,), xyz (M, 3)).
+        image_size: (W, H).
+    """
+    w, h = image_size
+    out: dict[str, Any] = {"image_size": (w, h), "landmarks": {}}
+    for name, (ids, xyz) in sets.items():
+        X = as_points(f"{name} xyz", xyz, 3)
+        uv, depth = project(K, cam_from_world, X)
+        in_frame = (depth > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5)
+        out["landmarks"][name] = {
+            "ids": np.asarray(ids, dtype=np.int64).reshape(-1),
+            "xyz": X,
+            "uv": uv,
+            "in_frame": in_frame,
+            "visible": in_frame.copy(),
+        }
+    return out
