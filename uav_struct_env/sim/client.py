@@ -1,0 +1,246 @@
+"""One pybullet client and its rendering backend: TinyRenderer ("tiny") or the EGL plugin ("egl").
+
+A :class:`RenderClient` owns a ``p.connect(p.DIRECT)`` client (never the module-level default
+client). Once pybullet's ``eglRenderer`` plugin is loaded on a client, ``getCameraImage`` goes
+through EGL whatever renderer flag is passed, so the backend is chosen when the client is made.
+
+Both backends are calibrated to the exact-K projection of :mod:`uav_struct_env.sim.camera`
+(pixel centres at integer ``(u, v)``); their quirks are compensated here, in one place, and
+measured by ``tests/sim/test_projection.py``:
+
+* **TinyRenderer** rasterizes at integer screen coordinates, i.e. at pixel *corners* rather than
+  centres: geometry lands ``(+0.5, -0.5)`` px from where ``K`` puts it (measured: 0.49-0.51 px at
+  1280x720, 640x360 and 320x180). We render with the principal point moved by
+  ``(-0.5, +0.5)`` px (:data:`TINY_PIXEL_SHIFT`), which cancels it exactly.
+* **EGL** renders into a fixed 1024 x 768 off-screen surface (``START_WIDTH``/``START_HEIGHT`` in
+  pybullet's ``eglRendererVisualShapeConverter.cpp``) and *nearest-neighbour resamples* larger
+  requests to the requested size: at 1280 x 720 it renders 1024 columns and stretches them
+  (measured: a +0.37 px mean shift and lost resolution). We split larger images into tiles of at
+  most 1024 x 768, each rendered with the same ``K`` shifted by the tile origin, and stitch them:
+  exact, and at the same cost (two 640 x 720 tiles take as long as one stretched 1280 x 720).
+
+The plugin prints its OpenGL banner and per-frame chatter on the C-level stdout; those calls run
+with file descriptor 1 redirected to ``/dev/null``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import pkgutil
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pybullet as p
+from numpy.typing import NDArray
+
+from uav_struct_env.errors import ConfigError, RendererUnavailableError
+from uav_struct_env.sim.camera import Camera, projection_matrix
+
+__all__ = [
+    "BACKENDS",
+    "EGL_MAX_TILE",
+    "RENDERERS",
+    "TINY_PIXEL_SHIFT",
+    "RawImage",
+    "RenderClient",
+    "egl_plugin_path",
+    "resolve_renderer",
+]
+
+BACKENDS = ("tiny", "egl")
+RENDERERS = ("auto", *BACKENDS)
+
+#: Where TinyRenderer draws geometry relative to the exact-K pixel position, (du, dv) in pixels.
+TINY_PIXEL_SHIFT = (0.5, -0.5)
+#: The EGL plugin's off-screen surface, (width, height); larger images are rendered in tiles.
+EGL_MAX_TILE = (1024, 768)
+#: "auto" uses EGL for images with at least this many pixels (measured crossover, see
+#: ``benchmarks/render.py``: on 2 llvmpipe cores TinyRenderer wins below about 320 x 180).
+AUTO_EGL_MIN_PIXELS = 320 * 180
+
+
+@dataclass(frozen=True)
+class RawImage:
+    """Buffers as rendered: RGB, the [0, 1] depth buffer and the body-id mask (or None)."""
+
+    rgb: NDArray[np.uint8]  # (H, W, 3)
+    depth_buffer: NDArray[np.float32]  # (H, W)
+    segmentation: NDArray[np.int32] | None  # (H, W) body ids, -1 for background
+
+
+def egl_plugin_path() -> str | None:
+    """File of pybullet's ``eglRenderer`` plugin, or None where this pybullet has none."""
+    loader = pkgutil.get_loader("eglRenderer")
+    return None if loader is None else loader.get_filename()
+
+
+@contextlib.contextmanager
+def _quiet_stdout() -> Iterator[None]:
+    """Silence C-level writes to stdout (file descriptor 1) for the duration."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        fd = 1
+    sys.stdout.flush()
+    saved = os.dup(fd)
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), fd)
+            yield
+    finally:
+        os.dup2(saved, fd)
+        os.close(saved)
+
+
+def resolve_renderer(renderer: str, image_size: tuple[int, int]) -> str:
+    """The backend that ``renderer`` asks for at ``image_size``: "tiny" or "egl".
+
+    ``"auto"`` picks EGL for images of at least :data:`AUTO_EGL_MIN_PIXELS` pixels and
+    TinyRenderer for smaller ones (availability is checked when the client starts).
+
+    Raises:
+        ConfigError: for an unknown renderer name or a bad image size.
+    """
+    if renderer not in RENDERERS:
+        raise ConfigError(f"renderer must be one of {RENDERERS}, got {renderer!r}")
+    try:
+        w, h = (int(x) for x in image_size)
+    except (TypeError, ValueError):
+        raise ConfigError(f"image_size must be (width, height) in pixels, got {image_size!r}") from None
+    if w <= 0 or h <= 0:
+        raise ConfigError(f"image_size must be positive (width, height), got {image_size!r}")
+    if renderer != "auto":
+        return renderer
+    return "egl" if w * h >= AUTO_EGL_MIN_PIXELS else "tiny"
+
+
+class RenderClient:
+    """A DIRECT pybullet client with one rendering backend.
+
+    Args:
+        backend: ``"tiny"`` or ``"egl"``.
+
+    Raises:
+        ConfigError: for an unknown backend.
+        RendererUnavailableError: if ``backend == "egl"`` and the plugin cannot start.
+    """
+
+    def __init__(self, backend: str) -> None:
+        if backend not in BACKENDS:
+            raise ConfigError(f"backend must be one of {BACKENDS}, got {backend!r}")
+        self.backend = backend
+        self.client_id = p.connect(p.DIRECT)
+        if self.client_id < 0:
+            raise RendererUnavailableError("pybullet could not create a DIRECT client")
+        self._closed = False
+        if backend == "egl":
+            try:
+                self._load_egl()
+            except BaseException:
+                self.close()
+                raise
+
+    def _load_egl(self) -> None:
+        path = egl_plugin_path()
+        if path is None:
+            raise RendererUnavailableError(
+                "this pybullet build has no eglRenderer plugin; use renderer='tiny'"
+            )
+        os.environ.setdefault("EGL_PLATFORM", "surfaceless")
+        with _quiet_stdout():
+            plugin = p.loadPlugin(path, "_eglRendererPlugin", physicsClientId=self.client_id)
+        if plugin < 0:
+            raise RendererUnavailableError(
+                f"pybullet's eglRenderer plugin ({path}) failed to start (no usable EGL device or "
+                "driver; on a headless machine Mesa's llvmpipe is enough); use renderer='tiny'"
+            )
+        self._plugin = plugin
+
+    # ------------------------------------------------------------------------------ rendering
+    def render(
+        self,
+        view: tuple[float, ...],
+        camera: Camera,
+        *,
+        segmentation: bool = False,
+        light: dict | None = None,
+    ) -> RawImage:
+        """Render through ``camera`` from ``view`` (pybullet view matrix, 16 floats).
+
+        Args:
+            view: column-major view matrix (:func:`uav_struct_env.sim.camera.view_matrix`).
+            camera: intrinsics and size; the backend's pixel convention is compensated.
+            segmentation: also render the body-id mask (costs an extra pass with EGL).
+            light: extra ``getCameraImage`` lighting keywords (``lightDirection``, ...).
+        """
+        if self._closed:
+            raise RuntimeError("this RenderClient is closed")
+        if self.backend == "tiny":
+            du, dv = TINY_PIXEL_SHIFT
+            shifted = replace(camera, cx=camera.cx - du, cy=camera.cy - dv)
+            return self._render_once(view, shifted, segmentation, light, p.ER_TINY_RENDERER)
+        tw, th = EGL_MAX_TILE
+        if camera.width <= tw and camera.height <= th:
+            return self._render_once(view, camera, segmentation, light, p.ER_BULLET_HARDWARE_OPENGL)
+        nx, ny = -(-camera.width // tw), -(-camera.height // th)
+        xs = np.linspace(0, camera.width, nx + 1).round().astype(int)
+        ys = np.linspace(0, camera.height, ny + 1).round().astype(int)
+        rgb = np.empty((camera.height, camera.width, 3), np.uint8)
+        depth = np.empty((camera.height, camera.width), np.float32)
+        seg = np.empty((camera.height, camera.width), np.int32) if segmentation else None
+        for j in range(ny):
+            for i in range(nx):
+                tile = replace(
+                    camera,
+                    width=int(xs[i + 1] - xs[i]),
+                    height=int(ys[j + 1] - ys[j]),
+                    cx=camera.cx - xs[i],
+                    cy=camera.cy - ys[j],
+                )
+                part = self._render_once(view, tile, segmentation, light,
+                                         p.ER_BULLET_HARDWARE_OPENGL)
+                window = np.s_[ys[j]:ys[j + 1], xs[i]:xs[i + 1]]
+                rgb[window] = part.rgb
+                depth[window] = part.depth_buffer
+                if seg is not None:
+                    seg[window] = part.segmentation
+        return RawImage(rgb, depth, seg)
+
+    def _render_once(
+        self, view: tuple[float, ...], camera: Camera, segmentation: bool, light: dict | None,
+        renderer: int,
+    ) -> RawImage:
+        flags = 0 if segmentation else p.ER_NO_SEGMENTATION_MASK
+        w, h = camera.width, camera.height
+        quiet = _quiet_stdout() if self.backend == "egl" else contextlib.nullcontext()
+        with quiet:
+            _, _, rgba, depth, seg = p.getCameraImage(
+                w, h, viewMatrix=view, projectionMatrix=projection_matrix(camera),
+                renderer=renderer, flags=flags, physicsClientId=self.client_id, **(light or {}),
+            )
+        rgb = np.asarray(rgba, dtype=np.uint8).reshape(h, w, 4)[:, :, :3]
+        depth = np.asarray(depth, dtype=np.float32).reshape(h, w)
+        mask = np.asarray(seg, dtype=np.int32).reshape(h, w) if segmentation else None
+        return RawImage(np.ascontiguousarray(rgb), depth, mask)
+
+    # ------------------------------------------------------------------------------ lifetime
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` has run."""
+        return self._closed
+
+    def close(self) -> None:
+        """Disconnect the client (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        quiet = _quiet_stdout() if self.backend == "egl" else contextlib.nullcontext()
+        with quiet, contextlib.suppress(p.error):
+            p.disconnect(physicsClientId=self.client_id)
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):
+            self.close()

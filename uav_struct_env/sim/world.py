@@ -1,0 +1,324 @@
+"""SiteWorld: one pybullet client with one site loaded, rendered through calibrated cameras.
+
+The site is built and loaded once, when the world is made (the environment keeps one world and
+only moves its UAVs on reset). Each world owns its own DIRECT client and a temporary directory
+for the meshes and textures, both released by :meth:`SiteWorld.close` (also on garbage
+collection, and at interpreter exit).
+
+**Depth precision.** The EGL plugin's depth buffer has 16 bits (measured: steps of exactly
+2**-16). With the camera's near plane at 0.1 m one step is ``z**2 / (0.1 * 65536)``, 0.38 m at
+50 m: the marker sheets (1 cm above the ground) would z-fight and occlusion tests would be coarse.
+Each render therefore moves the near plane out to 80 % of the nearest depth any scene geometry
+can have in that view (element bounding boxes, the ground plane through the image corners, added
+bodies), never below ``camera.near``. Typically that is 10-20 m, making a step at 50 m 2-4 mm.
+Only the depth mapping changes (pixel geometry is independent of the clip planes); the camera
+actually used is returned as ``RenderResult.camera``.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+import warnings
+import weakref
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pybullet as p
+from numpy.typing import ArrayLike, NDArray
+
+from localization.geometry import check_transform, quat_wxyz_from_matrix
+from uav_struct_env.errors import RendererUnavailableError
+from uav_struct_env.sim.camera import Camera, depth_from_buffer, view_matrix
+from uav_struct_env.sim.client import RenderClient, resolve_renderer
+from uav_struct_env.sim.scene import LoadedScene, load_elements
+from uav_struct_env.sim.visibility import landmark_visibility
+from uav_struct_env.site.mesh import site_elements
+from uav_struct_env.site.model import Site
+
+__all__ = ["DEFAULT_LIGHT", "SKY_RGB", "RenderResult", "SiteWorld"]
+
+#: Colour given to pixels that show no geometry (both backends clear to different colours).
+SKY_RGB = (186, 204, 224)
+#: Sun from the south-east, high; TinyRenderer's lighting coefficients (EGL uses the direction).
+DEFAULT_LIGHT = {
+    "lightDirection": (0.45, -0.35, 1.0),
+    "lightAmbientCoeff": 0.55,
+    "lightDiffuseCoeff": 0.45,
+    "lightSpecularCoeff": 0.0,
+}
+
+
+@dataclass(frozen=True, eq=False)
+class RenderResult:
+    """One rendered view.
+
+    Attributes:
+        rgb: (H, W, 3) uint8.
+        depth: (H, W) float32 metric depth along the optical axis (m; ``camera.far`` where
+            nothing was hit), or None if not requested.
+        segmentation: (H, W) int32 pybullet body ids (-1 for sky), or None if not requested.
+        camera: the camera with the near plane used for this render (see the module docstring).
+        depth_bits: bits of the depth buffer the metric depth was decoded from.
+    """
+
+    rgb: NDArray[np.uint8]
+    depth: NDArray[np.float32] | None = None
+    segmentation: NDArray[np.int32] | None = None
+    #: The camera as rendered: the requested intrinsics with the near plane actually used.
+    camera: Camera | None = None
+    #: Depth-buffer resolution of the backend (16 for EGL, 24 for TinyRenderer's float buffer).
+    depth_bits: int = 24
+
+
+def _release(client: RenderClient, directory: str) -> None:
+    client.close()
+    shutil.rmtree(directory, ignore_errors=True)
+
+
+class SiteWorld:
+    """A pybullet client with ``site`` loaded, rendering RGB, depth and segmentation.
+
+    Args:
+        site: the site to load.
+        renderer: ``"auto"``, ``"tiny"`` or ``"egl"``. ``"auto"`` picks the faster backend for
+            ``image_size`` and falls back to ``"tiny"`` with a warning when EGL cannot start.
+        image_size: ``(width, height)`` of the images this world will mostly render; sets the
+            default :attr:`camera` (the paper's camera scaled to this size) and the "auto" choice.
+        rng: generator for the textures (default: ``np.random.default_rng(0)``).
+        texture_size: texture side cap in pixels (columns; the slab and inner ground get twice it).
+
+    Raises:
+        ConfigError: for an unknown renderer or a bad image size.
+        RendererUnavailableError: if ``renderer="egl"`` and EGL cannot start.
+    """
+
+    def __init__(
+        self,
+        site: Site,
+        *,
+        renderer: str = "auto",
+        image_size: tuple[int, int] = (1280, 720),
+        rng: np.random.Generator | None = None,
+        texture_size: int = 512,
+    ) -> None:
+        if not isinstance(site, Site):
+            raise TypeError(f"site must be a uav_struct_env.site.Site, got {type(site).__name__}")
+        if rng is not None and not isinstance(rng, np.random.Generator):
+            raise TypeError(f"rng must be a numpy.random.Generator or None, got {type(rng).__name__}")
+        start = time.perf_counter()
+        backend = resolve_renderer(renderer, image_size)
+        try:
+            client = RenderClient(backend)
+        except RendererUnavailableError as exc:
+            if renderer != "auto":
+                raise
+            warnings.warn(
+                f"EGL rendering is unavailable ({exc}); falling back to TinyRenderer, which is "
+                "about 5x slower at 1280x720. Pass renderer='tiny' to silence this warning.",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+            client = RenderClient("tiny")
+        self._client = client
+        self._directory = tempfile.mkdtemp(prefix="uav_struct_env_site_")
+        self._finalizer = weakref.finalize(self, _release, client, self._directory)
+        self.site = site
+        self.camera = Camera().scaled(*(int(x) for x in image_size))
+        self.light = dict(DEFAULT_LIGHT)
+        try:
+            elements = site_elements(
+                site, np.random.default_rng(0) if rng is None else rng, texture_size=texture_size
+            )
+            self.scene: LoadedScene = load_elements(client.client_id, elements, self._directory)
+        except BaseException:
+            self.close()
+            raise
+        self._extra_bodies: set[int] = set()
+        # Bounding-box corners of the solid elements, for the per-view near plane.
+        self._box_corners = np.stack([
+            np.array(np.meshgrid(*e.mesh.bounds.T, indexing="ij")).reshape(3, -1).T
+            for e in elements if e.kind != "ground"
+        ])
+        #: Seconds spent building textures/meshes and loading them (excludes the first render).
+        self.load_time_s = time.perf_counter() - start
+
+    # ------------------------------------------------------------------------------ properties
+    @property
+    def backend(self) -> str:
+        """The backend in use: ``"tiny"`` or ``"egl"`` (what "auto" resolved to)."""
+        return self._client.backend
+
+    @property
+    def client_id(self) -> int:
+        """This world's pybullet client id (pass it as ``physicsClientId``)."""
+        return self._client.client_id
+
+    @property
+    def body_ids(self) -> dict[str, int]:
+        """pybullet body id of every site element, by element name (``"column C1-03"``, ...)."""
+        return dict(self.scene.body_ids)
+
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` has run."""
+        return not self._finalizer.alive
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise RuntimeError("this SiteWorld is closed")
+
+    # ------------------------------------------------------------------------------ rendering
+    def render(
+        self,
+        cam_from_world: ArrayLike,
+        camera: Camera | None = None,
+        *,
+        depth: bool = False,
+        segmentation: bool = False,
+    ) -> RenderResult:
+        """Render the view of ``camera`` at pose ``cam_from_world``.
+
+        Args:
+            cam_from_world: (4, 4) OpenCV camera pose.
+            camera: intrinsics and image size (default :attr:`camera`).
+            depth: also return metric depth.
+            segmentation: also return the body-id mask (an extra render pass with EGL).
+
+        Returns:
+            :class:`RenderResult`; pixels that show no geometry are sky-coloured.
+        """
+        self._check_open()
+        camera = self.camera if camera is None else camera
+        if not isinstance(camera, Camera):
+            raise TypeError(f"camera must be a uav_struct_env.sim.camera.Camera, got {type(camera).__name__}")
+        T = check_transform("cam_from_world", cam_from_world)
+        used = replace(camera, near=self._near_plane(T, camera))
+        raw = self._client.render(view_matrix(T), used, segmentation=segmentation, light=self.light)
+        rgb = raw.rgb
+        rgb[raw.depth_buffer >= 1.0] = SKY_RGB
+        metric = depth_from_buffer(raw.depth_buffer, used) if depth else None
+        bits = 16 if self.backend == "egl" else 24
+        return RenderResult(rgb, metric, raw.segmentation, used, bits)
+
+    def _near_plane(self, cam_from_world: NDArray[np.float64], camera: Camera) -> float:
+        """80 % of the smallest depth that scene geometry can have in this view (>= camera.near)."""
+        R, t = cam_from_world[:3, :3], cam_from_world[:3, 3]
+        corners = self._box_corners
+        if self._extra_bodies:
+            extra = []
+            for body in self._extra_bodies:
+                lo, hi = p.getAABB(body, physicsClientId=self.client_id)
+                extra.append(np.array(np.meshgrid(*np.array([lo, hi]).T, indexing="ij")).reshape(3, -1).T)
+            corners = np.concatenate([corners, np.stack(extra)])
+        z = corners @ R[2] + t[2]  # (boxes, 8) depth of every box corner
+        in_front = z.max(axis=1) > 0
+        if np.any(z[in_front].min(axis=1) <= camera.near):
+            return camera.near  # a box straddles the camera plane or is very close
+        nearest = float(z[in_front].min()) if np.any(in_front) else np.inf
+        # Ground plane z = 0: 1/depth is affine over the image, so its extremes are at the corners.
+        centre_z = float(-(R.T @ t)[2])
+        if centre_z <= 0:
+            return camera.near
+        K_inv = np.linalg.inv(camera.K)
+        W, H = camera.width, camera.height
+        rays = K_inv @ np.array([[-0.5, W - 0.5, W - 0.5, -0.5], [-0.5, -0.5, H - 0.5, H - 0.5], [1, 1, 1, 1]])
+        descent = -(R.T @ rays)[2]  # metres down per metre of depth
+        if descent.max() > 0:
+            nearest = min(nearest, centre_z / float(descent.max()))
+        if not np.isfinite(nearest):
+            return camera.near
+        return float(min(max(camera.near, 0.8 * nearest), 0.5 * camera.far))
+
+    def landmark_truth(
+        self,
+        name: str,
+        cam_from_world: ArrayLike,
+        camera: Camera | None,
+        depth: RenderResult | ArrayLike,
+    ) -> dict[str, NDArray]:
+        """Ground truth for landmark set ``name`` in a rendered view.
+
+        Args:
+            name: a landmark set of the site (``"column_tops"``, ``"aruco"``, ...).
+            cam_from_world: (4, 4) pose the depth was rendered from.
+            camera: the camera it was rendered with (None: :attr:`camera`).
+            depth: the :class:`RenderResult` of ``render(..., depth=True)`` (best: it knows the
+                near plane and depth-buffer resolution used) or its (H, W) metric depth (then
+                the occlusion tolerance assumes ``camera.near`` and this backend's buffer).
+
+        Returns:
+            ``ids``, ``xyz``, ``uv``, ``in_frame``, ``visible``: see
+            :func:`uav_struct_env.sim.visibility.landmark_visibility`.
+        """
+        camera = self.camera if camera is None else camera
+        bits = 16 if self.backend == "egl" else 24
+        if isinstance(depth, RenderResult):
+            if depth.depth is None:
+                raise ValueError("landmark_truth needs a render made with depth=True")
+            bits = depth.depth_bits
+            if depth.camera is not None:
+                camera = replace(camera, near=depth.camera.near, far=depth.camera.far)
+            depth = depth.depth
+        return landmark_visibility(
+            self.site.landmarks(name), cam_from_world, camera, depth, depth_bits=bits
+        )
+
+    # ------------------------------------------------------------------------------ extra bodies
+    def add_body(
+        self,
+        half_extents: tuple[float, float, float] = (0.2, 0.2, 0.06),
+        rgba: tuple[float, float, float, float] = (0.15, 0.15, 0.17, 1.0),
+        world_from_body: ArrayLike | None = None,
+    ) -> int:
+        """Add a visual-only box (e.g. a UAV body) and return its body id."""
+        self._check_open()
+        if len(half_extents) != 3 or min(half_extents) <= 0:
+            raise ValueError(f"half_extents must be three positive lengths, got {half_extents!r}")
+        shape = p.createVisualShape(
+            p.GEOM_BOX, halfExtents=list(map(float, half_extents)), rgbaColor=list(rgba),
+            physicsClientId=self.client_id,
+        )
+        body = p.createMultiBody(
+            baseMass=0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=shape,
+            physicsClientId=self.client_id,
+        )
+        self._extra_bodies.add(body)
+        if world_from_body is not None:
+            self.move_body(body, world_from_body)
+        return body
+
+    def move_body(self, body_id: int, world_from_body: ArrayLike) -> None:
+        """Place a body added with :meth:`add_body` at the 4x4 pose ``world_from_body``."""
+        self._check_open()
+        if body_id not in self._extra_bodies:
+            raise ValueError(f"body {body_id!r} was not added with add_body (site bodies are static)")
+        T = check_transform("world_from_body", world_from_body)
+        w, x, y, z = quat_wxyz_from_matrix(T)
+        p.resetBasePositionAndOrientation(
+            body_id, T[:3, 3].tolist(), [x, y, z, w], physicsClientId=self.client_id
+        )
+
+    def remove_body(self, body_id: int) -> None:
+        """Remove a body added with :meth:`add_body`."""
+        self._check_open()
+        if body_id not in self._extra_bodies:
+            raise ValueError(f"body {body_id!r} was not added with add_body")
+        p.removeBody(body_id, physicsClientId=self.client_id)
+        self._extra_bodies.discard(body_id)
+
+    # ------------------------------------------------------------------------------ lifetime
+    def close(self) -> None:
+        """Disconnect the client and delete the temporary files (idempotent)."""
+        self._finalizer()
+
+    def __enter__(self) -> SiteWorld:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self.closed else f"client {self.client_id}"
+        return f"SiteWorld(site={self.site.name!r}, stage={self.site.stage!r}, backend={self.backend!r}, {state})"

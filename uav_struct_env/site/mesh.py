@@ -1,0 +1,433 @@
+"""Triangle meshes with texture coordinates for every element of a site, and their textures.
+
+Each element (every cast column, each slab with its openings cut out, the ground, each marker
+sheet) becomes a :class:`SiteElement`: a ``trimesh.Trimesh`` in the project frame with
+per-vertex UVs and flat normals, plus its own texture image. Elements are built from planar
+rectangular :class:`Face` s; the faces of one element are laid out in a texture atlas at a
+uniform scale (metres per texel), side faces of a box as one continuous strip so the concrete
+grain runs around corners. Slab faces with openings are split into the rectangles around the
+openings (exact for axis-aligned openings, no triangulation library needed).
+
+Textures are drawn from a ``numpy.random.Generator``: each element gets its own child generator
+(``rng.spawn``), so no two surfaces share a texture and adding an element does not change the
+others' textures.
+
+UV convention (Wavefront OBJ): ``v`` points up the image, so texture row 0 is at ``v = 1``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from numpy.typing import ArrayLike, NDArray
+
+from uav_struct_env.site.model import ArucoMarker, Column, Site, Slab
+from uav_struct_env.site.textures import (
+    aruco_texture,
+    concrete_texture,
+    ground_texture,
+)
+
+__all__ = [
+    "ELEMENT_KINDS",
+    "Face",
+    "SiteElement",
+    "box_faces",
+    "build_mesh",
+    "column_element",
+    "ground_elements",
+    "marker_element",
+    "site_elements",
+    "slab_element",
+    "write_obj",
+]
+
+ELEMENT_KINDS = ("column", "slab", "ground", "marker")
+
+#: Gutter between atlas islands, in texels, against bilinear/mipmap bleeding.
+_GUTTER_TEXELS = 4
+
+
+@dataclass(frozen=True)
+class Face:
+    """A planar rectangle ``origin + a * axis_a + b * axis_b``, ``0 <= a <= size[0]``, ``0 <= b <= size[1]``.
+
+    The outward normal is ``axis_a x axis_b``. ``holes`` are rectangles ``(a0, b0, a1, b1)`` in
+    the face's own coordinates that are cut out.
+    """
+
+    origin: tuple[float, float, float]
+    axis_a: tuple[float, float, float]
+    axis_b: tuple[float, float, float]
+    size: tuple[float, float]
+    holes: tuple[tuple[float, float, float, float], ...] = ()
+
+    @property
+    def normal(self) -> NDArray[np.float64]:
+        """Unit outward normal."""
+        n = np.cross(self.axis_a, self.axis_b)
+        return n / np.linalg.norm(n)
+
+    def cells(self) -> list[tuple[float, float, float, float]]:
+        """The face minus its holes as rectangles ``(a0, b0, a1, b1)``."""
+        la, lb = self.size
+        a_breaks = sorted({0.0, la, *[h[0] for h in self.holes], *[h[2] for h in self.holes]})
+        b_breaks = sorted({0.0, lb, *[h[1] for h in self.holes], *[h[3] for h in self.holes]})
+        out = []
+        for a0, a1 in zip(a_breaks[:-1], a_breaks[1:]):
+            for b0, b1 in zip(b_breaks[:-1], b_breaks[1:]):
+                am, bm = (a0 + a1) / 2, (b0 + b1) / 2
+                if any(h[0] < am < h[2] and h[1] < bm < h[3] for h in self.holes):
+                    continue
+                out.append((a0, b0, a1, b1))
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class SiteElement:
+    """One renderable element: a textured mesh in the project frame.
+
+    Attributes:
+        name: unique, readable (``"column C1-03"``, ``"slab S1"``, ``"ground"``, ``"marker 4"``).
+        kind: one of :data:`ELEMENT_KINDS`.
+        mesh: triangles in the project frame with ``mesh.visual.uv`` (N, 2) and flat vertex normals.
+        texture: ``(H, W, 3)`` uint8 RGB, row 0 at the top (``v = 1``).
+    """
+
+    name: str
+    kind: str
+    mesh: trimesh.Trimesh
+    texture: NDArray[np.uint8] = field(repr=False)
+
+    @property
+    def uv(self) -> NDArray[np.float64]:
+        """(N, 2) texture coordinates, one per mesh vertex."""
+        return np.asarray(self.mesh.visual.uv, dtype=np.float64)
+
+
+# --------------------------------------------------------------------------------------- geometry
+def box_faces(lo: ArrayLike, hi: ArrayLike) -> tuple[list[Face], list[Face], list[Face]]:
+    """Faces of the axis-aligned box ``lo..hi``: ``(sides, [top], [bottom])``.
+
+    The sides run counter-clockwise seen from above (-y, +x, +y, -x), each starting where the
+    previous one ends, so they unwrap into one continuous strip.
+    """
+    (x0, y0, z0), (x1, y1, z1) = np.asarray(lo, float), np.asarray(hi, float)
+    if not (x1 > x0 and y1 > y0 and z1 > z0):
+        raise ValueError(f"box needs lo < hi on every axis, got lo={lo}, hi={hi}")
+    h = z1 - z0
+    up = (0.0, 0.0, 1.0)
+    sides = [
+        Face((x0, y0, z0), (1.0, 0.0, 0.0), up, (x1 - x0, h)),
+        Face((x1, y0, z0), (0.0, 1.0, 0.0), up, (y1 - y0, h)),
+        Face((x1, y1, z0), (-1.0, 0.0, 0.0), up, (x1 - x0, h)),
+        Face((x0, y1, z0), (0.0, -1.0, 0.0), up, (y1 - y0, h)),
+    ]
+    top = Face((x0, y0, z1), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (x1 - x0, y1 - y0))
+    bottom = Face((x0, y1, z0), (1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (x1 - x0, y1 - y0))
+    return sides, [top], [bottom]
+
+
+def _pack(strips: Sequence[Sequence[Face]], gutter: float) -> tuple[list[tuple[float, float]], float]:
+    """Shelf-pack strips (faces laid side by side along u) into a square atlas.
+
+    Returns the (u, v) offset in metres of each strip's lower-left corner and the atlas side in
+    metres. Strips are placed tallest first; the atlas width grows until the packing is square.
+    """
+    dims = [(sum(f.size[0] for f in s), max(f.size[1] for f in s)) for s in strips]
+    order = sorted(range(len(strips)), key=lambda k: -dims[k][1])
+    width = max(max(w for w, _ in dims), math.sqrt(sum(w * h for w, h in dims))) + 2 * gutter
+    while True:
+        offsets: list[tuple[float, float]] = [(0.0, 0.0)] * len(strips)
+        u, v, shelf = gutter, gutter, 0.0
+        for k in order:
+            w, h = dims[k]
+            if u + w + gutter > width + 1e-9 and u > gutter:
+                u, v, shelf = gutter, v + shelf + gutter, 0.0
+            offsets[k] = (u, v)
+            u += w + gutter
+            shelf = max(shelf, h)
+        height = v + shelf + gutter
+        if height <= width + 1e-9:
+            return offsets, width
+        width *= 1.05
+
+
+def build_mesh(
+    strips: Sequence[Sequence[Face]], *, gutter: float = 0.0
+) -> tuple[trimesh.Trimesh, float]:
+    """Triangulate faces and lay them out in one texture atlas.
+
+    Args:
+        strips: groups of faces; the faces of a group are placed side by side (continuous texture).
+        gutter: space between groups in the atlas, metres.
+
+    Returns:
+        ``(mesh, atlas_side)``: the mesh with UVs in [0, 1] and flat normals, and the side of the
+        square area (metres) that the texture covers.
+    """
+    offsets, side = _pack(strips, gutter)
+    verts: list[NDArray[np.float64]] = []
+    uvs: list[NDArray[np.float64]] = []
+    normals: list[NDArray[np.float64]] = []
+    for strip, (u0, v0) in zip(strips, offsets):
+        du = 0.0
+        for face in strip:
+            o, a, b = (np.asarray(x, float) for x in (face.origin, face.axis_a, face.axis_b))
+            for a0, b0, a1, b1 in face.cells():
+                corners = np.array([[a0, b0], [a1, b0], [a1, b1], [a0, b1]])
+                verts.append(o + corners[:, :1] * a + corners[:, 1:] * b)
+                uvs.append((corners + [u0 + du, v0]) / side)
+                normals.append(np.repeat(face.normal[None], 4, axis=0))
+            du += face.size[0]
+    v = np.concatenate(verts)
+    n_quads = len(v) // 4
+    base = 4 * np.arange(n_quads)[:, None]
+    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=1).reshape(-1, 3)
+    mesh = trimesh.Trimesh(
+        vertices=v,
+        faces=faces,
+        vertex_normals=np.concatenate(normals),
+        visual=trimesh.visual.TextureVisuals(uv=np.concatenate(uvs)),
+        process=False,
+    )
+    return mesh, side
+
+
+def _texture_px(extent: float, texel_size: float, max_size: int) -> int:
+    """Power-of-two texture side giving about ``texel_size`` metres per texel, capped."""
+    want = extent / texel_size
+    return int(min(max_size, max(64, 2 ** math.ceil(math.log2(max(want, 1.0))))))
+
+
+def column_element(
+    column: Column, rng: np.random.Generator, *, texel_size: float = 0.015, max_texture: int = 512
+) -> SiteElement:
+    """A column: a box with its four sides as one strip, top and bottom separately."""
+    sx, sy = column.section
+    sides, top, bottom = box_faces(
+        (column.x - sx / 2, column.y - sy / 2, column.z_bottom),
+        (column.x + sx / 2, column.y + sy / 2, column.z_top),
+    )
+    size = _texture_px(column.z_top - column.z_bottom, texel_size, max_texture)
+    gutter = _GUTTER_TEXELS * (column.z_top - column.z_bottom) / size
+    mesh, extent = build_mesh([sides, top, bottom], gutter=gutter)
+    return SiteElement(f"column {column.name}", "column", mesh, concrete_texture(rng, size, extent))
+
+
+def slab_element(
+    slab: Slab, rng: np.random.Generator, *, texel_size: float = 0.015, max_texture: int = 1024
+) -> SiteElement:
+    """A slab: top and bottom with the openings cut out, the edge strip and each opening's walls."""
+    xmin, ymin, xmax, ymax = slab.bounds
+    z1, z0 = slab.z_top, slab.z_top - slab.thickness
+    sides, _, _ = box_faces((xmin, ymin, z0), (xmax, ymax, z1))
+    top_holes, bottom_holes, strips = [], [], []
+    for op in slab.openings:
+        ox0, oy0, ox1, oy1 = op.bounds
+        top_holes.append((ox0 - xmin, oy0 - ymin, ox1 - xmin, oy1 - ymin))
+        bottom_holes.append((ox0 - xmin, ymax - oy1, ox1 - xmin, ymax - oy0))
+        t, up = slab.thickness, (0.0, 0.0, 1.0)
+        strips.append([  # walls facing into the opening, continuous around it
+            Face((ox1, oy0, z0), (-1.0, 0.0, 0.0), up, (ox1 - ox0, t)),
+            Face((ox0, oy0, z0), (0.0, 1.0, 0.0), up, (oy1 - oy0, t)),
+            Face((ox0, oy1, z0), (1.0, 0.0, 0.0), up, (ox1 - ox0, t)),
+            Face((ox1, oy1, z0), (0.0, -1.0, 0.0), up, (oy1 - oy0, t)),
+        ])
+    top = Face((xmin, ymin, z1), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (xmax - xmin, ymax - ymin),
+               tuple(top_holes))
+    bottom = Face((xmin, ymax, z0), (1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (xmax - xmin, ymax - ymin),
+                  tuple(bottom_holes))
+    approx_side = 2.0 * max(xmax - xmin, ymax - ymin)
+    size = _texture_px(approx_side, texel_size, max_texture)
+    gutter = _GUTTER_TEXELS * approx_side / size
+    # The edge faces go in separately: as one strip the 40 m perimeter would set the atlas width.
+    mesh, extent = build_mesh([[top], [bottom], *[[f] for f in sides], *strips], gutter=gutter)
+    return SiteElement(f"slab {slab.name}", "slab", mesh, concrete_texture(rng, size, extent))
+
+
+def _axis_aligned(marker: ArucoMarker) -> bool:
+    q = (marker.yaw / (math.pi / 2)) % 1.0
+    return min(q, 1.0 - q) < 1e-9
+
+
+def _marker_holes(site: Site, x0: float, y0: float, size: float) -> tuple[tuple[float, ...], ...]:
+    """Footprints of the axis-aligned ground markers lying inside the square ``x0, y0, size``.
+
+    The ground is cut out under each marker sheet, so the sheet (1 cm above the ground) never
+    competes with it in the depth buffer, however far away it is seen.
+    """
+    holes = []
+    for m in site.markers:
+        x, y, z = m.center
+        h = m.footprint_half_extent
+        if not (_axis_aligned(m) and 0.0 < z <= 0.05):
+            continue
+        a0, b0, a1, b1 = x - h - x0, y - h - y0, x + h - x0, y + h - y0
+        if a0 > 0 and b0 > 0 and a1 < size and b1 < size:
+            holes.append((a0, b0, a1, b1))
+    return tuple(holes)
+
+
+def _ground_warp(d: NDArray[np.float64], core: float, k: float) -> NDArray[np.float64]:
+    """Texture coordinate (texture metres) of a ground offset ``d`` (m) from the site centre.
+
+    Identity within ``core`` metres, logarithmic beyond (``core + k log(1 + (|d| - core) / k)``):
+    full detail where cameras look, ever coarser towards the horizon, one texture and no seam.
+    """
+    a = np.abs(d)
+    return np.sign(d) * np.where(a <= core, a, core + k * np.log1p(np.maximum(a - core, 0.0) / k))
+
+
+def ground_elements(
+    site: Site,
+    rng: np.random.Generator,
+    *,
+    core: float = 20.0,
+    falloff: float = 10.0,
+    texture_size: int = 1024,
+) -> list[SiteElement]:
+    """The ground at z = 0: a square of ``site.ground_size`` centred on the building footprint.
+
+    One mesh and one texture, mapped at full scale within ``core`` metres of the building centre
+    and logarithmically compressed beyond (:func:`_ground_warp`), so the texture's detail sits
+    where the cameras look and there is no seam (a seam would be a false straight edge for a
+    corner detector). The ground is cut out under axis-aligned marker sheets.
+    """
+    xmin, ymin, xmax, ymax = site.building.slab_bounds
+    cx, cy = (xmin + xmax) / 2, (ymin + ymax) / 2
+    half = site.ground_size / 2
+    core = min(max(core, 0.6 * max(xmax - xmin, ymax - ymin) + 6.0), half)
+    s_half = float(_ground_warp(np.array(half), core, falloff))
+    # Breaks: the core edges, then uniform 2-texture-metre steps in the warped coordinate.
+    s_steps = np.arange(float(_ground_warp(np.array(core), core, falloff)), s_half, 2.0)[1:]
+    outer = core + falloff * np.expm1((s_steps - core) / falloff)
+    breaks = np.unique(np.concatenate([[-half, -core, core, half], outer, -outer]))
+    x0, y0 = cx - half, cy - half
+    holes = _marker_holes(site, x0, y0, 2 * half)
+    a_breaks = np.unique(np.concatenate([breaks + half, [h[i] for h in holes for i in (0, 2)]]))
+    b_breaks = np.unique(np.concatenate([breaks + half, [h[i] for h in holes for i in (1, 3)]]))
+    verts, uvs = [], []
+    for a0, a1 in zip(a_breaks[:-1], a_breaks[1:]):
+        for b0, b1 in zip(b_breaks[:-1], b_breaks[1:]):
+            am, bm = (a0 + a1) / 2, (b0 + b1) / 2
+            if any(h[0] < am < h[2] and h[1] < bm < h[3] for h in holes):
+                continue
+            q = np.array([[a0, b0], [a1, b0], [a1, b1], [a0, b1]])
+            verts.append(np.column_stack([q[:, 0] + x0, q[:, 1] + y0, np.zeros(4)]))
+            uvs.append((_ground_warp(q - half, core, falloff) + s_half) / (2 * s_half))
+    v = np.concatenate(verts)
+    base = 4 * np.arange(len(v) // 4)[:, None]
+    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=1).reshape(-1, 3)
+    mesh = trimesh.Trimesh(
+        vertices=v, faces=faces, vertex_normals=np.tile([0.0, 0.0, 1.0], (len(v), 1)),
+        visual=trimesh.visual.TextureVisuals(uv=np.concatenate(uvs)), process=False,
+    )
+    texture = ground_texture(rng, texture_size, 2 * s_half)
+    return [SiteElement("ground", "ground", mesh, texture)]
+
+
+def marker_element(marker: ArucoMarker, *, module_px: int = 16) -> SiteElement:
+    """A marker sheet: a thin box from the ground up to the marker's plane, pattern on top.
+
+    The top face carries the pattern and quiet zone over its whole texture; the texture's
+    top-left pixel is at the sheet corner ``(-h, +h)`` of the marker frame, so the printed
+    top-left marker corner is ``marker.corners_world[0]`` (OpenCV order). The four edge faces
+    (only where the marker lies above z = 0) sample the quiet zone's white corner texel.
+    """
+    texture = aruco_texture(marker, module_px)
+    h = marker.footprint_half_extent
+    T = marker.world_from_marker
+    x_axis, y_axis, centre = T[:3, 0], T[:3, 1], T[:3, 3]
+    corners2d = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])  # CCW seen from above
+    top = centre + corners2d[:, :1] * x_axis + corners2d[:, 1:] * y_axis
+    verts = [top]
+    uvs = [(corners2d + h) / (2 * h)]
+    normals = [np.repeat([[0.0, 0.0, 1.0]], 4, axis=0)]
+    if centre[2] > 0:
+        corner_uv = 0.5 / texture.shape[0]
+        for k in range(4):
+            a, b = top[k], top[(k + 1) % 4]
+            low = np.array([0.0, 0.0, centre[2]])
+            verts.append(np.array([a - low, b - low, b, a]))
+            uvs.append(np.full((4, 2), corner_uv))
+            n = np.cross(b - a, [0.0, 0.0, 1.0])
+            normals.append(np.repeat([n / np.linalg.norm(n)], 4, axis=0))
+    v = np.concatenate(verts)
+    base = 4 * np.arange(len(v) // 4)[:, None]
+    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=1).reshape(-1, 3)
+    mesh = trimesh.Trimesh(
+        vertices=v, faces=faces, vertex_normals=np.concatenate(normals),
+        visual=trimesh.visual.TextureVisuals(uv=np.concatenate(uvs)), process=False,
+    )
+    return SiteElement(f"marker {marker.id}", "marker", mesh, texture)
+
+
+def site_elements(
+    site: Site,
+    rng: np.random.Generator,
+    *,
+    texel_size: float = 0.015,
+    texture_size: int = 512,
+) -> tuple[SiteElement, ...]:
+    """Every renderable element of ``site`` at its stage, with its own texture.
+
+    Args:
+        site: the site.
+        rng: generator; element ``k`` draws from ``rng.spawn(...)[k]``.
+        texel_size: target metres per texel of the concrete textures.
+        texture_size: cap on a column texture's side in pixels; the slab and the ground get
+            twice this (they are an order of magnitude larger).
+
+    Returns:
+        Columns (in ``site.columns`` order), slabs, ground pieces, then markers.
+    """
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    if isinstance(texture_size, bool) or not isinstance(texture_size, (int, np.integer)) or texture_size < 16:
+        raise ValueError(f"texture_size must be an int >= 16 (pixels), got {texture_size!r}")
+    if not (isinstance(texel_size, (int, float)) and texel_size > 0):
+        raise ValueError(f"texel_size must be a positive length in metres, got {texel_size!r}")
+    n = len(site.columns) + len(site.slabs) + 1
+    rngs = iter(rng.spawn(n))
+    elements: list[SiteElement] = []
+    for column in site.columns:
+        elements.append(column_element(column, next(rngs), texel_size=texel_size,
+                                       max_texture=texture_size))
+    for slab in site.slabs:
+        elements.append(slab_element(slab, next(rngs), texel_size=texel_size,
+                                     max_texture=2 * texture_size))
+    elements += ground_elements(site, next(rngs), texture_size=2 * texture_size)
+    elements += [marker_element(m) for m in site.markers]
+    return tuple(elements)
+
+
+def write_obj(element: SiteElement, directory: str | Path, stem: str) -> Path:
+    """Write ``element`` as ``stem.obj`` + ``stem.mtl`` + ``stem.png`` in ``directory``.
+
+    The OBJ has positions, UVs and normals and one material whose ``map_Kd`` is the PNG, which
+    both pybullet renderers load. Returns the OBJ path.
+    """
+    from PIL import Image
+
+    directory = Path(directory)
+    Image.fromarray(element.texture).save(directory / f"{stem}.png", compress_level=1)
+    (directory / f"{stem}.mtl").write_text(
+        f"newmtl {stem}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nmap_Kd {stem}.png\n"
+    )
+    m = element.mesh
+    v, vt, vn = m.vertices, element.uv, m.vertex_normals
+    f = m.faces + 1
+    lines = [f"mtllib {stem}.mtl", f"o {stem}", f"usemtl {stem}"]
+    lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in v]
+    lines += [f"vt {u:.6f} {w:.6f}" for u, w in vt]
+    lines += [f"vn {x:.6f} {y:.6f} {z:.6f}" for x, y, z in vn]
+    lines += [f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}" for a, b, c in f]
+    path = directory / f"{stem}.obj"
+    path.write_text("\n".join(lines) + "\n")
+    return path

@@ -1,0 +1,221 @@
+"""Procedural textures: non-repeating concrete, site ground and crisp ArUco marker sheets.
+
+Every texture is an ``(H, W, 3)`` uint8 RGB array (row 0 at the top, as in an image file), drawn
+from a ``numpy.random.Generator`` so that a seed reproduces it. Noise features are specified in
+metres, not texels: a texture covering ``extent`` metres looks the same at any resolution, and
+neighbouring surfaces of one element (whose faces share an atlas) get consistent grain.
+
+Only numpy, OpenCV (for the ArUco bit pattern) and nothing else: no pybullet here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from uav_struct_env.site.model import ArucoMarker
+
+__all__ = [
+    "aruco_texture",
+    "concrete_texture",
+    "fractal_noise",
+    "ground_palette",
+    "ground_texture",
+    "value_noise",
+]
+
+
+def _check_rng(rng: object) -> np.random.Generator:
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    return rng
+
+
+def _check_size(size: int) -> int:
+    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 2:
+        raise ValueError(f"texture size must be an int >= 2 (pixels), got {size!r}")
+    return int(size)
+
+
+def value_noise(
+    rng: np.random.Generator, size: int, cells: float, *, period: bool = False
+) -> NDArray[np.float32]:
+    """One octave of smooth value noise on a ``size x size`` grid, values in about [-1, 1].
+
+    Args:
+        rng: source of the random lattice values.
+        size: output side in pixels.
+        cells: number of lattice cells across the texture (feature size = side / cells).
+        period: if True the noise wraps around (tileable); the site never tiles textures, so the
+            default is False.
+
+    Returns:
+        ``(size, size)`` float32.
+    """
+    rng = _check_rng(rng)
+    size = _check_size(size)
+    if not cells > 0:
+        raise ValueError(f"cells must be positive, got {cells!r}")
+    n = int(np.ceil(cells)) + 2
+    lattice = rng.uniform(-1.0, 1.0, (n, n)).astype(np.float32)
+    if period:
+        m = max(int(round(cells)), 1)
+        lattice = lattice[np.arange(n) % m][:, np.arange(n) % m]
+    # Random sub-cell offset so that octaves do not align on pixel (0, 0).
+    off = rng.uniform(0.0, 1.0, 2)
+    t = (np.arange(size, dtype=np.float64) + 0.5) / size * cells
+    ty, tx = t + off[0], t + off[1]
+    iy, ix = np.floor(ty).astype(np.intp), np.floor(tx).astype(np.intp)
+    fy, fx = ty - iy, tx - ix
+    sy = (fy * fy * (3.0 - 2.0 * fy)).astype(np.float32)[:, None]  # smoothstep
+    sx = (fx * fx * (3.0 - 2.0 * fx)).astype(np.float32)[None, :]
+    # Separable: interpolate the lattice rows along x first (small), then along y.
+    rows = lattice[:, ix] + (lattice[:, ix + 1] - lattice[:, ix]) * sx  # (n, size)
+    return rows[iy] + (rows[iy + 1] - rows[iy]) * sy
+
+
+def fractal_noise(
+    rng: np.random.Generator,
+    size: int,
+    extent: float,
+    feature: float,
+    *,
+    octaves: int = 5,
+    persistence: float = 0.5,
+) -> NDArray[np.float32]:
+    """Multi-octave value noise over a texture covering ``extent`` metres.
+
+    The first octave has features of ``feature`` metres; each further octave halves the feature
+    size and multiplies the amplitude by ``persistence``. Octaves finer than two texels are
+    skipped (they would only alias). The result is normalised to unit standard deviation.
+
+    Returns:
+        ``(size, size)`` float32 with mean about 0 and standard deviation 1.
+    """
+    size = _check_size(size)
+    if not (extent > 0 and feature > 0):
+        raise ValueError(f"extent and feature must be positive metres, got {extent!r}, {feature!r}")
+    out = np.zeros((size, size), dtype=np.float32)
+    amplitude = 1.0
+    for k in range(octaves):
+        cells = extent / (feature / 2**k)
+        if cells > size / 2:
+            break
+        out += amplitude * value_noise(rng, size, cells)
+        amplitude *= persistence
+    std = float(out.std())
+    return (out - out.mean()) / std if std > 0 else out
+
+
+def _to_uint8(rgb: NDArray[np.floating]) -> NDArray[np.uint8]:
+    return np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
+
+
+def concrete_texture(
+    rng: np.random.Generator, size: int = 512, extent: float = 4.0
+) -> NDArray[np.uint8]:
+    """A cast-concrete surface: grey with blotchy stains, fine grain, pores and faint lift lines.
+
+    Args:
+        rng: generator; two calls never give the same texture.
+        size: side in pixels.
+        extent: side of the square area the texture covers, metres (sets the feature scale).
+
+    Returns:
+        ``(size, size, 3)`` uint8 RGB.
+    """
+    rng = _check_rng(rng)
+    size = _check_size(size)
+    base = rng.uniform(128.0, 168.0)  # overall grey level differs from pour to pour
+    tint = rng.uniform(-4.0, 6.0) * np.array([1.0, 0.6, -0.6])  # slightly warm or cool
+    stains = fractal_noise(rng, size, extent, feature=rng.uniform(0.8, 1.6), octaves=4)
+    grain = fractal_noise(rng, size, extent, feature=0.06, octaves=3, persistence=0.6)
+    # Darker streaks running down the face (water runs, formwork marks): low-frequency in u,
+    # stretched along v.
+    streak = value_noise(rng, size, cells=extent / 0.25)
+    streak = np.repeat(streak.mean(axis=0, keepdims=True), size, axis=0)
+    lum = base + 16.0 * stains + 7.0 * grain + 5.0 * streak
+    # Pores: sparse small dark dots (air voids), a few texels wide at most.
+    n_pores = int(rng.poisson(100.0 * extent**2))  # about 100 voids per square metre
+    if n_pores:
+        py = rng.integers(0, size, n_pores)
+        px = rng.integers(0, size, n_pores)
+        np.subtract.at(lum, (py, px), rng.uniform(25.0, 60.0, n_pores))
+    # Faint horizontal formwork joints every 0.5-1.2 m (v direction), randomly phased.
+    pitch = rng.uniform(0.5, 1.2)
+    rows = ((np.arange(size) + 0.5) / size * extent + rng.uniform(0, pitch)) % pitch
+    joint = np.exp(-0.5 * (rows / 0.008) ** 2) + np.exp(-0.5 * ((pitch - rows) / 0.008) ** 2)
+    lum -= 14.0 * joint[:, None].astype(np.float32)
+    rgb = lum[:, :, None] + tint[None, None, :]
+    return _to_uint8(rgb)
+
+
+def ground_palette(rng: np.random.Generator) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A site's (soil, gravel) RGB colours, drawn once and shared by all ground textures."""
+    rng = _check_rng(rng)
+    soil = np.array([112.0, 94.0, 72.0]) + rng.uniform(-8.0, 8.0, 3)
+    gravel = np.array([128.0, 124.0, 116.0]) + rng.uniform(-8.0, 8.0, 3)
+    return soil, gravel
+
+
+def ground_texture(
+    rng: np.random.Generator,
+    size: int = 1024,
+    extent: float = 48.0,
+    *,
+    palette: tuple[ArrayLike, ArrayLike] | None = None,
+) -> NDArray[np.uint8]:
+    """Site ground: brown compacted soil with gravel patches and pebble speckle.
+
+    Args:
+        rng: generator.
+        size: side in pixels.
+        extent: side of the square area the texture covers, metres.
+        palette: (soil, gravel) RGB colours (default: drawn from ``rng``, see
+            :func:`ground_palette`).
+
+    Returns:
+        ``(size, size, 3)`` uint8 RGB.
+    """
+    rng = _check_rng(rng)
+    size = _check_size(size)
+    soil, gravel = ground_palette(rng) if palette is None else (np.asarray(c, float) for c in palette)
+    mix_field = fractal_noise(rng, size, extent, feature=6.0, octaves=4)
+    mix = 1.0 / (1.0 + np.exp(-2.5 * (mix_field - 0.3)))  # 0 soil .. 1 gravel
+    lum = 14.0 * fractal_noise(rng, size, extent, feature=1.5, octaves=5, persistence=0.55)
+    rgb = soil * (1.0 - mix[..., None]) + gravel * mix[..., None] + lum[..., None]
+    # Pebbles: texel-scale speckle whose density follows the gravel mix, faded where a texel is
+    # much larger than a pebble (it would average out).
+    texel = extent / size
+    speckle = rng.normal(0.0, 1.0, (size, size)).astype(np.float32)
+    rgb += (10.0 + 18.0 * mix[..., None]) * speckle[..., None] * min(1.0, 0.02 / texel)
+    return _to_uint8(rgb)
+
+
+def aruco_texture(marker: ArucoMarker, module_px: int = 16) -> NDArray[np.uint8]:
+    """The printed sheet of ``marker``: its ArUco pattern with the white quiet zone around it.
+
+    The pattern comes from ``cv2.aruco.generateImageMarker`` at one pixel per module and is
+    upscaled by pixel replication (crisp edges). The quiet zone is ``marker.quiet_zone * side``
+    on each side, rounded to whole pixels. Image row 0 is the marker's top edge (marker +y),
+    column 0 its left edge (marker -x): the OpenCV corner order of ``marker.corners_world``
+    (top-left first) is that of the image.
+
+    Args:
+        marker: the marker.
+        module_px: pixels per module (bit cell) of the pattern.
+
+    Returns:
+        ``(S, S, 3)`` uint8 RGB, ``S = modules * module_px + 2 * quiet``.
+    """
+    import cv2
+
+    if isinstance(module_px, bool) or not isinstance(module_px, (int, np.integer)) or module_px < 1:
+        raise ValueError(f"module_px must be a positive int, got {module_px!r}")
+    dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, marker.dictionary))
+    modules = dictionary.markerSize + 2  # data bits plus the one-module black border
+    pattern = cv2.aruco.generateImageMarker(dictionary, int(marker.id), modules, borderBits=1)
+    big = np.kron(pattern, np.ones((module_px, module_px), dtype=np.uint8))
+    quiet = int(round(marker.quiet_zone * modules * module_px))
+    sheet = np.pad(big, quiet, constant_values=255)
+    return np.repeat(sheet[:, :, None], 3, axis=2)
