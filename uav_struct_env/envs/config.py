@@ -7,7 +7,8 @@ Build one with :func:`make_config` (``preset`` plus keyword overrides), which is
 * ``"paper"`` (default): the paper's camera (1280 x 720, fx = fy = 1108.5 px), the paper's
   noise (3 m, 2 deg roll/pitch, 5 deg yaw, alternating signs), 1.0 m ArUco markers.
 * ``"train"``: the same field of view at 128 x 72 px, the ``gnss_ins`` noise model, no
-  landmark truth in ``info`` (saves the per-step projections), for RL training.
+  landmark truth in ``info`` (saves the per-step projections), 200 cycles, and a crash ends the
+  episode for everyone (``on_crash="all"``, for SuperSuit/SB3), for RL training.
 
 Keys with a stable meaning (DESIGN.md): ``stage``, ``image_size``, ``marker_size``, ``noise``,
 ``renderer``, ``max_cycles``, ``render_mode``. The rest may grow.
@@ -60,6 +61,9 @@ class EnvConfig:
             skips the projections.
         observe_depth: add ``obs["depth"]`` (float32 (H, W), metres along the optical axis).
         texture_seed: seed of the per-env concrete textures (and of ``site="random"``).
+        on_crash: ``"agent"`` (a crash terminates only that agent, PettingZoo's usual
+            semantics) or ``"all"`` (it also truncates every other agent: the episode ends, as
+            SuperSuit's vector-env conversion needs).
         render_view_height: height in pixels of each agent's tile in ``render()``.
         render_fps: frame rate stored in ``metadata`` and used by the video helper.
     """
@@ -81,6 +85,7 @@ class EnvConfig:
     landmark_sets: tuple[str, ...] = LANDMARK_SETS
     observe_depth: bool = False
     texture_seed: int = 0
+    on_crash: str = "agent"
     render_view_height: int = 180
     render_fps: int = 2
 
@@ -129,6 +134,8 @@ class EnvConfig:
                 or v <= 0
             ):
                 raise ConfigError(f"{name} must be a positive number, got {v!r}")
+        if self.on_crash not in ("agent", "all"):
+            raise ConfigError(f"on_crash must be 'agent' or 'all', got {self.on_crash!r}")
         sets = tuple(self.landmark_sets)
         unknown = [s for s in sets if s not in LANDMARK_SETS]
         if unknown:
@@ -161,7 +168,9 @@ def _replace(config: EnvConfig, overrides: dict[str, Any]) -> EnvConfig:
 
 PRESETS: dict[str, EnvConfig] = {
     "paper": EnvConfig(),
-    "train": EnvConfig(image_size=(128, 72), noise="gnss_ins", landmark_sets=(), max_cycles=200),
+    "train": EnvConfig(
+        image_size=(128, 72), noise="gnss_ins", landmark_sets=(), max_cycles=200, on_crash="all"
+    ),
 }
 
 

@@ -18,13 +18,17 @@ Per agent and step:
   visible), ``viewpoint`` (k right after ``reset(options={"viewpoint": k})``, else -1),
   ``noise_index`` (the viewpoint counter the paper noise's sign uses) and
   ``termination_reason`` (None, ``"collision_structure"``, ``"collision_uav"``,
-  ``"below_min_altitude"``, ``"above_max_altitude"``, ``"beyond_max_distance"``);
+  ``"below_min_altitude"``, ``"above_max_altitude"``, ``"beyond_max_distance"``) and
+  ``truncation_reason`` (None, ``"max_cycles"``, ``"teammate_crash"``);
 * reward ``0.0``: the base env has no localization and no task; the LocalizationWrapper adds
   the reward. ``info["reward_terms"]`` is an empty dict that sums to it.
 
 Episode: a crash (structure within ``uav_radius``, another UAV within ``2 * uav_radius``) or
 leaving the geofence terminates that agent (it leaves ``env.agents``); after ``max_cycles``
-steps every remaining agent is truncated.
+steps every remaining agent is truncated. With ``on_crash="all"`` (the ``train`` preset) a crash
+also truncates every other agent, ending the episode: SuperSuit's
+``pettingzoo_env_to_vec_env_v1`` cannot handle agents leaving mid-episode and its
+``black_death_v3`` wrapper does not support Dict observations.
 """
 
 from __future__ import annotations
@@ -257,9 +261,17 @@ class UavStructParallelEnv(ParallelEnv):
         self._scripted_viewpoint = -1
         observations, infos = self._observe(live, dt=cfg.control_period, reasons=reasons)
         terminations = {a: reasons[a] is not None for a in live}
-        truncations = {
-            a: (not terminations[a]) and self.num_cycles >= self.max_cycles for a in live
-        }
+        crashed = [a for a in live if terminations[a]]
+        truncations = {}
+        for a in live:
+            why = None
+            if not terminations[a]:
+                if cfg.on_crash == "all" and crashed:
+                    why = "teammate_crash"
+                elif self.num_cycles >= self.max_cycles:
+                    why = "max_cycles"
+            truncations[a] = why is not None
+            infos[a]["truncation_reason"] = why
         rewards = dict.fromkeys(live, 0.0)
         self.agents = [a for a in live if not (terminations[a] or truncations[a])]
         for a in live:
@@ -331,6 +343,7 @@ class UavStructParallelEnv(ParallelEnv):
                 "viewpoint": self._scripted_viewpoint,
                 "noise_index": noise_index,
                 "termination_reason": reasons.get(agent),
+                "truncation_reason": None,
                 "reward_terms": {},
             }
             self._last_images[agent] = result.rgb
