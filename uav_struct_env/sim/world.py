@@ -41,6 +41,8 @@ __all__ = ["DEFAULT_LIGHT", "SKY_RGB", "RenderResult", "SiteWorld"]
 
 #: Colour given to pixels that show no geometry (both backends clear to different colours).
 SKY_RGB = (186, 204, 224)
+#: Depth-buffer value from which a pixel counts as background (TinyRenderer clears to 1 - 1e-7).
+_BACKGROUND_DEPTH = 1.0 - 1e-6
 #: Sun from the south-east, high; TinyRenderer's lighting coefficients (EGL uses the direction).
 DEFAULT_LIGHT = {
     "lightDirection": (0.45, -0.35, 1.0),
@@ -136,6 +138,7 @@ class SiteWorld:
             self.close()
             raise
         self._extra_bodies: set[int] = set()
+        self._depth_meta: dict[int, tuple[weakref.ref, float, float, int]] = {}
         # Bounding-box corners of the solid elements, for the per-view near plane.
         self._box_corners = np.stack([
             np.array(np.meshgrid(*e.mesh.bounds.T, indexing="ij")).reshape(3, -1).T
@@ -197,10 +200,23 @@ class SiteWorld:
         used = replace(camera, near=self._near_plane(T, camera))
         raw = self._client.render(view_matrix(T), used, segmentation=segmentation, light=self.light)
         rgb = raw.rgb
-        rgb[raw.depth_buffer >= 1.0] = SKY_RGB
-        metric = depth_from_buffer(raw.depth_buffer, used) if depth else None
+        background = raw.depth_buffer >= _BACKGROUND_DEPTH
+        rgb[background] = SKY_RGB
+        metric = None
+        if depth:
+            metric = depth_from_buffer(raw.depth_buffer, used)
+            metric[background] = used.far
         bits = 16 if self.backend == "egl" else 24
+        if metric is not None:
+            self._remember_depth(metric, used, bits)
         return RenderResult(rgb, metric, raw.segmentation, used, bits)
+
+    def _remember_depth(self, depth: NDArray[np.float32], camera: Camera, bits: int) -> None:
+        """Note how a returned depth image was made, so that passing the bare array to
+        :meth:`landmark_truth` still gets the tight tolerance (weak references, last 32 only)."""
+        self._depth_meta[id(depth)] = (weakref.ref(depth), camera.near, camera.far, bits)
+        while len(self._depth_meta) > 32:
+            self._depth_meta.pop(next(iter(self._depth_meta)))
 
     def _near_plane(self, cam_from_world: NDArray[np.float64], camera: Camera) -> float:
         """80 % of the smallest depth that scene geometry can have in this view (>= camera.near)."""
@@ -244,9 +260,10 @@ class SiteWorld:
             name: a landmark set of the site (``"column_tops"``, ``"aruco"``, ...).
             cam_from_world: (4, 4) pose the depth was rendered from.
             camera: the camera it was rendered with (None: :attr:`camera`).
-            depth: the :class:`RenderResult` of ``render(..., depth=True)`` (best: it knows the
-                near plane and depth-buffer resolution used) or its (H, W) metric depth (then
-                the occlusion tolerance assumes ``camera.near`` and this backend's buffer).
+            depth: the :class:`RenderResult` of ``render(..., depth=True)`` or its ``.depth``
+                (H, W) metric depth. Either way the occlusion tolerance uses the near plane and
+                depth-buffer resolution that render used (for a depth array this world did not
+                return, it assumes ``camera.near`` and this backend's buffer: looser).
 
         Returns:
             ``ids``, ``xyz``, ``uv``, ``in_frame``, ``visible``: see
@@ -261,6 +278,11 @@ class SiteWorld:
             if depth.camera is not None:
                 camera = replace(camera, near=depth.camera.near, far=depth.camera.far)
             depth = depth.depth
+        else:
+            meta = self._depth_meta.get(id(depth))
+            if meta is not None and meta[0]() is depth:
+                camera = replace(camera, near=meta[1], far=meta[2])
+                bits = meta[3]
         return landmark_visibility(
             self.site.landmarks(name), cam_from_world, camera, depth, depth_bits=bits
         )
