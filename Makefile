@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-EXTRAS ?= dev,viz,rl
+EXTRAS ?= dev,rl
 
 .PHONY: demo test test-slow lint bench clean
 
@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/python -m uav_struct_env.demo --out renders
+	$(BIN)/uav-struct study --out results --workers 2
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -1,0 +1,37 @@
+"""The ``uav-struct`` command: ``uav-struct study …`` and ``uav-struct render …``."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+
+USAGE = """usage: uav-struct <command> [options]
+
+commands:
+  study    reproduce the paper's four-UAV study (Tables I and II, Fig. 2)
+  render   render the four UAV views of a site to PNG files
+
+`uav-struct <command> --help` describes each command's options."""
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Dispatch to a sub-command; returns the exit status."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if not args or args[0] in ("-h", "--help"):
+        print(USAGE)
+        return 0 if args else 2
+    command, rest = args[0], args[1:]
+    if command == "study":
+        from uav_struct_env.study import main as study_main
+
+        return study_main(rest)
+    if command == "render":
+        from uav_struct_env.demo import main as render_main
+
+        return render_main(rest)
+    print(f"uav-struct: unknown command {command!r}\n\n{USAGE}", file=sys.stderr)
+    return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,143 @@
+"""The study's figures: a Fig. 2-style panel, error CDFs and a top-down map of the viewpoints."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from uav_struct_env.site import Site
+from uav_struct_env.study.protocol import METHODS
+from uav_struct_env.study.run import ImageResult, Overlay
+
+__all__ = ["draw_overlay", "plot_error_cdfs", "plot_fig2", "plot_viewpoint_map"]
+
+# BGR-free: images are RGB, so colours are RGB tuples.
+_GREEN, _RED, _YELLOW, _CYAN, _MAGENTA = (40, 220, 40), (235, 40, 40), (255, 220, 0), (0, 220, 255), (255, 0, 255)
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def draw_overlay(ov: Overlay) -> np.ndarray:
+    """The image with detections (circles), associations (lines to the prior projection of the
+    assigned landmark: green correct, red wrong) and final-pose reprojections (cyan crosses)."""
+    img = np.ascontiguousarray(ov.image.copy())
+    h, w = img.shape[:2]
+    s = max(1, round(w / 640))
+
+    def pt(uv):
+        return int(round(uv[0])), int(round(uv[1]))
+
+    def inside(uv):
+        return np.all(np.isfinite(uv)) and -w < uv[0] < 2 * w and -h < uv[1] < 2 * h
+
+    for uv in ov.model_uv_prior:
+        if inside(uv):
+            cv2.drawMarker(img, pt(uv), _YELLOW, cv2.MARKER_DIAMOND, 10 * s, s)
+    for i, uv in enumerate(ov.detections_uv):
+        j = ov.assignment[i]
+        if j >= 0 and inside(ov.model_uv_prior[j]):
+            cv2.line(img, pt(uv), pt(ov.model_uv_prior[j]), _GREEN if ov.correct[i] else _RED, s, cv2.LINE_AA)
+        cv2.circle(img, pt(uv), 7 * s, _MAGENTA if j < 0 else _GREEN, s, cv2.LINE_AA)
+    if ov.success:
+        for uv in ov.model_uv_final:
+            if inside(uv):
+                cv2.drawMarker(img, pt(uv), _CYAN, cv2.MARKER_CROSS, 14 * s, s)
+    return img
+
+
+def plot_fig2(overlays: Sequence[Overlay], path: Path) -> None:
+    """Fig. 2: one image per landmark type with detections, associations and reprojections."""
+    plt = _pyplot()
+    order = [m.key for m in METHODS]
+    chosen = sorted(
+        [o for o in overlays if o.method in ("slab_corners", "opening_corners", "column_tops")],
+        key=lambda o: order.index(o.method),
+    )
+    if not chosen:
+        return
+    fig, axes = plt.subplots(1, len(chosen), figsize=(6 * len(chosen), 3.9), squeeze=False)
+    for ax, ov in zip(axes[0], chosen):
+        ax.imshow(draw_overlay(ov))
+        label = next(m.label for m in METHODS if m.key == ov.method)
+        ax.set_title(f"{label} — UAV {ov.uav}, viewpoint {ov.viewpoint}", fontsize=10)
+        ax.axis("off")
+    fig.text(
+        0.5, 0.01,
+        "circles: detections · yellow diamonds: BIM landmarks projected with the onboard prior · "
+        "lines: association (green correct, red wrong) · cyan crosses: final-pose reprojection",
+        ha="center", fontsize=8,
+    )
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_error_cdfs(rows: Sequence[ImageResult], path: Path) -> None:
+    """Empirical CDFs of translation and rotation error per method (failures never reach 1)."""
+    plt = _pyplot()
+    fig, (ax_t, ax_r) = plt.subplots(1, 2, figsize=(11, 4))
+    for m in METHODS:
+        mine = [r for r in rows if r.method == m.key]
+        if not mine:
+            continue
+        n = len(mine)
+        for ax, attr in ((ax_t, "translation_error_m"), (ax_r, "rotation_error_deg")):
+            v = np.sort([getattr(r, attr) for r in mine if r.success])
+            if v.size:
+                ax.step(np.concatenate([[v[0] * 0.5], v]), np.arange(v.size + 1) / n, where="post",
+                        label=f"{m.label} ({v.size}/{n})")
+    for ax, xlabel in ((ax_t, "translation error (m)"), (ax_r, "rotation error (°)")):
+        ax.set_xscale("log")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("fraction of images")
+        ax.set_ylim(0, 1.02)
+        ax.grid(True, which="both", alpha=0.3)
+    ax_t.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_viewpoint_map(site: Site, rows: Sequence[ImageResult], method: str, path: Path) -> None:
+    """Top-down map: the building, markers and, per image, ground truth, prior and estimate."""
+    plt = _pyplot()
+    mine = [r for r in rows if r.method == method]
+    fig, ax = plt.subplots(figsize=(7, 7))
+    xmin, ymin, xmax, ymax = site.building.slab_bounds
+    ax.add_patch(plt.Rectangle((xmin, ymin), xmax - xmin, ymax - ymin, fill=False, lw=1.5, color="k"))
+    for c in site.columns:
+        sx, sy = c.section
+        ax.add_patch(plt.Rectangle((c.x - sx / 2, c.y - sy / 2), sx, sy, color="0.3"))
+    for mk in site.markers:
+        h = mk.side / 2
+        ax.add_patch(plt.Rectangle((mk.center[0] - h, mk.center[1] - h), 2 * h, 2 * h, color="tab:purple"))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for r in mine:
+        col = colours[r.uav % len(colours)]
+        ax.plot(r.gt_x, r.gt_y, "o", color=col, ms=5)
+        ax.plot([r.gt_x, r.prior_x], [r.gt_y, r.prior_y], ":", color=col, lw=0.8)
+        ax.plot(r.prior_x, r.prior_y, "x", color=col, ms=5)
+        if r.success:
+            ax.plot(r.est_x, r.est_y, "+", color="k", ms=7)
+    ax.plot([], [], "o", color="0.4", label="ground truth")
+    ax.plot([], [], "x", color="0.4", label="onboard prior")
+    ax.plot([], [], "+", color="k", label=f"estimate ({method})")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title("Viewpoints, one colour per UAV")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,178 @@
+"""The paper's study protocol as data: the study configuration and the evaluated methods.
+
+A *method* is one row of the paper's Table II: a landmark source (a structural landmark set, or
+ArUco markers of one size), the construction stage it is evaluated in and the paper's reported
+figures. Methods that share a stage and marker size share a *scene*: the study renders every
+scene once per viewpoint and evaluates all of its methods on the same frames.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from uav_struct_env.errors import ConfigError
+
+__all__ = [
+    "ASSOCIATIONS",
+    "DETECTORS",
+    "NOISES",
+    "METHODS",
+    "Method",
+    "PaperFigures",
+    "Scene",
+    "StudyConfig",
+]
+
+DETECTORS = ("projection",)
+ASSOCIATIONS = ("paper", "robust")
+NOISES = ("paper", "gnss_ins")
+
+
+@dataclass(frozen=True)
+class PaperFigures:
+    """The paper's Table I / II figures for one method (None where the paper gives none)."""
+
+    successful: int
+    total: int
+    translation_median_m: float
+    translation_p90_m: float
+    rotation_median_deg: float
+    rotation_p90_deg: float
+    detection_pct: float | None = None
+    association_f1_pct: float | None = None
+    latency_s: float | None = None
+
+
+@dataclass(frozen=True)
+class Scene:
+    """What gets rendered: a construction stage with markers of one size."""
+
+    stage: str
+    marker_size: float
+
+
+@dataclass(frozen=True)
+class Method:
+    """One evaluated method (a results.json key and a Table II row)."""
+
+    key: str
+    label: str
+    scene: Scene
+    landmarks: str  # landmark set: a structural set, or "aruco"
+    aruco_mode: str | None = None  # "average" (the paper's) or "joint"; None for structural
+    paper: PaperFigures | None = None
+
+    @property
+    def structural(self) -> bool:
+        """True for structural landmarks, False for the ArUco baseline."""
+        return self.aruco_mode is None
+
+
+_SLAB = Scene("slab", 1.0)
+_COLUMNS = Scene("columns", 1.0)
+
+#: Every method the study evaluates, in table order. The paper's figures: Tables I and II.
+METHODS: tuple[Method, ...] = (
+    Method("slab_corners", "Slab corners", _SLAB, "slab_corners",
+           paper=PaperFigures(39, 40, 0.185, 0.363, 0.615, 1.142, 99.10, 100.00, 13.28)),
+    Method("opening_corners", "Opening corners", _SLAB, "opening_corners",
+           paper=PaperFigures(39, 40, 1.192, 2.607, 2.664, 6.220, 96.88, 100.00, 13.91)),
+    Method("column_tops", "Column tops", _COLUMNS, "column_tops",
+           paper=PaperFigures(40, 40, 0.163, 3.323, 0.470, 11.503, 95.65, 94.21, 27.13)),
+    Method("all", "All structural (columns stage)", _COLUMNS, "all"),
+    Method("aruco_0.5m", "ArUco, 0.5 m", Scene("slab", 0.5), "aruco", "average",
+           paper=PaperFigures(39, 40, 14.929, 35.958, 35.862, 93.235)),
+    Method("aruco_1.0m", "ArUco, 1.0 m", _SLAB, "aruco", "average",
+           paper=PaperFigures(38, 40, 0.658, 1.533, 0.698, 1.631)),
+    Method("aruco_0.5m_joint", "ArUco, 0.5 m, joint PnP", Scene("slab", 0.5), "aruco", "joint"),
+    Method("aruco_1.0m_joint", "ArUco, 1.0 m, joint PnP", _SLAB, "aruco", "joint"),
+)
+
+
+@dataclass(frozen=True)
+class StudyConfig:
+    """Everything that determines a study's numbers (written to ``results.json``).
+
+    Attributes:
+        seed: seeds textures, detector noise and the ``gnss_ins`` prior.
+        detector: ``"projection"`` (ground-truth projections + pixel noise, as the paper isolated
+            association and pose from its vision model).
+        association: ``"robust"`` or ``"paper"`` (plain linear assignment).
+        noise: onboard prior model, ``"paper"`` (3 m, 2/2/5 deg, alternating signs) or
+            ``"gnss_ins"``.
+        site: ``"paper"`` or ``"random"`` (drawn from ``seed``).
+        n_viewpoints: viewpoints per UAV (10 in the paper; ``--quick`` uses 2).
+        n_agents: UAVs, one per side (4 in the paper).
+        image_size: (W, H); the paper's camera is scaled to it.
+        pixel_sigma: the projection detector's noise, px.
+        miss_rate: the projection detector's probability of missing a visible landmark.
+        false_positives: mean clutter detections per image.
+        renderer: ``"auto"``, ``"tiny"`` or ``"egl"``.
+        workers: processes rendering and localizing in parallel.
+        methods: keys of :data:`METHODS` to run (default all).
+    """
+
+    seed: int = 0
+    detector: str = "projection"
+    association: str = "robust"
+    noise: str = "paper"
+    site: str = "paper"
+    n_viewpoints: int = 10
+    n_agents: int = 4
+    image_size: tuple[int, int] = (1280, 720)
+    pixel_sigma: float = 1.0
+    miss_rate: float = 0.0
+    false_positives: float = 0.0
+    renderer: str = "auto"
+    workers: int = 1
+    methods: tuple[str, ...] = field(default_factory=lambda: tuple(m.key for m in METHODS))
+
+    def __post_init__(self) -> None:
+        def choice(name: str, options: tuple[str, ...]) -> None:
+            if getattr(self, name) not in options:
+                raise ConfigError(f"{name} must be one of {options}, got {getattr(self, name)!r}")
+
+        if self.detector == "learned":
+            raise ConfigError(
+                "detector='learned' is not available yet (the learned landmark detector is a "
+                f"separate issue); use one of {DETECTORS}"
+            )
+        choice("detector", DETECTORS)
+        choice("association", ASSOCIATIONS)
+        choice("noise", NOISES)
+        choice("site", ("paper", "random"))
+        for name in ("seed",):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ConfigError(f"{name} must be an int >= 0, got {v!r}")
+        for name in ("n_viewpoints", "n_agents", "workers"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ConfigError(f"{name} must be a positive int, got {v!r}")
+        for name, lo, hi in (("pixel_sigma", 0.0, math.inf), ("miss_rate", 0.0, 1.0),
+                             ("false_positives", 0.0, math.inf)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi) or math.isnan(v):
+                raise ConfigError(f"{name} must be a number in [{lo}, {hi}], got {v!r}")
+        keys = [m.key for m in METHODS]
+        unknown = [k for k in self.methods if k not in keys]
+        if unknown or not self.methods:
+            raise ConfigError(f"methods must be a non-empty subset of {keys}, got {list(self.methods)}")
+        object.__setattr__(self, "methods", tuple(self.methods))
+        object.__setattr__(self, "image_size", tuple(int(v) for v in self.image_size))
+
+    @property
+    def selected_methods(self) -> tuple[Method, ...]:
+        """The methods to run, in table order."""
+        return tuple(m for m in METHODS if m.key in self.methods)
+
+    @property
+    def scenes(self) -> tuple[Scene, ...]:
+        """The distinct scenes the selected methods need, in first-use order."""
+        out: list[Scene] = []
+        for m in self.selected_methods:
+            if m.scene not in out:
+                out.append(m.scene)
+        return tuple(out)
+

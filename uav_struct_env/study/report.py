@@ -1,0 +1,181 @@
+"""Turn per-image results into ``results.json``, the paper's Tables I and II, and a CSV.
+
+Statistics follow the paper: error medians and P90 over the *successful* poses only, with the
+success count beside them. Detection rate and association precision/recall/F1 are pooled over
+all images of a method (sums of counts, then ratios). A value that cannot be computed (no
+successful pose, nothing visible) is ``null`` in JSON and ``—`` in the tables.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from uav_struct_env.study.protocol import METHODS, Method, StudyConfig
+from uav_struct_env.study.run import ImageResult
+
+__all__ = ["summarize", "write_csv", "write_results_json", "table1_markdown", "table2_markdown"]
+
+RECALL_THRESHOLDS = ((0.25, 1.0), (0.5, 2.0), (1.0, 5.0))
+
+
+def _num(x: float) -> float | None:
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def _stats(values: Sequence[float]) -> dict[str, float | None]:
+    v = np.asarray([x for x in values if math.isfinite(x)], dtype=float)
+    if v.size == 0:
+        return {"median": None, "p90": None}
+    return {"median": float(np.median(v)), "p90": float(np.percentile(v, 90))}
+
+
+def _ratio(a: int, b: int) -> float | None:
+    return a / b if b else None
+
+
+def summarize(method: Method, rows: Sequence[ImageResult]) -> dict:
+    """The ``results.json`` entry of one method."""
+    ok = [r for r in rows if r.success]
+    visible = sum(r.n_visible for r in rows)
+    true_det = sum(r.n_true_detections for r in rows)
+    assigned = sum(r.n_assigned for r in rows)
+    correct = sum(r.n_correct for r in rows)
+    # Structural: detections of a true landmark / visible landmarks. Markers: correctly decoded
+    # visible markers / visible markers (n_true_detections counts the visible markers there).
+    detection_rate = _ratio(true_det, visible) if method.structural else _ratio(correct, true_det)
+    precision = _ratio(correct, assigned)
+    recall = _ratio(correct, true_det)
+    f1 = (2 * precision * recall / (precision + recall)
+          if precision is not None and recall is not None and precision + recall > 0 else None)
+    t = [r.translation_error_m for r in ok]
+    rot = [r.rotation_error_deg for r in ok]
+    crb_t = _stats([r.crb_translation_m for r in rows])
+    crb_r = _stats([r.crb_rotation_deg for r in rows])
+    t_stats = _stats(t)
+    failures: dict[str, int] = {}
+    for r in rows:
+        if not r.success:
+            failures[r.failure_reason or "unknown"] = failures.get(r.failure_reason or "unknown", 0) + 1
+    return {
+        "label": method.label,
+        "stage": method.scene.stage,
+        "marker_size_m": method.scene.marker_size if not method.structural else None,
+        "successful": len(ok),
+        "total": len(rows),
+        "translation_error_m": t_stats,
+        "rotation_error_deg": _stats(rot),
+        "detection_rate": detection_rate,
+        "association_precision": precision,
+        "association_recall": recall,
+        "association_f1": f1,
+        "latency_s": _stats([r.latency_s for r in rows]),
+        "cramer_rao_translation_m": crb_t,
+        "cramer_rao_rotation_deg": crb_r,
+        "median_error_over_bound": (
+            t_stats["median"] / crb_t["median"]
+            if t_stats["median"] is not None and crb_t["median"] not in (None, 0.0) else None
+        ),
+        "recall_at": {
+            f"{tm}m_{rd}deg": sum(r.translation_error_m <= tm and r.rotation_error_deg <= rd for r in ok) / len(rows)
+            for tm, rd in RECALL_THRESHOLDS
+        } if rows else {},
+        "prior_translation_error_m": _stats([r.prior_translation_error_m for r in rows]),
+        "prior_rotation_error_deg": _stats([r.prior_rotation_error_deg for r in rows]),
+        "failures": failures,
+    }
+
+
+def results_dict(config: StudyConfig, rows: Sequence[ImageResult], extra_config: dict | None = None) -> dict:
+    """The whole ``results.json`` document."""
+    cfg = dataclasses.asdict(config)
+    cfg["image_size"] = list(config.image_size)
+    cfg["methods"] = list(config.methods)
+    cfg.update(extra_config or {})
+    methods = {}
+    for m in config.selected_methods:
+        methods[m.key] = summarize(m, [r for r in rows if r.method == m.key])
+    return {"config": cfg, "methods": _clean(methods)}
+
+
+def _clean(obj):
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, float):
+        return _num(obj)
+    return obj
+
+
+def write_results_json(path: Path, results: dict) -> None:
+    """Write ``results.json`` (strict JSON: no NaN)."""
+    path.write_text(json.dumps(results, indent=2, allow_nan=False) + "\n")
+
+
+def write_csv(path: Path, rows: Sequence[ImageResult]) -> None:
+    """Every per-image result, one row each."""
+    fields = [f.name for f in dataclasses.fields(ImageResult)]
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=fields)
+        writer.writeheader()
+        for r in rows:
+            writer.writerow(dataclasses.asdict(r))
+
+
+def _f(x: float | None, digits: int = 3) -> str:
+    return "—" if x is None else f"{x:.{digits}f}"
+
+
+def _pct(x: float | None) -> str:
+    return "—" if x is None else f"{100 * x:.2f}"
+
+
+def table1_markdown(results: dict) -> str:
+    """Table I: detection and association, ours beside the paper's."""
+    lines = [
+        "| Landmark type | Detection (%) | Paper | Association F1 (%) | Paper | Latency (s) | Paper |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for m in METHODS:
+        r = results["methods"].get(m.key)
+        if r is None or not m.structural:
+            continue
+        p = m.paper
+        lines.append(
+            f"| {m.label} | {_pct(r['detection_rate'])} | {_f(p and p.detection_pct, 2)} | "
+            f"{_pct(r['association_f1'])} | {_f(p and p.association_f1_pct, 2)} | "
+            f"{_f(r['latency_s']['median'], 4)} | {_f(p and p.latency_s, 2)} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def table2_markdown(results: dict) -> str:
+    """Table II: pose accuracy, ours beside the paper's, with the Cramér-Rao bound."""
+    lines = [
+        "| Method | Successful | Translation median / P90 (m) | Paper | Bound median (m) "
+        "| Rotation median / P90 (°) | Paper | Bound median (°) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for m in METHODS:
+        r = results["methods"].get(m.key)
+        if r is None:
+            continue
+        p = m.paper
+        t, rot = r["translation_error_m"], r["rotation_error_deg"]
+        paper_t = f"{p.translation_median_m:.3f} / {p.translation_p90_m:.3f}" if p else "—"
+        paper_r = f"{p.rotation_median_deg:.3f} / {p.rotation_p90_deg:.3f}" if p else "—"
+        paper_n = f" (paper {p.successful}/{p.total})" if p else ""
+        lines.append(
+            f"| {m.label} | {r['successful']}/{r['total']}{paper_n} | {_f(t['median'])} / {_f(t['p90'])} | "
+            f"{paper_t} | {_f(r['cramer_rao_translation_m']['median'])} | "
+            f"{_f(rot['median'])} / {_f(rot['p90'])} | {paper_r} | "
+            f"{_f(r['cramer_rao_rotation_deg']['median'])} |"
+        )
+    return "\n".join(lines) + "\n"

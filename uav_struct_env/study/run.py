@@ -1,0 +1,251 @@
+"""Run the study: render every scene from every scripted viewpoint and evaluate every method.
+
+The unit of work is one (scene, viewpoint): one ``reset(options={"viewpoint": k})`` of the
+four-UAV environment, which renders the four UAV views with the paper's prior perturbation, and
+then every method of that scene on the four frames. Workers (``workers > 1``) are spawned
+processes that keep one environment per scene alive across the viewpoints they are given, so
+each site is loaded at most once per process. Every random draw is seeded from
+``(seed, method, uav, viewpoint)``, so the numbers do not depend on how the work is split.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from localization import Localizer, ProjectionDetector, association_scores, cramer_rao_bound
+from localization.geometry import camera_center, invert, project
+from localization.metrics import pose_errors
+from uav_struct_env.study.protocol import METHODS, Method, Scene, StudyConfig
+
+__all__ = ["Overlay", "ImageResult", "iter_study", "run_units"]
+
+
+@dataclass(frozen=True)
+class ImageResult:
+    """One method on one image (a row of ``per_image.csv``)."""
+
+    method: str
+    uav: int
+    viewpoint: int
+    success: bool
+    failure_reason: str
+    translation_error_m: float
+    rotation_error_deg: float
+    prior_translation_error_m: float
+    prior_rotation_error_deg: float
+    n_visible: int
+    n_detections: int
+    n_true_detections: int
+    n_assigned: int
+    n_correct: int
+    n_inliers: int
+    reprojection_rmse_px: float
+    crb_translation_m: float
+    crb_rotation_deg: float
+    latency_s: float
+    gt_x: float
+    gt_y: float
+    gt_z: float
+    prior_x: float
+    prior_y: float
+    prior_z: float
+    est_x: float
+    est_y: float
+    est_z: float
+
+
+@dataclass(frozen=True, eq=False)
+class Overlay:
+    """What Fig. 2 draws for one structural method on one image."""
+
+    method: str
+    uav: int
+    viewpoint: int
+    image: NDArray[np.uint8]
+    detections_uv: NDArray[np.float64]
+    assignment: NDArray[np.int64]
+    correct: NDArray[np.bool_]
+    model_uv_prior: NDArray[np.float64]
+    model_uv_final: NDArray[np.float64]
+    success: bool
+
+
+# ------------------------------------------------------------------------------- per process
+_ENVS: dict[Scene, object] = {}
+
+
+def _env_for(config: StudyConfig, scene: Scene):
+    """The environment of ``scene``, built once per process."""
+    env = _ENVS.get(scene)
+    if env is None:
+        import uav_struct_env
+
+        env = uav_struct_env.parallel_env(
+            stage=scene.stage,
+            marker_size=scene.marker_size,
+            site=config.site,
+            image_size=config.image_size,
+            noise=config.noise,
+            renderer=config.renderer,
+            n_agents=config.n_agents,
+            texture_seed=config.seed,
+        )
+        _ENVS[scene] = env
+    return env
+
+
+def _close_envs() -> None:
+    for env in _ENVS.values():
+        env.close()
+    _ENVS.clear()
+
+
+def _rng(config: StudyConfig, method: Method, uav: int, viewpoint: int) -> np.random.Generator:
+    index = next(i for i, m in enumerate(METHODS) if m.key == method.key)
+    return np.random.default_rng([config.seed, index, uav, viewpoint])
+
+
+def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoint: int = 0):
+    """Render ``scene`` at ``viewpoint`` and evaluate its methods: ``(results, overlays)``."""
+    env = _env_for(config, scene)
+    obs, infos = env.reset(seed=config.seed * 1000 + viewpoint, options={"viewpoint": viewpoint})
+    site = env.site
+    methods = [m for m in config.selected_methods if m.scene == scene]
+    results: list[ImageResult] = []
+    overlays: list[Overlay] = []
+    for uav, agent in enumerate(env.possible_agents):
+        info = infos[agent]
+        image = obs[agent]["image"]
+        K = info["intrinsics"]
+        gt = invert(info["world_from_cam"])
+        prior = invert(info["prior_world_from_cam"])
+        for method in methods:
+            truth = info["landmarks"][method.landmarks]
+            if method.structural:
+                res, ov = _structural(config, method, uav, viewpoint, image, K, gt, prior, truth,
+                                      site.landmarks(method.landmarks).xyz)
+                if ov is not None and viewpoint == overlay_viewpoint and uav == 0:
+                    overlays.append(ov)
+            else:
+                res = _aruco(config, method, uav, viewpoint, image, K, gt, prior, truth, site.markers)
+            results.append(res)
+    return results, overlays
+
+
+def _row(method, uav, viewpoint, est, gt, prior, truth, K, pixel_sigma, **counts) -> ImageResult:
+    visible = np.asarray(truth["visible"], dtype=bool)
+    t_err, r_err = pose_errors(est.cam_from_world, gt) if est.success else (float("nan"),) * 2
+    p_err = pose_errors(prior, gt)
+    crb = cramer_rao_bound(np.asarray(truth["xyz"])[visible].reshape(-1, 3), gt, K, pixel_sigma)
+    c_gt, c_prior = camera_center(gt), camera_center(prior)
+    c_est = camera_center(est.cam_from_world) if est.success else np.full(3, np.nan)
+    return ImageResult(
+        method=method.key, uav=uav, viewpoint=viewpoint, success=bool(est.success),
+        failure_reason=est.failure_reason or "",
+        translation_error_m=t_err, rotation_error_deg=r_err,
+        prior_translation_error_m=p_err[0], prior_rotation_error_deg=p_err[1],
+        n_visible=int(visible.sum()),
+        n_inliers=int(est.n_inliers), reprojection_rmse_px=float(est.reprojection_rmse_px),
+        crb_translation_m=crb.position_rms_m, crb_rotation_deg=crb.rotation_rms_deg,
+        gt_x=c_gt[0], gt_y=c_gt[1], gt_z=c_gt[2],
+        prior_x=c_prior[0], prior_y=c_prior[1], prior_z=c_prior[2],
+        est_x=c_est[0], est_y=c_est[1], est_z=c_est[2],
+        **counts,
+    )
+
+
+def _structural(config, method, uav, viewpoint, image, K, gt, prior, truth, model_xyz):
+    w, h = config.image_size
+    detector = ProjectionDetector(
+        method.landmarks, pixel_sigma=config.pixel_sigma, miss_rate=config.miss_rate,
+        false_positives=config.false_positives, rng=_rng(config, method, uav, viewpoint),
+    )
+    t0 = time.perf_counter()
+    det = detector.detect(image, {"landmarks": {method.landmarks: truth}, "image_size": (w, h)})
+    t_detect = time.perf_counter() - t0
+    loc = Localizer(model_xyz, K, association=config.association,
+                    pixel_sigma=max(config.pixel_sigma, 0.5), image_size=(w, h))
+    est = loc.localize(det.uv, prior)
+    scores = association_scores(est.assignment, det.true_ids, truth["ids"])
+    row = _row(
+        method, uav, viewpoint, est, gt, prior, truth, K, max(config.pixel_sigma, 1e-3),
+        n_detections=len(det), n_true_detections=scores.true_detections,
+        n_assigned=scores.assigned, n_correct=scores.correct,
+        latency_s=t_detect + est.timings.get("total", 0.0),
+    )
+    ids = np.asarray(truth["ids"])
+    correct = (est.assignment >= 0) & (ids[np.maximum(est.assignment, 0)] == det.true_ids)
+    uv_prior, _ = project(K, prior, model_xyz)
+    uv_final, _ = project(K, est.cam_from_world, model_xyz)
+    overlay = Overlay(method.key, uav, viewpoint, image, det.uv, est.assignment, correct,
+                      uv_prior, uv_final, bool(est.success))
+    return row, overlay
+
+
+def _aruco(config, method, uav, viewpoint, image, K, gt, prior, truth, markers):
+    from localization.aruco import ArucoLocalizer
+
+    loc = ArucoLocalizer(markers, K, mode=method.aruco_mode)
+    t0 = time.perf_counter()
+    est = loc.localize(image, prior)
+    latency = time.perf_counter() - t0
+    # "Association" of markers is decoding their ids: a marker counts as visible when all its
+    # corners are, and a detection is correct when its id is one of the visible markers.
+    visible = np.asarray(truth["visible"], dtype=bool).reshape(-1, 4).all(axis=1)
+    visible_ids = {int(m.id) for m, v in zip(markers, visible) if v}
+    found = [int(i) for i in est.marker_ids]
+    correct = sum(1 for i in found if i in visible_ids)
+    return _row(
+        method, uav, viewpoint, est, gt, prior, truth, K, max(config.pixel_sigma, 1e-3),
+        n_detections=len(found), n_true_detections=len(visible_ids),
+        n_assigned=len(found), n_correct=correct, latency_s=latency,
+    )
+
+
+# ------------------------------------------------------------------------------- scheduling
+def _units(config: StudyConfig) -> list[tuple[Scene, int]]:
+    return [(scene, k) for scene in config.scenes for k in range(config.n_viewpoints)]
+
+
+def _worker(args):
+    config, scene, k = args
+    return run_unit(config, scene, k)
+
+
+def iter_study(config: StudyConfig) -> Iterator[tuple[list[ImageResult], list[Overlay]]]:
+    """Yield the results of every (scene, viewpoint) unit as it completes."""
+    units = _units(config)
+    if config.workers == 1:
+        try:
+            for scene, k in units:
+                yield run_unit(config, scene, k)
+        finally:
+            _close_envs()
+        return
+    ctx = mp.get_context("spawn")
+    with ctx.Pool(config.workers) as pool:
+        # Group by scene so each process mostly keeps one scene; chunksize 1 keeps progress fine.
+        yield from pool.imap_unordered(_worker, [(config, s, k) for s, k in units], chunksize=1)
+
+
+def run_units(
+    config: StudyConfig, progress: Callable[[int, int], None] | None = None
+) -> tuple[list[ImageResult], list[Overlay]]:
+    """Run the whole study; ``progress(done, total)`` is called after each unit."""
+    total = len(_units(config))
+    results: list[ImageResult] = []
+    overlays: list[Overlay] = []
+    for done, (res, ovs) in enumerate(iter_study(config), start=1):
+        results += res
+        overlays += ovs
+        if progress is not None:
+            progress(done, total)
+    order = {m.key: i for i, m in enumerate(METHODS)}
+    results.sort(key=lambda r: (order[r.method], r.uav, r.viewpoint))
+    return results, overlays
