@@ -165,7 +165,25 @@ def test_random_sites_are_seeded_and_plausible():
 def test_make_site_resolves_names_and_errors():
     assert make_site("paper", stage="slab").stage == "slab"
     assert make_site(paper_site("slab"), stage="columns").stage == "columns"
-    with pytest.raises(ValueError, match=r"site must be a Site, 'random' or one of \['paper'\], got 'moon'"):
+    with pytest.raises(ValueError, match=r"site must be a Site, 'random', a site file \(\*\.json\) or one of \['paper'\], got 'moon'"):
         make_site("moon")
     with pytest.raises(ValueError, match=r"site='random' needs a numpy.random.Generator"):
         make_site("random")
+
+
+def test_site_files_round_trip_and_resize_markers(tmp_path):
+    from uav_struct_env.site.io import load_site, save_site, site_from_dict
+
+    site = paper_site("slab", marker_size=0.5)
+    path = tmp_path / "site.json"
+    save_site(site, path)
+    assert load_site(path) == site
+    resolved = make_site(str(path), stage="columns", marker_size=1.0)
+    assert resolved.stage == "columns" and {m.side for m in resolved.markers} == {1.0}
+    assert resolved.building == site.building
+    with pytest.raises(SiteGeometryError, match=r"site.building has unknown keys \['floors'\]"):
+        site_from_dict({"building": {"grid": {"spans_x": [4], "spans_y": [4]}, "floors": 2}})
+    with pytest.raises(SiteGeometryError, match=r"columns overlap: spans_x\[0\] = 0\.3 m"):
+        site_from_dict({"building": {"grid": {"spans_x": [0.3], "spans_y": [4]}}})
+    with pytest.raises(FileNotFoundError, match=r"site file '.*nope.json' does not exist"):
+        load_site(tmp_path / "nope.json")

@@ -9,6 +9,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+from pathlib import Path
+
 import numpy as np
 
 from uav_struct_env.errors import ConfigError
@@ -125,13 +128,30 @@ def make_site(
     marker_size: float | None = 1.0,
     rng: np.random.Generator | None = None,
 ) -> Site:
-    """Resolve a site argument: a :class:`Site`, a preset name, or ``"random"`` (needs ``rng``)."""
+    """Resolve a site argument at ``stage``: a :class:`Site`, a preset name, ``"random"`` (needs
+    ``rng``) or the path of a site file (``*.json``, see :mod:`uav_struct_env.site.io`).
+
+    For a :class:`Site` or a site file, ``marker_size`` resizes its markers (a site without
+    markers gets two per side 3 m out); None removes them.
+    """
+    if isinstance(site, str) and (site.endswith(".json") or Path(site).is_file()):
+        from uav_struct_env.site.io import load_site
+
+        site = load_site(site)
     if isinstance(site, Site):
-        return site.with_stage(stage) if site.stage != stage else site
+        if marker_size is None:
+            markers: tuple[ArucoMarker, ...] = ()
+        elif site.markers:
+            markers = tuple(dataclasses.replace(m, side=marker_size) for m in site.markers)
+        else:
+            markers = markers_around(site.building, marker_size)
+        if markers == site.markers and site.stage == stage:
+            return site
+        return Site(site.building, stage, markers, site.ground_size, site.name)
     if site == "random":
         if rng is None:
             raise ConfigError("site='random' needs a numpy.random.Generator (rng)")
         return random_site(rng, stage=stage, marker_size=marker_size)
     if site not in PRESETS:
-        raise ConfigError(f"site must be a Site, 'random' or one of {sorted(PRESETS)}, got {site!r}")
+        raise ConfigError(f"site must be a Site, 'random', a site file (*.json) or one of {sorted(PRESETS)}, got {site!r}")
     return PRESETS[site](stage=stage, marker_size=marker_size)

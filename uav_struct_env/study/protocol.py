@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from uav_struct_env.errors import ConfigError
 
@@ -101,7 +102,7 @@ class StudyConfig:
         association: ``"robust"`` or ``"paper"`` (plain linear assignment).
         noise: onboard prior model, ``"paper"`` (3 m, 2/2/5 deg, alternating signs) or
             ``"gnss_ins"``.
-        site: ``"paper"`` or ``"random"`` (drawn from ``seed``).
+        site: ``"paper"``, ``"random"`` (drawn from ``seed``) or the path of a site file.
         n_viewpoints: viewpoints per UAV (10 in the paper; ``--quick`` uses 2).
         n_agents: UAVs, one per side (4 in the paper).
         image_size: (W, H); the paper's camera is scaled to it.
@@ -141,7 +142,10 @@ class StudyConfig:
         choice("detector", DETECTORS)
         choice("association", ASSOCIATIONS)
         choice("noise", NOISES)
-        choice("site", ("paper", "random"))
+        if not isinstance(self.site, str) or not (
+            self.site in ("paper", "random") or Path(self.site).is_file()
+        ):
+            raise ConfigError(f"site must be 'paper', 'random' or an existing site file (*.json), got {self.site!r}")
         for name in ("seed",):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:

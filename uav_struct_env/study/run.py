@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from localization import Localizer, ProjectionDetector, association_scores, cramer_rao_bound
 from localization.geometry import camera_center, invert, project
 from localization.metrics import pose_errors
+from uav_struct_env.site.io import load_site
 from uav_struct_env.study.protocol import METHODS, Method, Scene, StudyConfig
 
 __all__ = ["Overlay", "ImageResult", "iter_study", "run_units"]
@@ -89,7 +90,7 @@ def _env_for(config: StudyConfig, scene: Scene):
         env = uav_struct_env.parallel_env(
             stage=scene.stage,
             marker_size=scene.marker_size,
-            site=config.site,
+            site=config.site if config.site in ("paper", "random") else load_site(config.site),
             image_size=config.image_size,
             noise=config.noise,
             renderer=config.renderer,

@@ -8,6 +8,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from uav_struct_env.site import make_site
@@ -56,17 +57,11 @@ def run_study(config: StudyConfig, out: str | Path, *, progress: bool = True, fi
         plot_fig2(overlays, out / "fig2_associations.png")
         plot_error_cdfs(rows, out / "error_cdf.png")
         site = make_site(config.site, stage="slab", marker_size=1.0,
-                         rng=None if config.site == "paper" else _site_rng(config))
+                         rng=np.random.default_rng(config.seed))
         structural = [m.key for m in config.selected_methods if m.structural]
         if structural:
             plot_viewpoint_map(site, rows, structural[0], out / "viewpoint_map.png")
     return results
-
-
-def _site_rng(config: StudyConfig):
-    import numpy as np
-
-    return np.random.default_rng(config.seed)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -81,7 +76,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--noise", default="paper", choices=NOISES, help="onboard prior model")
     p.add_argument("--quick", action="store_true",
                    help=f"{QUICK_VIEWPOINTS} viewpoints per UAV instead of 10 (for tests)")
-    p.add_argument("--site", default="paper", help="site preset: paper or random")
+    p.add_argument("--site", default="paper",
+                   help="site: paper, random (drawn from --seed) or a site file (*.json)")
     p.add_argument("--workers", type=int, default=1, help="parallel processes (default 1)")
     p.add_argument("--pixel-sigma", type=float, default=1.0, help="projection detector noise, px")
     p.add_argument("--miss-rate", type=float, default=0.0, help="projection detector miss rate")

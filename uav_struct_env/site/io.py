@@ -1,0 +1,90 @@
+"""Site files: a :class:`~uav_struct_env.site.Site` as JSON, to describe any building by hand.
+
+Example (the paper's building without markers)::
+
+    {"building": {"grid": {"spans_x": [4, 4], "spans_y": [4, 3, 4]},
+                  "storey_heights": [3.5, 3.5], "column_section": [0.35, 0.35],
+                  "slab_thickness": 0.25, "slab_overhang": 0.3,
+                  "openings": [{"name": "stair", "center": [2.0, 5.5], "size": [3.6, 2.6]}]},
+     "stage": "columns",
+     "markers": [{"id": 0, "side": 1.0, "center": [2.0, -3.3, 0.01]}]}
+
+Every value is validated by the dataclasses themselves, so a file describing impossible geometry
+raises the same :class:`~uav_struct_env.errors.SiteGeometryError` as code would.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+from uav_struct_env.errors import SiteGeometryError
+from uav_struct_env.site.model import ArucoMarker, Building, ColumnGrid, Opening, Site
+
+__all__ = ["load_site", "save_site", "site_from_dict", "site_to_dict"]
+
+
+def site_to_dict(site: Site) -> dict[str, Any]:
+    """A JSON-ready dict of ``site`` (inverse of :func:`site_from_dict`)."""
+    return json.loads(json.dumps(dataclasses.asdict(site)))
+
+
+def _build(cls, data: Any, where: str, **nested):
+    if not isinstance(data, dict):
+        raise SiteGeometryError(f"{where} must be a JSON object, got {data!r}")
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise SiteGeometryError(f"{where} has unknown keys {unknown}; expected some of {sorted(names)}")
+    kwargs = {}
+    for key, value in data.items():
+        if key in nested:
+            kwargs[key] = nested[key](value, f"{where}.{key}")
+        elif isinstance(value, list):
+            kwargs[key] = tuple(value)
+        else:
+            kwargs[key] = value
+    try:
+        return cls(**kwargs)
+    except TypeError as err:
+        raise SiteGeometryError(f"{where}: {err}") from None
+
+
+def site_from_dict(data: dict[str, Any]) -> Site:
+    """Build a :class:`Site` from a dict as written by :func:`site_to_dict`.
+
+    Raises:
+        SiteGeometryError: on unknown keys, missing keys or impossible geometry.
+    """
+    def grid(v, where):
+        return _build(ColumnGrid, v, where)
+
+    def openings(v, where):
+        return tuple(_build(Opening, o, f"{where}[{i}]") for i, o in enumerate(v))
+
+    def markers(v, where):
+        return tuple(_build(ArucoMarker, m, f"{where}[{i}]") for i, m in enumerate(v))
+
+    def building(v, where):
+        return _build(Building, v, where, grid=grid, openings=openings)
+
+    return _build(Site, data, "site", building=building, markers=markers)
+
+
+def load_site(path: str | Path) -> Site:
+    """Read a site file (JSON)."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise FileNotFoundError(f"site file {str(path)!r} does not exist") from None
+    except json.JSONDecodeError as err:
+        raise SiteGeometryError(f"site file {str(path)!r} is not valid JSON: {err}") from None
+    return site_from_dict(data)
+
+
+def save_site(site: Site, path: str | Path) -> None:
+    """Write ``site`` as a site file (JSON)."""
+    Path(path).write_text(json.dumps(site_to_dict(site), indent=2) + "\n")
