@@ -66,6 +66,10 @@ class EnvConfig:
             SuperSuit's vector-env conversion needs).
         render_view_height: height in pixels of each agent's tile in ``render()``.
         render_fps: frame rate stored in ``metadata`` and used by the video helper.
+        start_yaw_jitter: random starts (``reset`` without a ``viewpoint`` option) turn each
+            UAV's heading by a uniform angle in ``[-start_yaw_jitter, start_yaw_jitter]`` rad
+            after the in-view check, so some start views miss part of the structure (a
+            viewpoint-planning task); ``0`` (default) keeps the aimed views and draws nothing.
     """
 
     stage: str = "columns"
@@ -88,6 +92,7 @@ class EnvConfig:
     on_crash: str = "agent"
     render_view_height: int = 180
     render_fps: int = 2
+    start_yaw_jitter: float = 0.0
 
     def __post_init__(self) -> None:
         if self.stage not in STAGES:
@@ -134,6 +139,9 @@ class EnvConfig:
                 or v <= 0
             ):
                 raise ConfigError(f"{name} must be a positive number, got {v!r}")
+        j = self.start_yaw_jitter
+        if isinstance(j, bool) or not isinstance(j, (int, float)) or not 0 <= j <= math.pi:
+            raise ConfigError(f"start_yaw_jitter must be a number in [0, pi] rad, got {j!r}")
         if self.on_crash not in ("agent", "all"):
             raise ConfigError(f"on_crash must be 'agent' or 'all', got {self.on_crash!r}")
         sets = tuple(self.landmark_sets)

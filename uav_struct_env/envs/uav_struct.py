@@ -197,6 +197,12 @@ class UavStructParallelEnv(ParallelEnv):
                 a: sample_viewpoint(self._targets, i, n, self._rng, self.config.schedule)[0]
                 for i, a in enumerate(self.possible_agents)
             }
+            jitter = self.config.start_yaw_jitter
+            if jitter > 0:
+                for a in self.possible_agents:
+                    st = self._states[a]
+                    turn = self._rng.uniform(-jitter, jitter)
+                    self._states[a] = UavState.make(st.xyz, st.yaw + turn, st.pitch)
             self._viewpoint_base = 0
             self._scripted_viewpoint = -1
         self._sensor_state = self.config.noise.start(self._rng, n)
