@@ -6,11 +6,10 @@ Cycle counts are kept low at 1280 x 720 (one step renders four full-size images)
 import warnings
 
 import pytest
+from env_helpers import default_module, small_aec_env, small_module, small_parallel_env
 from pettingzoo.test import max_cycles_test, parallel_api_test, parallel_seed_test, render_test
 
 import uav_struct_env
-
-from env_helpers import default_module, small_aec_env, small_module, small_parallel_env
 
 CONFIGS = {
     "default": (uav_struct_env.parallel_env, uav_struct_env.env, default_module, 3),

@@ -240,3 +240,23 @@ def test_on_crash_all_ends_the_episode_for_everyone():
     assert infos["uav_0"]["truncation_reason"] == "teammate_crash"
     assert env.agents == []
     env.close()
+
+
+def test_other_uavs_are_drawn_but_not_the_own_airframe():
+    small = {"landmark_sets": (), "image_size": (160, 90), "renderer": "tiny", "on_crash": "agent"}
+    env = small_parallel_env(**small)
+    plain = small_parallel_env(show_uavs=False, **small)
+    obs, _ = env.reset(seed=0, options={"viewpoint": 3})
+    p_obs, _ = plain.reset(seed=0, options={"viewpoint": 3})
+    # at the scripted viewpoints the others are far off and the own airframe is not drawn
+    diff = np.abs(p_obs["uav_0"]["image"].astype(int) - obs["uav_0"]["image"].astype(int))
+    assert (diff.max(axis=2) > 0).mean() < 0.001
+    plain.close()
+    s0 = env.uav_state("uav_0")
+    env._states["uav_1"] = UavState.make(s0.xyz + 3.0 * s0.world_from_cam[:3, 2], 0.0, 0.5)
+    after, *_ = env.step({})
+    window = np.s_[30:60, 65:95]  # around the image centre (80, 45)
+    dark_after = (after["uav_0"]["image"][window].max(axis=2) < 60).mean()
+    dark_before = (obs["uav_0"]["image"][window].max(axis=2) < 60).mean()
+    assert dark_after > 0.1 and dark_before < 0.01  # a dark airframe appeared ahead
+    env.close()

@@ -90,7 +90,7 @@ def test_seeded_generator_reproduces_readings():
         rng = np.random.default_rng(7)
         st = m.start(rng, 2)
         out.append([m.measure(st, rng, reading(i % 2, dt=0.5)) for i in range(10)])
-    for (g1, a1), (g2, a2) in zip(*out):
+    for (g1, a1), (g2, a2) in zip(*out, strict=True):
         assert np.array_equal(g1, g2) and np.array_equal(a1, a2)
 
 

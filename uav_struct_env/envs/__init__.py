@@ -36,6 +36,9 @@ def raw_env(preset: str | EnvConfig = "paper", **config: Any) -> parallel_to_aec
 
 
 def env(preset: str | EnvConfig = "paper", **config: Any):
-    """The AEC form: ``pettingzoo.utils.conversions.parallel_to_aec(parallel_env(...))``, which
-    includes PettingZoo's ``OrderEnforcingWrapper``."""
+    """The AEC form of :func:`parallel_env`.
+
+    Built with ``pettingzoo.utils.conversions.parallel_to_aec``, which includes PettingZoo's
+    ``OrderEnforcingWrapper``.
+    """
     return parallel_to_aec(parallel_env(preset, **config))

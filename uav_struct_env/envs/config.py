@@ -64,6 +64,8 @@ class EnvConfig:
         on_crash: ``"agent"`` (a crash terminates only that agent, PettingZoo's usual
             semantics) or ``"all"`` (it also truncates every other agent: the episode ends, as
             SuperSuit's vector-env conversion needs).
+        show_uavs: draw every flying UAV's airframe (a 32 x 24 x 8 cm box) in the other
+            UAVs' images.
         render_view_height: height in pixels of each agent's tile in ``render()``.
         render_fps: frame rate stored in ``metadata`` and used by the video helper.
         start_yaw_jitter: random starts (``reset`` without a ``viewpoint`` option) turn each
@@ -90,6 +92,7 @@ class EnvConfig:
     observe_depth: bool = False
     texture_seed: int = 0
     on_crash: str = "agent"
+    show_uavs: bool = True
     render_view_height: int = 180
     render_fps: int = 2
     start_yaw_jitter: float = 0.0
@@ -107,7 +110,8 @@ class EnvConfig:
                 or self.marker_size <= 0
             ):
                 raise ConfigError(
-                    f"marker_size must be a positive side length in metres or None, got {self.marker_size!r}"
+                    "marker_size must be a positive side length in metres or None, "
+                    f"got {self.marker_size!r}"
                 )
         size = self.image_size
         if (

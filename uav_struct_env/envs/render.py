@@ -30,8 +30,10 @@ AGENT_COLORS = (
 
 @dataclass(frozen=True)
 class UavMarker:
-    """What the map shows of one UAV: true position (3,), heading (rad), prior position (3,)
-    or None, whether it is still flying, and its label.
+    """What the map shows of one UAV.
+
+    Its label, true position (3,), heading (rad), prior position (3,) or None, and whether it is
+    still flying.
     """
 
     label: str

@@ -60,6 +60,23 @@ __all__ = ["ACTION_COMPONENTS", "UavStructParallelEnv"]
 
 #: Bound on the gnss observation box (m); far outside any reachable geofence.
 GNSS_BOUND = 1.0e4
+#: Half extents (m) of the box drawn for a UAV: DJI Mavic 2 Pro unfolded, 322 x 242 x 84 mm.
+UAV_HALF_EXTENTS = (0.161, 0.121, 0.042)
+UAV_RGBA = (0.18, 0.18, 0.2, 1.0)
+#: Where hidden UAV bodies go: far below the ground.
+_HIDDEN = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, -500.0], [0, 0, 0, 1.0]])
+
+
+def _body_pose(state: UavState) -> NDArray[np.float64]:
+    """``world_from_body`` of the drawn airframe.
+
+    Level, along the heading, its centre 0.1 m above the camera (the gimbal hangs under the body).
+    """
+    c, s = np.cos(state.yaw), np.sin(state.yaw)
+    out = np.eye(4)
+    out[:2, :2] = [[c, -s], [s, c]]
+    out[:3, 3] = state.xyz + (0.0, 0.0, 0.1)
+    return out
 
 
 class UavStructParallelEnv(ParallelEnv):
@@ -126,6 +143,7 @@ class UavStructParallelEnv(ParallelEnv):
         self._priors: dict[str, NDArray[np.float64]] = {}
         self._alive: dict[str, bool] = {}
         self._map_view: MapView | None = None
+        self._bodies: dict[str, int] = {}
 
     # ------------------------------------------------------------------ spaces
     def _check_agent(self, agent: str) -> None:
@@ -138,7 +156,7 @@ class UavStructParallelEnv(ParallelEnv):
         return self._observation_space
 
     def action_space(self, agent: str) -> spaces.Box:
-        """The (cached, shared) action space: Box(-1, 1, (5,), float32), see ``ACTION_COMPONENTS``."""
+        """The (cached, shared) action space: Box(-1, 1, (5,), float32); see ACTION_COMPONENTS."""
         self._check_agent(agent)
         return self._action_space
 
@@ -155,7 +173,17 @@ class UavStructParallelEnv(ParallelEnv):
                 image_size=self.config.image_size,
                 rng=np.random.default_rng(self.config.texture_seed),
             )
+            if self.config.show_uavs:
+                self._bodies = {
+                    a: self._world.add_body(UAV_HALF_EXTENTS, UAV_RGBA, _HIDDEN)
+                    for a in self.possible_agents
+                }
         return self._world
+
+    def _place_bodies(self, flying: list[str]) -> None:
+        """Put the UAV bodies of ``flying`` agents at their poses and hide the others."""
+        for a, body in self._bodies.items():
+            self._world.move_body(body, _body_pose(self._states[a]) if a in flying else _HIDDEN)
 
     # ------------------------------------------------------------------ reset / step
     def reset(self, seed: int | None = None, options: dict | None = None):
@@ -250,7 +278,8 @@ class UavStructParallelEnv(ParallelEnv):
         """
         if not isinstance(actions, dict):
             raise ValueError(
-                f"actions must be a dict mapping agent names to actions, got {type(actions).__name__}"
+                "actions must be a dict mapping agent names to actions, "
+                f"got {type(actions).__name__}"
             )
         cleaned = {agent: self._validate_action(agent, a) for agent, a in actions.items()}
         live = list(self.agents)
@@ -316,6 +345,8 @@ class UavStructParallelEnv(ParallelEnv):
         observations: dict[str, dict[str, NDArray]] = {}
         infos: dict[str, dict[str, Any]] = {}
         clearance = self.obstacles.distances(np.array([self._states[a].xyz for a in agents]))
+        if self._bodies:
+            self._place_bodies(agents)
         for k, agent in enumerate(agents):
             i = self._index[agent]
             state = self._states[agent]
@@ -329,7 +360,12 @@ class UavStructParallelEnv(ParallelEnv):
             att32 = np.clip(attitude, -np.pi, np.pi).astype(np.float32)
             world_from_cam = state.world_from_cam
             cam_from_world = invert(world_from_cam)
+            own = self._bodies.get(agent)
+            if own is not None:  # a camera does not see its own airframe
+                world.move_body(own, _HIDDEN)
             result = world.render(cam_from_world, self.camera, depth=need_depth)
+            if own is not None:
+                world.move_body(own, _body_pose(state))
             obs = {"image": result.rgb, "gnss": gnss32, "attitude": att32}
             if cfg.observe_depth:
                 obs["depth"] = np.asarray(result.depth, dtype=np.float32)
@@ -403,6 +439,7 @@ class UavStructParallelEnv(ParallelEnv):
     def __repr__(self) -> str:
         c = self.config
         return (
-            f"UavStructParallelEnv(stage={c.stage!r}, image_size={c.image_size}, noise={c.noise.name!r}, "
+            f"UavStructParallelEnv(stage={c.stage!r}, image_size={c.image_size}, "
+            f"noise={c.noise.name!r}, "
             f"n_agents={c.n_agents}, max_cycles={self.max_cycles})"
         )

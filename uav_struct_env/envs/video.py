@@ -79,7 +79,8 @@ def record_rollout(
         env: the parallel env.
         path: output file (``.mp4``, ``.avi`` or ``.gif``).
         n_steps: steps after the reset (stops early when every agent is done).
-        seed, options: passed to ``reset``.
+        seed: passed to ``reset``.
+        options: passed to ``reset`` (e.g. ``{"viewpoint": 0}``).
         policy: ``policy(agent, observation) -> action``; default samples the action space.
         fps: frame rate (default ``env.metadata["render_fps"]``).
 

@@ -82,7 +82,8 @@ class ScheduleSpec:
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
                 raise ConfigError(
-                    f"ScheduleSpec.{name} must be (low, high) with 0 < low <= high, got {(lo, hi)!r}"
+                    f"ScheduleSpec.{name} must be (low, high) with 0 < low <= high, "
+                    f"got {(lo, hi)!r}"
                 )
         if not 0 <= self.azimuth_spread < 2 * math.pi:
             raise ConfigError(
@@ -136,7 +137,7 @@ class _ViewTargets:
         d = self.marker_centres - self.center[:2]
         ang = np.arctan2(d[:, 1], d[:, 0]) - azimuth
         near = np.abs((ang + np.pi) % (2 * np.pi) - np.pi) <= math.radians(45.0)
-        return tuple(c for c, keep in zip(self.markers, near) if keep)
+        return tuple(c for c, keep in zip(self.markers, near, strict=True) if keep)
 
     def aim(self, azimuth: float) -> NDArray[np.float64]:
         """Aim point: centre of the bounding box of the structure and the own-side markers."""
@@ -206,15 +207,17 @@ def sample_viewpoint(
         return UavState.make(eye, yaw, pitch), target
     raise ConfigError(
         f"no viewpoint for agent {agent_index} keeps every landmark in view after {spec.max_tries} "
-        f"draws with distance {spec.distance} m, height {spec.height} m: widen the ranges or lower margin_px"
+        f"draws with distance {spec.distance} m, height {spec.height} m: widen the ranges or "
+        "lower margin_px"
     )
 
 
 @dataclass(frozen=True, eq=False)
 class ViewpointSchedule:
-    """Scripted viewpoints for ``n_agents`` UAVs: ``positions`` (A, V, 3) m, ``attitudes``
-    (A, V, 3) true camera (roll, pitch, yaw) rad, ``targets`` (A, V, 3) aim points, ``center``
-    (3,) the building centre the distances are measured from, ``sides`` (A,).
+    """Scripted viewpoints for ``n_agents`` UAVs, as arrays.
+
+    ``positions`` (A, V, 3) m, ``attitudes`` (A, V, 3) true camera (roll, pitch, yaw) rad,
+    ``targets`` (A, V, 3) aim points, ``center`` (3,) the building centre, ``sides`` (A,).
     """
 
     positions: NDArray[np.float64]

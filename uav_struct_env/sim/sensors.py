@@ -158,8 +158,9 @@ class PaperNoise:
 
 @dataclass
 class GnssInsState:
-    """Per-episode state of :class:`GnssInsNoise`: unit-variance GNSS bias processes (n, 3) and
-    the constant attitude biases (n, 3), rad.
+    """Per-episode state of :class:`GnssInsNoise`.
+
+    Unit-variance GNSS bias processes (n, 3) and the constant attitude biases (n, 3), rad.
     """
 
     gnss_bias_unit: NDArray[np.float64]

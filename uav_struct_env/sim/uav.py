@@ -101,8 +101,10 @@ class FlightLimits:
 
 @dataclass(frozen=True)
 class Geofence:
-    """The flight area: camera altitude above ground in ``[min_altitude, max_altitude]`` m and
-    horizontal distance from the site centre at most ``max_distance`` m.
+    """The flight area of the UAVs.
+
+    Camera altitude above ground in ``[min_altitude, max_altitude]`` m and horizontal distance
+    from the site centre at most ``max_distance`` m.
 
     Defaults: 2 m above ground, 120 m (the common EU/US limit for open-category flights), and
     60 m from the building centre (the paper's viewpoints are 15-35 m out).
@@ -218,8 +220,8 @@ class Obstacles:
             xmin, ymin, xmax, ymax = slab.bounds
             xs = sorted({xmin, xmax, *(b for op in slab.openings for b in op.bounds[0::2])})
             ys = sorted({ymin, ymax, *(b for op in slab.openings for b in op.bounds[1::2])})
-            for x0, x1 in zip(xs[:-1], xs[1:]):
-                for y0, y1 in zip(ys[:-1], ys[1:]):
+            for x0, x1 in zip(xs[:-1], xs[1:], strict=True):
+                for y0, y1 in zip(ys[:-1], ys[1:], strict=True):
                     cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
                     if any(
                         o[0] < cx < o[2] and o[1] < cy < o[3]

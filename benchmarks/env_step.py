@@ -1,0 +1,106 @@
+"""Env steps per second and the share of each step spent rendering.
+
+Usage::
+
+    .venv/bin/python benchmarks/env_step.py                  # paper 1280x720 and train 128x72
+    .venv/bin/python benchmarks/env_step.py --steps 50 --renderer tiny
+
+For each configuration: the time of one ``reset`` (the first one also builds the world), then
+``--steps`` steps with random actions (gentle, so the UAVs stay up), reporting env steps/s (one
+step = all four UAVs), the time inside ``SiteWorld.render`` (four images per step) and inside
+``SiteWorld.landmark_truth`` as shares of the step time, and the rest (kinematics, sensors,
+projections, dict building).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+import uav_struct_env
+
+CONFIGS = {
+    "paper 1280x720": ("paper", {}),
+    "paper 1280x720, no landmark info": ("paper", {"landmark_sets": ()}),
+    "train 128x72": ("train", {}),
+    "train 128x72 + landmark info": ("train", {"landmark_sets": ("column_tops", "slab_corners")}),
+}
+
+
+class _Timed:
+    """Wraps a callable and accumulates its wall time."""
+
+    def __init__(self, fn):
+        self.fn, self.total, self.calls = fn, 0.0, 0
+
+    def __call__(self, *args, **kwargs):
+        t = time.perf_counter()
+        try:
+            return self.fn(*args, **kwargs)
+        finally:
+            self.total += time.perf_counter() - t
+            self.calls += 1
+
+
+def bench(preset: str, overrides: dict, steps: int, renderer: str) -> dict:
+    env = uav_struct_env.parallel_env(preset, renderer=renderer, **overrides)
+    t0 = time.perf_counter()
+    env.reset(seed=0)
+    first_reset = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    env.reset(seed=1)
+    reset = time.perf_counter() - t0
+    world = env.world
+    render, truth = _Timed(world.render), _Timed(world.landmark_truth)
+    world.render, world.landmark_truth = render, truth
+    rng = np.random.default_rng(0)
+    t0 = time.perf_counter()
+    n = 0
+    for _ in range(steps):
+        if not env.agents:
+            env.reset()
+        env.step({a: rng.uniform(-0.3, 0.3, 5).astype(np.float32) for a in env.agents})
+        n += 1
+    elapsed = time.perf_counter() - t0
+    out = {
+        "backend": world.backend,
+        "first_reset_s": first_reset,
+        "reset_s": reset,
+        "steps_per_s": n / elapsed,
+        "step_ms": 1e3 * elapsed / n,
+        "render_ms_per_image": 1e3 * render.total / max(render.calls, 1),
+        "render_share": render.total / elapsed,
+        "truth_share": truth.total / elapsed,
+    }
+    env.close()
+    return out
+
+
+def main(steps: int = 20, renderer: str = "auto", configs: list[str] | None = None) -> dict:
+    results = {}
+    print(
+        f"{'config':36s} {'backend':7s} {'1st reset':>9s} {'reset':>7s} {'steps/s':>8s} "
+        f"{'ms/step':>8s} {'ms/img':>7s} {'render':>7s} {'truth':>6s} {'other':>6s}"
+    )
+    for name in configs or list(CONFIGS):
+        preset, overrides = CONFIGS[name]
+        r = bench(preset, overrides, steps, renderer)
+        results[name] = r
+        other = 1.0 - r["render_share"] - r["truth_share"]
+        print(
+            f"{name:36s} {r['backend']:7s} {r['first_reset_s']:8.2f}s {r['reset_s']:6.3f}s "
+            f"{r['steps_per_s']:8.2f} {r['step_ms']:8.1f} {r['render_ms_per_image']:7.1f} "
+            f"{r['render_share']:6.0%} {r['truth_share']:6.0%} {other:6.0%}",
+            flush=True,
+        )
+    return results
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=20)
+    parser.add_argument("--renderer", default="auto", choices=["auto", "tiny", "egl"])
+    parser.add_argument("--config", action="append", choices=list(CONFIGS), dest="configs")
+    main(**vars(parser.parse_args()))
