@@ -12,10 +12,12 @@ Two methods:
     Goes beyond it for a detector that misses landmarks and reports clutter and a prior that is off
     by metres and degrees:
 
-    1. *Hypotheses.* The prior's error mostly shifts the projected layout in the image and
-       scales it (distance error). For a few scales, every (detection, projected landmark) pair
-       proposes a 2D shift; maps are ranked by how many other pairs agree with them (a Hough
-       vote), and the best distinct ones, plus the unchanged prior, each give a gated assignment.
+    1. *Hypotheses.* The prior's attitude error mostly shifts the projected layout in the image;
+       its position error also changes scale and perspective. The prior camera centre is moved
+       by -1, 0, +1 sigma along each axis; for each, every (detection, projected
+       landmark) pair proposes a 2D shift, ranked by how many other pairs agree with it (a Hough
+       vote). The best distinct layouts each give a gated assignment. Small problems (a slab's
+       four corners) enumerate every one-to-one assignment instead.
     2. *Re-association.* Each hypothesis is turned into a pose (PnP, candidates chosen with the
        prior as tie-breaker), the landmarks are re-projected with that pose and re-assigned with
        a gate that tightens to ``gate_px``, until the assignment is stable.
@@ -36,10 +38,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
-from localization.geometry import project
+from localization.geometry import invert, project
 from localization.pnp import (
     PriorSigmas,
     is_coplanar,
@@ -59,6 +61,10 @@ __all__ = [
 ]
 
 _BIG = 1e12
+#: Prior-centre perturbations (units of the position sigmas): none, then +-1 sigma along each axis.
+_AXIS_OFFSETS = ((0.0, 0.0, 0.0),) + tuple(
+    tuple(float(s * (i == j)) for j in range(3)) for i in range(3) for s in (-1.0, 1.0)
+)
 
 
 @dataclass(frozen=True)
@@ -163,62 +169,106 @@ def associate_paper(
     out = np.full(n, -1, dtype=np.int64)
     idx, proj = candidate_landmarks(landmarks_xyz, K, prior_cam_from_world, image_size, margin_px)
     if idx.size == 0:
-        return Association(out, prior_cam_from_world, 0.0, 0.0, 1,
-                           "no landmark projects in front of the prior camera near the image")
+        return Association(
+            out,
+            prior_cam_from_world,
+            0.0,
+            0.0,
+            1,
+            "no landmark projects in front of the prior camera near the image",
+        )
     good = np.flatnonzero(np.isfinite(detections_uv).all(axis=1))
     local = assign(detections_uv[good], proj, None)
     ok = local >= 0
     out[good[ok]] = idx[local[ok]]
     a = out >= 0
-    cost = float(np.sum((detections_uv[a] - project(K, prior_cam_from_world, landmarks_xyz[out[a]])[0]) ** 2))
+    cost = float(
+        np.sum((detections_uv[a] - project(K, prior_cam_from_world, landmarks_xyz[out[a]])[0]) ** 2)
+    )
     return Association(out, prior_cam_from_world, cost, cost, 1, None)
 
 
-def _layout_hypotheses(
-    det: NDArray, proj: NDArray, center: NDArray, scales: tuple[float, ...], vote_px: float, k: int
-) -> list[tuple[float, NDArray]]:
-    """Up to ``k`` distinct (scale, shift) maps of the projected layout onto the detections.
+def _shift_votes(det: NDArray, proj: NDArray, vote_px: float, k: int) -> list[tuple[int, NDArray]]:
+    """The ``k`` best-voted image shifts mapping projections ``proj`` onto detections ``det``.
 
-    The prior's error mostly shifts the projected layout (attitude, lateral position) and scales it
-    about the principal point (distance). For each scale, every (detection, scaled projection)
-    pair proposes a shift; shifts are binned in cells of ``vote_px`` and a cell's vote is the
-    number of shifts in it and its eight neighbours (a Hough vote, O(N M) per scale). The
-    best-voted distinct hypotheses over all scales are returned, ties broken towards scale 1 and
-    small shifts (the prior is right on average); each shift is the mean of the shifts within
-    ``vote_px`` of its cell's mean.
+    Every (detection, projection) pair proposes a shift; shifts are binned in cells of
+    ``vote_px`` and a cell's vote is the number of shifts in it and its eight neighbours (a Hough
+    vote, O(N M)). Each returned shift is the mean of the proposals within ``vote_px`` of its
+    cell's mean. Returns ``[(votes, shift (2,)), ...]``, best first.
     """
-    cands = []
-    offsets = np.array([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)])
-    per_scale = {}
-    for scale in scales:
-        p = center + scale * (proj - center)
-        shifts = (det[:, None, :] - p[None, :, :]).reshape(-1, 2)
-        cells = np.floor(shifts / vote_px).astype(np.int64)
-        keys = (cells[:, 0] + 2**20) * 2**21 + (cells[:, 1] + 2**20)
-        ukeys, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
-        votes = np.zeros(ukeys.size, dtype=np.int64)
-        ucells = np.stack([ukeys // 2**21 - 2**20, ukeys % 2**21 - 2**20], axis=1)
-        for off in offsets:
-            nk = (ucells[:, 0] + off[0] + 2**20) * 2**21 + (ucells[:, 1] + off[1] + 2**20)
-            pos = np.searchsorted(ukeys, nk)
-            pos = np.minimum(pos, ukeys.size - 1)
+    shifts = (det[:, None, :] - proj[None, :, :]).reshape(-1, 2)
+    if shifts.shape[0] == 0:
+        return []
+    cells = np.floor(shifts / vote_px).astype(np.int64)
+    base = 2**20
+    keys = (cells[:, 0] + base) * 2**21 + (cells[:, 1] + base)
+    ukeys, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    ucells = np.stack([ukeys // 2**21 - base, ukeys % 2**21 - base], axis=1)
+    votes = np.zeros(ukeys.size, dtype=np.int64)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            nk = (ucells[:, 0] + di + base) * 2**21 + (ucells[:, 1] + dj + base)
+            pos = np.minimum(np.searchsorted(ukeys, nk), ukeys.size - 1)
             votes += np.where(ukeys[pos] == nk, counts[pos], 0)
-        per_scale[scale] = (shifts, inverse)
-        top = np.argsort(-votes, kind="stable")[: 2 * k]
-        for c in top:
-            mean = shifts[inverse.reshape(-1) == c].mean(axis=0)
-            cands.append((int(votes[c]), abs(np.log(scale)), float(mean @ mean), scale, mean))
-    cands.sort(key=lambda c: (-c[0], c[1], c[2]))
-    chosen: list[tuple[float, NDArray]] = []
-    for _, _, _, scale, mean in cands:
-        shifts, _ = per_scale[scale]
+    out = []
+    for c in np.argsort(-votes, kind="stable")[:k]:
+        mean = shifts[inverse == c].mean(axis=0)
         near = np.sum((shifts - mean) ** 2, axis=1) <= vote_px**2
-        shift = shifts[near].mean(axis=0) if near.any() else mean
-        if all(sc != scale or np.sum((shift - sh) ** 2) > (0.5 * vote_px) ** 2 for sc, sh in chosen):
-            chosen.append((scale, shift))
-            if len(chosen) >= k:
-                break
-    return chosen
+        out.append((int(votes[c]), shifts[near].mean(axis=0)))
+    return out
+
+
+def _prior_hypotheses(
+    det: NDArray,
+    landmarks_xyz: NDArray,
+    K: NDArray,
+    prior: NDArray,
+    image_size: tuple[int, int],
+    margin_px: float,
+    sig: PriorSigmas,
+    offsets: tuple[float, ...],
+    gate_px: float,
+    k: int,
+) -> list[tuple[tuple, NDArray]]:
+    """Coarse assignments from perturbed priors, each shifted by its best-voted image shifts.
+
+    The prior camera centre is moved by each of ``offsets`` (in units of the prior's position
+    sigmas; the perspective and scale change that a shift cannot model), the
+    landmarks re-projected, and the projection shifted by zero and by its ``k`` best-voted shifts
+    (the attitude error, which mostly shifts the image). Each shifted layout gives a gated
+    assignment (``gate_px``); its shift is re-centred on the matched pairs once and the layout
+    re-assigned. Returns ``[(rank key, assignment into det rows), ...]``, best first: more
+    matches, then smaller mean squared distance, then smaller perturbation.
+    """
+    world_from_cam = invert(prior)
+    sp = np.asarray(sig.position_m, dtype=np.float64)
+    n = det.shape[0]
+    out = []
+    for o in offsets:
+        wfc = world_from_cam.copy()
+        wfc[:3, 3] += np.asarray(o) * sp
+        idx, proj = candidate_landmarks(landmarks_xyz, K, invert(wfc), image_size, margin_px)
+        if idx.size == 0:
+            continue
+        size = float(np.sum(np.square(o)))
+        shifts = [np.zeros(2)] + [sh for _, sh in _shift_votes(det, proj, gate_px, k)]
+        for shift in shifts:
+            for _ in range(2):
+                local = assign(det, proj + shift, gate_px)
+                ok = local >= 0
+                if not ok.any():
+                    break
+                resid = det[ok] - (proj[local[ok]] + shift)
+                shift = shift + resid.mean(axis=0)
+            if not ok.any():
+                continue
+            a = np.full(n, -1, dtype=np.int64)
+            a[ok] = idx[local[ok]]
+            mse = float(np.mean(np.sum(resid**2, axis=1)))
+            out.append(((-int(ok.sum()), mse, size), a))
+    out.sort(key=lambda t: t[0])
+    return out
 
 
 def _exhaustive_hypotheses(
@@ -316,18 +366,23 @@ def associate_robust(
     miss_cost: float = 4.0,
     prior_sigmas: PriorSigmas | None = None,
     max_prior_mahalanobis_sq: float | None = 22.46,
-    scales: tuple[float, ...] = (0.8, 0.9, 1.0, 1.1, 1.25),
+    position_offsets: tuple[tuple[float, float, float], ...] = _AXIS_OFFSETS,
     exhaustive_limit: int = 150,
 ) -> Association:
     """Robust association: shift hypotheses, re-association after each PnP, likelihood scoring.
 
     Args:
-        detections_uv, landmarks_xyz, K, prior_cam_from_world, image_size, margin_px: as for
-            :func:`associate_paper` (validated inputs).
+        detections_uv: (N, 2) detections (validated; NaN rows stay unassigned).
+        landmarks_xyz: (M, 3) model landmarks.
+        K: (3, 3) intrinsics.
+        prior_cam_from_world: (4, 4) rough pose.
+        image_size: (W, H).
+        margin_px: how far outside the image a projection may fall and remain a candidate.
         pixel_sigma: detector noise, px.
         gate_px: final inlier gate, px; default ``max(5 * pixel_sigma, 3)``.
         coarse_gate_px: gate of the first assignment of each shift hypothesis, px.
-        max_hypotheses: number of shift hypotheses tried (besides the unshifted prior).
+        max_hypotheses: number of distinct coarse assignments refined by PnP and re-association
+            (those agreeing with an already refined result are skipped and not counted).
         max_iterations: PnP / re-association rounds per hypothesis.
         min_correspondences: a hypothesis needs this many pairs to be turned into a pose.
         miss_cost: cost of a landmark predicted inside the image but not detected (about
@@ -336,8 +391,9 @@ def associate_robust(
         max_prior_mahalanobis_sq: hypotheses whose pose is farther from the prior than this
             (squared Mahalanobis distance, 6 dof; default the chi-square 99.9 % quantile 22.46)
             are rejected; None keeps all.
-        scales: image scale factors (about the principal point) tried for the layout, standing
-            for the prior's distance error.
+        position_offsets: offsets of the prior camera centre (in units of the prior's position
+            sigmas, project axes) that generate layout hypotheses; default none and +-1 sigma
+            along each axis (7 layouts).
         exhaustive_limit: when the number of largest one-to-one assignments between the finite
             detections and the candidate landmarks is at most this, all of them are tried
             (small sets such as four corners) instead of the layout vote.
@@ -349,43 +405,75 @@ def associate_robust(
     prior = prior_cam_from_world
     idx, proj = candidate_landmarks(landmarks_xyz, K, prior, image_size, margin_px)
     if idx.size == 0:
-        return Association(empty, prior, 0.0, np.inf, 0,
-                           "no landmark projects in front of the prior camera near the image")
+        return Association(
+            empty,
+            prior,
+            0.0,
+            np.inf,
+            0,
+            "no landmark projects in front of the prior camera near the image",
+        )
     good = np.flatnonzero(np.isfinite(detections_uv).all(axis=1))
     if good.size == 0:
         return Association(empty, prior, 0.0, np.inf, 0, "no finite detection")
     det = detections_uv
-    coplanar = is_coplanar(landmarks_xyz)
     need = max(min_correspondences, 3)
 
     # 1. coarse hypotheses from image shifts
-    center = K[:2, 2]
     coarse: list[NDArray] = []
     seen: set[bytes] = set()
     exhaustive = _exhaustive_hypotheses(
-        det, good, idx, landmarks_xyz, K, prior, need, pixel_sigma, gate, sig,
-        exhaustive_limit, min(max(max_hypotheses, 1), 3))
+        det,
+        good,
+        idx,
+        landmarks_xyz,
+        K,
+        prior,
+        need,
+        pixel_sigma,
+        gate,
+        sig,
+        exhaustive_limit,
+        min(max(max_hypotheses, 1), 3),
+    )
     if exhaustive is not None:
         coarse.extend(exhaustive)
-        seen.update(a.tobytes() for a in exhaustive)
-        maps = []
     else:
-        maps = [(1.0, np.zeros(2))] + _layout_hypotheses(
-            det[good], proj, center, scales, coarse_gate_px, max_hypotheses)
-    for scale, shift in maps:
-        local = assign(det[good], center + scale * (proj - center) + shift, coarse_gate_px)
-        a = np.full(n, -1, dtype=np.int64)
-        ok = local >= 0
-        a[good[ok]] = idx[local[ok]]
-        key = a.tobytes()
-        if ok.sum() >= need and key not in seen:
-            seen.add(key)
-            coarse.append(a)
+        layouts = _prior_hypotheses(
+            det[good],
+            landmarks_xyz,
+            K,
+            prior,
+            image_size,
+            margin_px,
+            sig,
+            position_offsets,
+            coarse_gate_px,
+            3,
+        )
+        for _, local_a in layouts:
+            a = np.full(n, -1, dtype=np.int64)
+            a[good] = local_a
+            ok = local_a >= 0
+            key = a.tobytes()
+            if ok.sum() >= need and key not in seen:
+                seen.add(key)
+                coarse.append(a)
+                if len(coarse) >= 5 * max_hypotheses:
+                    break
 
     # 2. re-association after each pose refinement
     finals: dict[bytes, tuple[NDArray, NDArray]] = {}
     rejected_by_prior = 0
+    explored: list[NDArray] = []
+    budget = max(max_hypotheses, 1)
     for a in coarse:
+        # a hypothesis whose pairs all agree with an explored result would converge to it again
+        if any(np.all((a < 0) | (a == e)) for e in explored):
+            continue
+        if budget == 0:
+            break
+        budget -= 1
         T = None
         current = a
         for it in range(max_iterations):
@@ -395,9 +483,16 @@ def associate_robust(
                 break
             if T is None:
                 res = solve_pnp(
-                    landmarks_xyz[current[m]], det[m], K, prior, rule="prior",
-                    min_points=need, pixel_sigma=pixel_sigma, prior_sigmas=sig,
-                    ransac=m.sum() >= 6, ransac_threshold_px=max(gate, coarse_gate_px / 4),
+                    landmarks_xyz[current[m]],
+                    det[m],
+                    K,
+                    prior,
+                    rule="prior",
+                    min_points=need,
+                    pixel_sigma=pixel_sigma,
+                    prior_sigmas=sig,
+                    ransac=m.sum() >= 6,
+                    ransac_threshold_px=max(gate, coarse_gate_px / 4),
                 )
                 if not res.success:
                     break
@@ -408,7 +503,7 @@ def associate_robust(
                     current = np.full(n, -1, dtype=np.int64)
                     current[keep] = a[keep]
             else:
-                T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, T, max_iterations=10)
+                T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, T, max_iterations=5)
             step_gate = max(gate, coarse_gate_px / 2 ** (it + 1))
             cidx, cproj = candidate_landmarks(landmarks_xyz, K, T, image_size, margin_px)
             local = assign(det[good], cproj, step_gate)
@@ -423,17 +518,22 @@ def associate_robust(
         m = current >= 0
         if m.sum() < need:
             continue
+        explored.append(current)
         T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, T, max_iterations=10)
-        if (max_prior_mahalanobis_sq is not None
-                and prior_mahalanobis_sq(T, prior, sig) > max_prior_mahalanobis_sq):
+        if (
+            max_prior_mahalanobis_sq is not None
+            and prior_mahalanobis_sq(T, prior, sig) > max_prior_mahalanobis_sq
+        ):
             rejected_by_prior += 1
             continue
         finals.setdefault(current.tobytes(), (current, T))
 
     if not finals:
         if rejected_by_prior:
-            reason = (f"all {rejected_by_prior} association hypotheses give poses inconsistent with "
-                      f"the prior (Mahalanobis^2 > {max_prior_mahalanobis_sq})")
+            reason = (
+                f"all {rejected_by_prior} association hypotheses give poses inconsistent with "
+                f"the prior (Mahalanobis^2 > {max_prior_mahalanobis_sq})"
+            )
         else:
             reason = f"no association hypothesis with {need} or more consistent correspondences"
         return Association(empty, prior, 0.0, np.inf, len(coarse), reason)
@@ -441,7 +541,9 @@ def associate_robust(
     # 3. scoring
     best = None
     for a, T in finals.values():
-        score = _nll(det, landmarks_xyz, K, T, a, prior, image_size, pixel_sigma, gate, miss_cost, sig)
+        score = _nll(
+            det, landmarks_xyz, K, T, a, prior, image_size, pixel_sigma, gate, miss_cost, sig
+        )
         if best is None or score < best[0]:
             best = (score, a, T)
     score, a, T = best

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from localization.geometry import as_points
 
@@ -118,7 +118,9 @@ class ProjectionDetector:
             ("miss_rate", miss_rate),
             ("false_positives", false_positives),
         ):
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+            if isinstance(value, bool) or not isinstance(
+                value, (int, float, np.integer, np.floating)
+            ):
                 raise TypeError(f"{name} must be a number, got {value!r}")
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
@@ -156,7 +158,8 @@ class ProjectionDetector:
         visible = np.asarray(gt["visible"], dtype=bool).reshape(-1)
         if not (uv_all.shape[0] == ids_all.shape[0] == visible.shape[0]):
             raise ValueError(
-                f"landmark arrays disagree in length: uv {uv_all.shape[0]}, ids {ids_all.shape[0]}, "
+                f"landmark arrays disagree in length: uv {uv_all.shape[0]}, "
+                f"ids {ids_all.shape[0]}, "
                 f"visible {visible.shape[0]}"
             )
         rng = self.rng

@@ -49,7 +49,12 @@ __all__ = [
 ]
 
 #: Paired (metres, degrees) thresholds for recall.
-DEFAULT_THRESHOLDS: tuple[tuple[float, float], ...] = ((0.25, 1.0), (0.5, 2.0), (1.0, 5.0), (5.0, 10.0))
+DEFAULT_THRESHOLDS: tuple[tuple[float, float], ...] = (
+    (0.25, 1.0),
+    (0.5, 2.0),
+    (1.0, 5.0),
+    (5.0, 10.0),
+)
 
 
 def translation_error_m(est_cam_from_world: ArrayLike, gt_cam_from_world: ArrayLike) -> float:
@@ -68,8 +73,10 @@ def rotation_error_deg(est_cam_from_world: ArrayLike, gt_cam_from_world: ArrayLi
 
 def pose_errors(est_cam_from_world: ArrayLike, gt_cam_from_world: ArrayLike) -> tuple[float, float]:
     """``(translation_error_m, rotation_error_deg)``."""
-    return (translation_error_m(est_cam_from_world, gt_cam_from_world),
-            rotation_error_deg(est_cam_from_world, gt_cam_from_world))
+    return (
+        translation_error_m(est_cam_from_world, gt_cam_from_world),
+        rotation_error_deg(est_cam_from_world, gt_cam_from_world),
+    )
 
 
 @dataclass(frozen=True)
@@ -88,8 +95,14 @@ class ErrorSummary:
         return {
             "successful": self.successful,
             "total": self.total,
-            "translation_error_m": {"median": self.translation_median_m, "p90": self.translation_p90_m},
-            "rotation_error_deg": {"median": self.rotation_median_deg, "p90": self.rotation_p90_deg},
+            "translation_error_m": {
+                "median": self.translation_median_m,
+                "p90": self.translation_p90_m,
+            },
+            "rotation_error_deg": {
+                "median": self.rotation_median_deg,
+                "p90": self.rotation_p90_deg,
+            },
         }
 
 
@@ -106,8 +119,14 @@ def summarize_errors(
     t = np.asarray(translation_m, dtype=np.float64).reshape(-1)
     r = np.asarray(rotation_deg, dtype=np.float64).reshape(-1)
     if t.shape != r.shape:
-        raise ValueError(f"translation_m and rotation_deg must have the same length, got {t.shape} and {r.shape}")
-    s = np.ones(t.shape, dtype=bool) if success is None else np.asarray(success, dtype=bool).reshape(-1)
+        raise ValueError(
+            f"translation_m and rotation_deg must have the same length, got {t.shape} and {r.shape}"
+        )
+    s = (
+        np.ones(t.shape, dtype=bool)
+        if success is None
+        else np.asarray(success, dtype=bool).reshape(-1)
+    )
     if s.shape != t.shape:
         raise ValueError(f"success must have shape {t.shape}, got {s.shape}")
     tm, tp = _stats(t[s])
@@ -124,12 +143,18 @@ def recall_at(
     """Fraction of *all* images (failures count as misses) within each (m, deg) threshold pair."""
     t = np.asarray(translation_m, dtype=np.float64).reshape(-1)
     r = np.asarray(rotation_deg, dtype=np.float64).reshape(-1)
-    s = np.ones(t.shape, dtype=bool) if success is None else np.asarray(success, dtype=bool).reshape(-1)
+    s = (
+        np.ones(t.shape, dtype=bool)
+        if success is None
+        else np.asarray(success, dtype=bool).reshape(-1)
+    )
     if not (t.shape == r.shape == s.shape):
         raise ValueError(f"inputs must have equal lengths, got {t.shape}, {r.shape}, {s.shape}")
     if t.size == 0:
         return {tuple(th): float("nan") for th in thresholds}
-    return {(float(tm), float(rd)): float(np.mean(s & (t <= tm) & (r <= rd))) for tm, rd in thresholds}
+    return {
+        (float(tm), float(rd)): float(np.mean(s & (t <= tm) & (r <= rd))) for tm, rd in thresholds
+    }
 
 
 @dataclass(frozen=True)
@@ -226,7 +251,9 @@ def association_scores(
     a = np.asarray(assignment).astype(np.int64).reshape(-1)
     t = np.asarray(true_ids).astype(np.int64).reshape(-1)
     if a.shape != t.shape:
-        raise ValueError(f"assignment and true_ids must have equal lengths, got {a.shape} and {t.shape}")
+        raise ValueError(
+            f"assignment and true_ids must have equal lengths, got {a.shape} and {t.shape}"
+        )
     if model_ids is None:
         assigned_ids = a
     else:
@@ -252,6 +279,10 @@ def latency_summary(timings: Iterable[Mapping[str, float]]) -> dict[str, dict[st
         for k, v in t.items():
             by_stage.setdefault(k, []).append(float(v))
     return {
-        k: {"median": float(np.median(v)), "p90": float(np.percentile(v, 90)), "mean": float(np.mean(v))}
+        k: {
+            "median": float(np.median(v)),
+            "p90": float(np.percentile(v, 90)),
+            "mean": float(np.mean(v)),
+        }
         for k, v in by_stage.items()
     }

@@ -1,9 +1,9 @@
 """Stage composition: anonymous detections + prior pose -> :class:`PoseEstimate`.
 
-    from localization import Localizer
-    loc = Localizer(landmarks_xyz, K, association="robust")
-    est = loc.localize(detections_uv, prior_cam_from_world)
-    est.success, est.cam_from_world, est.assignment
+from localization import Localizer
+loc = Localizer(landmarks_xyz, K, association="robust")
+est = loc.localize(detections_uv, prior_cam_from_world)
+est.success, est.cam_from_world, est.assignment
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ from localization.geometry import (
     check_intrinsics,
     check_transform,
     invert,
-    project,
 )
 from localization.pnp import (
     PriorSigmas,
@@ -93,7 +92,9 @@ def _positive_number(name: str, value: object, allow_zero: bool = False) -> floa
         raise TypeError(f"{name} must be a number, got {value!r}")
     v = float(value)
     if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        raise ValueError(f"{name} must be finite and {'>=' if allow_zero else '>'} 0, got {value!r}")
+        raise ValueError(
+            f"{name} must be finite and {'>=' if allow_zero else '>'} 0, got {value!r}"
+        )
     return v
 
 
@@ -149,35 +150,50 @@ class Localizer:
         self.landmarks_xyz = X
         self.K = check_intrinsics("K", K)
         if not isinstance(association, str):
-            raise TypeError(f"association must be one of {ASSOCIATION_METHODS}, got {association!r}")
+            raise TypeError(
+                f"association must be one of {ASSOCIATION_METHODS}, got {association!r}"
+            )
         if association not in ASSOCIATION_METHODS:
-            raise ValueError(f"association must be one of {ASSOCIATION_METHODS}, got {association!r}")
+            raise ValueError(
+                f"association must be one of {ASSOCIATION_METHODS}, got {association!r}"
+            )
         self.association = association
         self.pixel_sigma = _positive_number("pixel_sigma", pixel_sigma)
         if image_size is None:
             image_size = (int(round(2 * self.K[0, 2])), int(round(2 * self.K[1, 2])))
             if image_size[0] <= 0 or image_size[1] <= 0:
-                raise ValueError(f"cannot infer image_size from K's principal point; pass image_size")
+                raise ValueError(
+                    "cannot infer image_size from K's principal point; pass image_size"
+                )
         self.image_size = check_image_size("image_size", image_size)
         self.margin_px = (
-            0.25 * max(self.image_size) if margin_px is None
+            0.25 * max(self.image_size)
+            if margin_px is None
             else _positive_number("margin_px", margin_px, allow_zero=True)
         )
-        if isinstance(min_correspondences, bool) or not isinstance(min_correspondences, (int, np.integer)):
+        if isinstance(min_correspondences, bool) or not isinstance(
+            min_correspondences, (int, np.integer)
+        ):
             raise TypeError(f"min_correspondences must be an int, got {min_correspondences!r}")
         if min_correspondences < 3:
             raise ValueError(f"min_correspondences must be >= 3, got {min_correspondences}")
         self.min_correspondences = int(min_correspondences)
         self.gate_px = None if gate_px is None else _positive_number("gate_px", gate_px)
         self.coarse_gate_px = _positive_number("coarse_gate_px", coarse_gate_px)
-        if isinstance(max_hypotheses, bool) or not isinstance(max_hypotheses, (int, np.integer)) or max_hypotheses < 0:
+        if (
+            isinstance(max_hypotheses, bool)
+            or not isinstance(max_hypotheses, (int, np.integer))
+            or max_hypotheses < 0
+        ):
             raise ValueError(f"max_hypotheses must be an int >= 0, got {max_hypotheses!r}")
         self.max_hypotheses = int(max_hypotheses)
         self.prior_sigmas = self._prior_sigmas(prior_sigmas)
         self.ransac = bool(ransac)
         self.ransac_threshold_px = _positive_number("ransac_threshold_px", ransac_threshold_px)
         self.max_position_std_m = (
-            None if max_position_std_m is None else _positive_number("max_position_std_m", max_position_std_m)
+            None
+            if max_position_std_m is None
+            else _positive_number("max_position_std_m", max_position_std_m)
         )
         self.coplanar = is_coplanar(X)
 
@@ -193,23 +209,40 @@ class Localizer:
             rot = np.radians(np.broadcast_to(np.asarray(rot_deg, dtype=float), (3,)))
         except (TypeError, ValueError):
             raise ValueError(
-                f"prior_sigmas must be PriorSigmas or (position_m, (tilt_x_deg, tilt_y_deg, yaw_deg)), got {value!r}"
+                "prior_sigmas must be PriorSigmas or "
+                f"(position_m, (tilt_x_deg, tilt_y_deg, yaw_deg)), got {value!r}"
             ) from None
-        if not (np.all(pos > 0) and np.all(rot > 0) and np.all(np.isfinite(pos)) and np.all(np.isfinite(rot))):
+        if not (
+            np.all(pos > 0)
+            and np.all(rot > 0)
+            and np.all(np.isfinite(pos))
+            and np.all(np.isfinite(rot))
+        ):
             raise ValueError(f"prior_sigmas must be positive and finite, got {value!r}")
         return PriorSigmas(tuple(pos.tolist()), tuple(rot.tolist()))
 
     # ----------------------------------------------------------------------------------------
 
-    def associate(self, detections_uv: NDArray[np.float64], prior: NDArray[np.float64]) -> Association:
+    def associate(
+        self, detections_uv: NDArray[np.float64], prior: NDArray[np.float64]
+    ) -> Association:
         """Run the configured association only (validated inputs)."""
         if self.association == "paper":
-            return associate_paper(detections_uv, self.landmarks_xyz, self.K, prior,
-                                   self.image_size, self.margin_px)
+            return associate_paper(
+                detections_uv, self.landmarks_xyz, self.K, prior, self.image_size, self.margin_px
+            )
         return associate_robust(
-            detections_uv, self.landmarks_xyz, self.K, prior, self.image_size, self.margin_px,
-            pixel_sigma=self.pixel_sigma, gate_px=self.gate_px, coarse_gate_px=self.coarse_gate_px,
-            max_hypotheses=self.max_hypotheses, min_correspondences=self.min_correspondences,
+            detections_uv,
+            self.landmarks_xyz,
+            self.K,
+            prior,
+            self.image_size,
+            self.margin_px,
+            pixel_sigma=self.pixel_sigma,
+            gate_px=self.gate_px,
+            coarse_gate_px=self.coarse_gate_px,
+            max_hypotheses=self.max_hypotheses,
+            min_correspondences=self.min_correspondences,
             prior_sigmas=self.prior_sigmas,
         )
 
@@ -243,12 +276,17 @@ class Localizer:
         t1 = time.perf_counter()
         timings["validate"] = t1 - t0
 
-        def fail(reason: str, assignment: NDArray[np.int64] | None = None, n_hyp: int = 0) -> PoseEstimate:
+        def fail(
+            reason: str, assignment: NDArray[np.int64] | None = None, n_hyp: int = 0
+        ) -> PoseEstimate:
             timings["total"] = time.perf_counter() - t0
             return PoseEstimate(
-                success=False, cam_from_world=prior.copy(),
+                success=False,
+                cam_from_world=prior.copy(),
                 assignment=unassigned if assignment is None else assignment,
-                failure_reason=reason, timings=timings, prior_mahalanobis_sq=0.0,
+                failure_reason=reason,
+                timings=timings,
+                prior_mahalanobis_sq=0.0,
                 n_hypotheses=n_hyp,
             )
 
@@ -269,14 +307,25 @@ class Localizer:
         m = a >= 0
         if m.sum() < need:
             timings.update(pnp=0.0, covariance=0.0)
-            return fail(f"too few correspondences: {int(m.sum())} assigned, need {need}", a,
-                        assoc.n_hypotheses)
+            return fail(
+                f"too few correspondences: {int(m.sum())} assigned, need {need}",
+                a,
+                assoc.n_hypotheses,
+            )
 
         X, u = self.landmarks_xyz[a[m]], det[m]
         if self.association == "paper":
-            res = solve_pnp(X, u, self.K, prior, rule="paper", min_points=need,
-                            pixel_sigma=self.pixel_sigma, ransac=self.ransac,
-                            ransac_threshold_px=self.ransac_threshold_px)
+            res = solve_pnp(
+                X,
+                u,
+                self.K,
+                prior,
+                rule="paper",
+                min_points=need,
+                pixel_sigma=self.pixel_sigma,
+                ransac=self.ransac,
+                ransac_threshold_px=self.ransac_threshold_px,
+            )
             if not res.success:
                 timings.update(pnp=time.perf_counter() - t2, covariance=0.0)
                 return fail(res.failure_reason or "PnP failed", a, assoc.n_hypotheses)
@@ -300,12 +349,22 @@ class Localizer:
         if self.max_position_std_m is not None:
             std = float(np.sqrt(np.max(np.diag(cov)[:3]))) if np.all(np.isfinite(cov)) else np.inf
             if std > self.max_position_std_m:
-                return fail(f"ill-conditioned geometry: position std {std:.3g} m > "
-                            f"max_position_std_m={self.max_position_std_m}", a, assoc.n_hypotheses)
+                return fail(
+                    f"ill-conditioned geometry: position std {std:.3g} m > "
+                    f"max_position_std_m={self.max_position_std_m}",
+                    a,
+                    assoc.n_hypotheses,
+                )
         timings["total"] = time.perf_counter() - t0
         return PoseEstimate(
-            success=True, cam_from_world=T, assignment=a, reprojection_rmse_px=float(rmse),
-            n_inliers=int(m.sum()), covariance=cov, failure_reason=None, timings=timings,
+            success=True,
+            cam_from_world=T,
+            assignment=a,
+            reprojection_rmse_px=float(rmse),
+            n_inliers=int(m.sum()),
+            covariance=cov,
+            failure_reason=None,
+            timings=timings,
             prior_mahalanobis_sq=prior_mahalanobis_sq(T, prior, self.prior_sigmas),
             n_hypotheses=assoc.n_hypotheses,
         )

@@ -69,7 +69,9 @@ class PriorSigmas:
 
     def as_array(self) -> NDArray[np.float64]:
         """(6,) sigmas in the package's pose parameterization ``(C, dtheta)``."""
-        return np.concatenate([np.asarray(self.position_m, float), np.asarray(self.rotation_rad, float)])
+        return np.concatenate(
+            [np.asarray(self.position_m, float), np.asarray(self.rotation_rad, float)]
+        )
 
 
 @dataclass(frozen=True)
@@ -110,7 +112,7 @@ def is_coplanar(points_xyz: ArrayLike, rel_tol: float = 1e-3) -> bool:
 
 
 def plane_from_world(points_xyz: ArrayLike) -> NDArray[np.float64]:
-    """4x4 rigid ``plane_from_world`` whose z = 0 plane best fits the points (origin at centroid)."""
+    """4x4 rigid ``plane_from_world``: z = 0 is the best-fit plane, origin at the centroid."""
     X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
     centroid = X.mean(axis=0)
     _, _, vt = np.linalg.svd(X - centroid)
@@ -255,7 +257,7 @@ def pnp_candidates(
             n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
                 _as_cv(Xp), _as_cv(u), K, None, flags=cv2.SOLVEPNP_IPPE
             )
-            for r, t in zip(rvecs[:n], tvecs[:n]):
+            for r, t in zip(rvecs[:n], tvecs[:n], strict=True):
                 out.append(_pose_from_rt(r, t) @ p_from_w)
         else:
             if X.shape[0] < 3:
@@ -263,7 +265,7 @@ def pnp_candidates(
             n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
                 _as_cv(X), _as_cv(u), K, None, flags=cv2.SOLVEPNP_SQPNP
             )
-            for r, t in zip(rvecs[:n], tvecs[:n]):
+            for r, t in zip(rvecs[:n], tvecs[:n], strict=True):
                 out.append(_pose_from_rt(r, t))
     except cv2.error:
         return []
@@ -276,7 +278,7 @@ def refine_pose(
     K: ArrayLike,
     cam_from_world: ArrayLike,
     max_iterations: int = 20,
-    tol: float = 1e-10,
+    tol: float = 1e-8,
 ) -> tuple[NDArray[np.float64], float]:
     """Levenberg-Marquardt refinement of the reprojection error; returns ``(pose, rmse_px)``."""
     X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
@@ -364,8 +366,10 @@ def select_candidate(
         n = X.shape[0]
         return min(
             scored,
-            key=lambda s: n * s[1] ** 2 / pixel_sigma**2
-            + prior_mahalanobis_sq(candidates[s[0]], prior_cam_from_world, prior_sigmas),
+            key=lambda s: (
+                n * s[1] ** 2 / pixel_sigma**2
+                + prior_mahalanobis_sq(candidates[s[0]], prior_cam_from_world, prior_sigmas)
+            ),
         )[0]
     if rule != "paper":
         raise ValueError(f"rule must be 'paper' or 'prior', got {rule!r}")
@@ -417,8 +421,14 @@ def solve_pnp(
     u = as_points("uv", uv, 2)
     K = check_intrinsics("K", K)
     if X.shape[0] != u.shape[0]:
-        raise ValueError(f"points_xyz and uv must have the same length, got {X.shape[0]} and {u.shape[0]}")
-    prior = None if prior_cam_from_world is None else check_transform("prior_cam_from_world", prior_cam_from_world)
+        raise ValueError(
+            f"points_xyz and uv must have the same length, got {X.shape[0]} and {u.shape[0]}"
+        )
+    prior = (
+        None
+        if prior_cam_from_world is None
+        else check_transform("prior_cam_from_world", prior_cam_from_world)
+    )
     fallback = prior if prior is not None else np.eye(4)
     n = X.shape[0]
     inliers = np.ones(n, dtype=bool)
@@ -429,13 +439,19 @@ def solve_pnp(
     finite = np.isfinite(X).all(axis=1) & np.isfinite(u).all(axis=1)
     inliers &= finite
     if inliers.sum() < max(min_points, 3):
-        return fail(f"too few correspondences: {int(inliers.sum())} usable, need {max(min_points, 3)}")
+        return fail(
+            f"too few correspondences: {int(inliers.sum())} usable, need {max(min_points, 3)}"
+        )
     if ransac and inliers.sum() >= 6:
         idx = np.flatnonzero(inliers)
         try:
             ok, rvec, tvec, ransac_in = cv2.solvePnPRansac(
-                _as_cv(X[idx]), _as_cv(u[idx]), K, None,
-                reprojectionError=float(ransac_threshold_px), iterationsCount=200,
+                _as_cv(X[idx]),
+                _as_cv(u[idx]),
+                K,
+                None,
+                reprojectionError=float(ransac_threshold_px),
+                iterationsCount=200,
                 flags=cv2.SOLVEPNP_AP3P,
             )
         except cv2.error:
@@ -450,11 +466,24 @@ def solve_pnp(
     if not cands:
         return fail("PnP solver found no pose (degenerate layout)")
     if refine:
-        refined = [refine_pose(Xi, ui, K, T)[0] for T in cands] if rule == "prior" else cands
+        refined = (
+            [refine_pose(Xi, ui, K, T, max_iterations=8)[0] for T in cands]
+            if rule == "prior"
+            else cands
+        )
     else:
         refined = cands
-    k = select_candidate(refined, Xi, ui, K, prior, rule=rule, tie_px=tie_px,
-                         pixel_sigma=pixel_sigma, prior_sigmas=prior_sigmas)
+    k = select_candidate(
+        refined,
+        Xi,
+        ui,
+        K,
+        prior,
+        rule=rule,
+        tie_px=tie_px,
+        pixel_sigma=pixel_sigma,
+        prior_sigmas=prior_sigmas,
+    )
     if k is None:
         return fail("every PnP candidate puts landmarks behind the camera")
     T = refined[k]

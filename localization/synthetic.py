@@ -123,7 +123,13 @@ def landmark_context(
     for name, (ids, xyz) in sets.items():
         X = as_points(f"{name} xyz", xyz, 3)
         uv, depth = project(K, cam_from_world, X)
-        in_frame = (depth > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5)
+        in_frame = (
+            (depth > 0)
+            & (uv[:, 0] >= -0.5)
+            & (uv[:, 0] <= w - 0.5)
+            & (uv[:, 1] >= -0.5)
+            & (uv[:, 1] <= h - 0.5)
+        )
         out["landmarks"][name] = {
             "ids": np.asarray(ids, dtype=np.int64).reshape(-1),
             "xyz": X,
