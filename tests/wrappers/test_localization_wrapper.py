@@ -1,0 +1,176 @@
+"""LocalizationWrapper: spaces, observations, infos, reward terms, errors, composition."""
+
+import numpy as np
+import pytest
+
+import uav_struct_env
+from uav_struct_env.errors import ConfigError
+from uav_struct_env.wrappers import (
+    LocalizationWrapper,
+    make_localization_env,
+    make_train_env,
+)
+
+SMALL = {"max_cycles": 8}
+HOLD = np.zeros(5, np.float32)
+
+
+def hold(env):
+    return {a: HOLD for a in env.agents}
+
+
+def test_spaces_cached_identical_and_observations_inside():
+    env = make_train_env("state", **SMALL)
+    spaces = [env.observation_space(a) for a in env.possible_agents]
+    assert all(s is spaces[0] for s in spaces)
+    assert "image" not in spaces[0].spaces
+    for key in ("pose", "pose_std", "localized", "layout", "gnss", "attitude"):
+        assert key in spaces[0].spaces
+    obs, infos = env.reset(seed=1)
+    for _ in range(2):
+        for a in obs:
+            assert spaces[0].contains(obs[a]), a
+            assert obs[a]["pose"].shape == (7,) and obs[a]["pose"].dtype == np.float32
+            assert obs[a]["pose_std"].shape == (6,)
+            assert obs[a]["localized"][0] in (0.0, 1.0)
+        obs, *_ = env.step(hold(env))
+    env.close()
+
+
+def test_scripted_view_localizes_accurately_and_reports_quality():
+    env = make_localization_env("column_tops", env_overrides={"image_size": (128, 72), **SMALL})
+    obs, infos = env.reset(seed=0, options={"viewpoint": 3})
+    assert "image" in obs["uav_0"]
+    for a in env.possible_agents:
+        loc = infos[a]["localization"]
+        assert loc["success"], loc["failure_reason"]
+        assert loc["translation_error_m"] < 1.0 and loc["rotation_error_deg"] < 2.0
+        assert loc["translation_error_m"] < loc["prior_translation_error_m"]
+        assert loc["n_correspondences"] >= 4 and loc["association_f1"] > 0.9
+        assert loc["latency_s"] > 0 and np.isfinite(loc["position_std_m"])
+        est = obs[a]["pose"][:3]
+        truth = infos[a]["world_from_cam"][:3, 3]
+        assert np.linalg.norm(est - truth) == pytest.approx(loc["translation_error_m"], abs=1e-3)
+        q = obs[a]["pose"][3:]
+        assert np.linalg.norm(q) == pytest.approx(1.0, abs=1e-5)
+        assert np.all(obs[a]["pose_std"] < 1.0) and obs[a]["localized"][0] == 1.0
+    env.close()
+
+
+def test_failed_localization_falls_back_to_the_prior():
+    env = make_train_env("state", **SMALL)
+    env.reset(seed=0)
+    # turn every camera to face away from the building: nothing to detect
+    for _ in range(4):
+        obs, rew, term, trunc, infos = env.step(
+            {a: np.array([0, 0, 0, 1, 0], np.float32) for a in env.agents}
+        )
+    failed = [a for a in obs if not infos[a]["localization"]["success"]]
+    assert failed
+    for a in failed:
+        prior = infos[a]["prior_world_from_cam"][:3, 3]
+        np.testing.assert_allclose(obs[a]["pose"][:3], prior, atol=1e-3)
+        assert obs[a]["localized"][0] == 0.0
+        assert infos[a]["reward_terms"]["failure"] == -env.failure_penalty
+    env.close()
+
+
+@pytest.mark.parametrize("reward", ["error", "uncertainty"])
+def test_reward_terms_sum_to_the_reward_including_crashes(reward):
+    env = make_train_env("state", max_cycles=12)
+    env = LocalizationWrapper(env.env, reward=reward, mode="paper", drop_image=True)
+    env.reset(seed=2)
+    seen_crash = False
+    while env.agents:
+        # fly backwards, away from the building: leaves the geofence within the episode
+        obs, rew, term, trunc, infos = env.step(
+            {a: np.array([-1, 0, 0, 0, 0], np.float32) for a in env.agents}
+        )
+        for a in rew:
+            terms = infos[a]["reward_terms"]
+            assert rew[a] == pytest.approx(sum(terms.values()), abs=1e-12)
+            assert terms["alive"] == env.alive_bonus
+            if term[a]:
+                seen_crash = True
+                assert terms["crash"] == -env.crash_penalty
+            else:
+                assert "crash" not in terms
+            if infos[a]["localization"]["success"]:
+                assert ("translation" in terms) == (reward == "error")
+                assert ("uncertainty" in terms) == (reward == "uncertainty")
+    assert seen_crash
+    env.close()
+
+
+def test_seeded_resets_repeat_with_a_noisy_detector():
+    def rollout():
+        env = make_train_env("state", **SMALL)
+        env = LocalizationWrapper(
+            env.env, mode="paper", drop_image=True, miss_rate=0.2, false_positives=1.0
+        )
+        out = []
+        obs, _ = env.reset(seed=5)
+        out.append(obs["uav_1"]["pose"].copy())
+        for _ in range(3):
+            obs, *_ = env.step(hold(env))
+            out.append(obs["uav_1"]["layout"].copy())
+        env.close()
+        return out
+
+    for x, y in zip(rollout(), rollout(), strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_robust_mode_and_other_landmark_sets():
+    env = make_localization_env(
+        "all", env_overrides={"image_size": (128, 72), **SMALL}, mode="robust", drop_image=True
+    )
+    obs, infos = env.reset(seed=0, options={"viewpoint": 0})
+    assert infos["uav_0"]["localization"]["success"]
+    assert infos["uav_0"]["localization"]["translation_error_m"] < 1.0
+    env.close()
+
+
+def test_clear_errors():
+    env = uav_struct_env.parallel_env("train", **SMALL)  # landmark_sets=()
+    with pytest.raises(ConfigError, match="landmark_sets=\\('column_tops',\\)"):
+        LocalizationWrapper(env)
+    env2 = uav_struct_env.parallel_env("train", landmark_sets=("column_tops",), **SMALL)
+    with pytest.raises(ConfigError, match="'learned' is not available yet"):
+        LocalizationWrapper(env2, detector="learned")
+    with pytest.raises(ConfigError, match="landmarks must be one of"):
+        LocalizationWrapper(env2, landmarks="roof")
+    with pytest.raises(ConfigError, match="mode must be one of"):
+        LocalizationWrapper(env2, mode="fast")
+    with pytest.raises(ConfigError, match="reward must be one of"):
+        LocalizationWrapper(env2, reward="distance")
+    with pytest.raises(ConfigError, match="failure_penalty must be finite and >= 0"):
+        LocalizationWrapper(env2, failure_penalty=-1)
+    with pytest.raises(ConfigError, match="config must be one of"):
+        make_train_env("pixels")
+    with pytest.raises(ValueError, match="unknown agent"):
+        LocalizationWrapper(env2).observation_space("uav_9")
+
+
+def test_parallel_api_conformance():
+    from pettingzoo.test import parallel_api_test
+
+    env = make_train_env("state", max_cycles=5)
+    parallel_api_test(env, num_cycles=6)
+    env.close()
+
+
+@pytest.mark.filterwarnings("ignore:The `render_mode` attribute is not defined")
+def test_composes_with_supersuit_vector_envs():
+    ss = pytest.importorskip("supersuit")
+    env = make_train_env("state", **SMALL)
+    vec = ss.concat_vec_envs_v1(
+        ss.pettingzoo_env_to_vec_env_v1(env), 1, num_cpus=0, base_class="stable_baselines3"
+    )
+    assert vec.num_envs == 4
+    obs = vec.reset()
+    assert obs["pose"].shape == (4, 7) and "image" not in obs
+    obs, rew, done, info = vec.step(np.zeros((4, 5), np.float32))
+    assert rew.shape == (4,) and np.all(rew >= -env.crash_penalty - 1e-9)
+    assert "localization" in info[0]
+    vec.close()

@@ -1,0 +1,101 @@
+"""Named training configurations and a factory for wrapped environments.
+
+``TRAIN_CONFIGS`` (frozen :class:`TrainConfig`) are the documented observation configs that train
+on 2 CPU cores (docs/training.md):
+
+* ``"state"``: state-only. 128 x 72 frames are rendered for the landmark visibility and then
+  dropped; the policy sees ``gnss``, ``attitude``, ``pose``, ``pose_std``, ``localized`` and
+  ``layout``. Column tops, paper association on a clean projection detector (1 px noise at the
+  paper's resolution), ``error`` reward, 30-step episodes, random starts 15-35 m out turned by up
+  to +-60 deg of heading (some start views miss part of the structure).
+* ``"image"``: the same plus a low-resolution 64 x 36 RGB ``image`` (``MultiInputPolicy`` with
+  SB3's NatureCNN, several times slower per step to learn from).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from uav_struct_env.errors import ConfigError
+from uav_struct_env.wrappers.localization import LocalizationWrapper
+
+__all__ = ["TRAIN_CONFIGS", "TrainConfig", "make_localization_env", "make_train_env"]
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """An environment configuration for training: env overrides + wrapper options."""
+
+    name: str
+    env: dict[str, Any] = field(default_factory=dict)
+    wrapper: dict[str, Any] = field(default_factory=dict)
+    preset: str = "train"
+
+    def replace(
+        self, env: dict[str, Any] | None = None, wrapper: dict[str, Any] | None = None
+    ) -> TrainConfig:
+        """A copy with some env / wrapper options overridden."""
+        return dataclasses.replace(
+            self, env={**self.env, **(env or {})}, wrapper={**self.wrapper, **(wrapper or {})}
+        )
+
+
+_STATE_ENV = {
+    "image_size": (128, 72),
+    "max_cycles": 30,
+    "start_yaw_jitter": math.radians(60.0),
+    "render_mode": "rgb_array",  # SuperSuit/SB3 read env.render_mode
+}
+_WRAPPER = {
+    "landmarks": "column_tops",
+    "detector": "projection",
+    "mode": "paper",
+    "reward": "error",
+}
+
+TRAIN_CONFIGS: dict[str, TrainConfig] = {
+    "state": TrainConfig("state", env=_STATE_ENV, wrapper={**_WRAPPER, "drop_image": True}),
+    "image": TrainConfig(
+        "image",
+        env={**_STATE_ENV, "image_size": (64, 36)},
+        wrapper={**_WRAPPER, "drop_image": False},
+    ),
+}
+
+
+def make_localization_env(
+    landmarks: str = "column_tops",
+    preset: str = "train",
+    env_overrides: dict[str, Any] | None = None,
+    **wrapper_kwargs: Any,
+) -> LocalizationWrapper:
+    """A ``uav_struct_v0`` env (``preset`` + overrides) that provides ``landmarks``' truth, wrapped.
+
+    ``landmark_sets`` is set to include ``landmarks`` (the ``train`` preset has none).
+    """
+    import uav_struct_env
+
+    overrides = dict(env_overrides or {})
+    sets = tuple(overrides.pop("landmark_sets", ()))
+    if landmarks not in sets:
+        sets = (*sets, landmarks)
+    env = uav_struct_env.parallel_env(preset, landmark_sets=sets, **overrides)
+    return LocalizationWrapper(env, landmarks=landmarks, **wrapper_kwargs)
+
+
+def make_train_env(
+    config: str | TrainConfig = "state", **env_overrides: Any
+) -> LocalizationWrapper:
+    """The wrapped env of a named :data:`TRAIN_CONFIGS` entry (env fields may be overridden)."""
+    if isinstance(config, str):
+        if config not in TRAIN_CONFIGS:
+            raise ConfigError(f"config must be one of {sorted(TRAIN_CONFIGS)}, got {config!r}")
+        config = TRAIN_CONFIGS[config]
+    wrapper = dict(config.wrapper)
+    landmarks = wrapper.pop("landmarks", "column_tops")
+    return make_localization_env(
+        landmarks, preset=config.preset, env_overrides={**config.env, **env_overrides}, **wrapper
+    )
