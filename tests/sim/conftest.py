@@ -1,13 +1,19 @@
-"""Rendering fixtures: session-wide SiteWorlds (the site loads once per stage and backend)."""
+"""Rendering fixtures: session-wide SiteWorlds (the site loads once per stage and backend).
+
+pybullet's EGL plugin supports one live client per process (see ``uav_struct_env.sim.client``),
+so the session keeps at most one EGL world open; tests that need their own EGL client take the
+``free_egl`` fixture, which closes it first.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
 
 from uav_struct_env.errors import RendererUnavailableError
+from uav_struct_env.sim import client as client_module
 from uav_struct_env.sim.client import RenderClient
 from uav_struct_env.sim.world import SiteWorld
 from uav_struct_env.site import paper_site
@@ -18,11 +24,14 @@ _EGL: list[bool] = []
 def egl_available() -> bool:
     """Whether the EGL plugin starts here (checked once)."""
     if not _EGL:
-        try:
-            RenderClient("egl").close()
+        if client_module._LIVE_EGL:
             _EGL.append(True)
-        except RendererUnavailableError:
-            _EGL.append(False)
+        else:
+            try:
+                RenderClient("egl").close()
+                _EGL.append(True)
+            except RendererUnavailableError:
+                _EGL.append(False)
     return _EGL[0]
 
 
@@ -40,18 +49,44 @@ def backend(request: pytest.FixtureRequest) -> str:
     return request.param
 
 
-@pytest.fixture(scope="session")
-def paper_world() -> Iterator[Callable[[str, str], SiteWorld]]:
-    """``paper_world(stage, backend)``: the paper site loaded once per session and backend."""
-    worlds: dict[tuple[str, str], SiteWorld] = {}
+class PaperWorlds:
+    """``paper_world(stage, backend)``: the paper site, loaded once per stage and backend.
 
-    def get(stage: str, backend: str) -> SiteWorld:
-        if (stage, backend) not in worlds:
-            worlds[stage, backend] = SiteWorld(
+    TinyRenderer worlds stay open for the session; the one EGL world is replaced when another
+    stage is asked for (two EGL clients cannot coexist in one process).
+    """
+
+    def __init__(self) -> None:
+        self.worlds: dict[tuple[str, str], SiteWorld] = {}
+
+    def __call__(self, stage: str, backend: str) -> SiteWorld:
+        key = (stage, backend)
+        if key not in self.worlds:
+            if backend == "egl":
+                self.release_egl()
+            self.worlds[key] = SiteWorld(
                 paper_site(stage), renderer=backend, rng=np.random.default_rng(7)
             )
-        return worlds[stage, backend]
+        return self.worlds[key]
 
-    yield get
-    for world in worlds.values():
-        world.close()
+    def release_egl(self) -> None:
+        for key in [k for k in self.worlds if k[1] == "egl"]:
+            self.worlds.pop(key).close()
+
+    def close(self) -> None:
+        for world in self.worlds.values():
+            world.close()
+
+
+@pytest.fixture(scope="session")
+def paper_world() -> Iterator[PaperWorlds]:
+    """The session's :class:`PaperWorlds`."""
+    worlds = PaperWorlds()
+    yield worlds
+    worlds.close()
+
+
+@pytest.fixture
+def free_egl(paper_world: PaperWorlds) -> None:
+    """Close the session's EGL world so that the test can start its own EGL client."""
+    paper_world.release_egl()

@@ -47,7 +47,7 @@ def _plates(client: RenderClient, camera: Camera, cam_from_world: np.ndarray):
 
 
 @pytest.mark.parametrize("name", list(CAMERAS))
-def test_plate_centroids_land_on_K_projection(backend, name):
+def test_plate_centroids_land_on_K_projection(backend, name, free_egl):
     camera = CAMERAS[name]
     cam_from_world = look_at([0.0, 0.0, 1.0], [10.0, 3.0, 2.0])
     client = RenderClient(backend)

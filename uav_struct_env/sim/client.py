@@ -19,6 +19,15 @@ measured by ``tests/sim/test_projection.py``:
   most 1024 x 768, each rendered with the same ``K`` shifted by the tile origin, and stitch them:
   exact, and at the same cost (two 640 x 720 tiles take as long as one stretched 1280 x 720).
 
+**One EGL client per process.** pybullet 3.2.7's EGL plugin keeps renderer state that is
+shared between the clients of one process: with two EGL clients alive, one client's shapes show
+up in the other's images (measured: correct positions, wrong box sizes), and disconnecting one
+can crash the process when the other renders next. Clients made one after another (the first
+closed before the next starts) render exactly like a fresh process. So at most one EGL client is
+alive per process: asking for a second raises :class:`RendererUnavailableError` (``"auto"`` then
+falls back to TinyRenderer with a warning). Use one process per EGL world (e.g. a subprocess
+vector env) to run several at EGL speed.
+
 The plugin prints its OpenGL banner and per-frame chatter on the C-level stdout; those calls run
 with file descriptor 1 redirected to ``/dev/null``.
 """
@@ -60,6 +69,9 @@ EGL_MAX_TILE = (1024, 768)
 #: "auto" uses EGL for images with at least this many pixels (measured crossover, see
 #: ``benchmarks/render.py``: on 2 llvmpipe cores TinyRenderer wins below about 320 x 180).
 AUTO_EGL_MIN_PIXELS = 320 * 180
+
+#: Client ids of the EGL clients alive in this process (at most one, see the module docstring).
+_LIVE_EGL: set[int] = set()
 
 
 @dataclass(frozen=True)
@@ -130,6 +142,10 @@ class RenderClient:
         if backend not in BACKENDS:
             raise ConfigError(f"backend must be one of {BACKENDS}, got {backend!r}")
         self.backend = backend
+        self.client_id = -1
+        self._closed = True
+        if backend == "egl" and _LIVE_EGL:
+            self._load_egl()  # raises before a client is made
         self.client_id = p.connect(p.DIRECT)
         if self.client_id < 0:
             raise RendererUnavailableError("pybullet could not create a DIRECT client")
@@ -142,6 +158,12 @@ class RenderClient:
                 raise
 
     def _load_egl(self) -> None:
+        if _LIVE_EGL:
+            raise RendererUnavailableError(
+                f"pybullet's EGL plugin supports one client per process and client "
+                f"{next(iter(_LIVE_EGL))} still uses it; close that SiteWorld first, render in "
+                "another process, or use renderer='tiny'"
+            )
         path = egl_plugin_path()
         if path is None:
             raise RendererUnavailableError(
@@ -156,6 +178,7 @@ class RenderClient:
                 "driver; on a headless machine Mesa's llvmpipe is enough); use renderer='tiny'"
             )
         self._plugin = plugin
+        _LIVE_EGL.add(self.client_id)
 
     # ------------------------------------------------------------------------------ rendering
     def render(
@@ -238,6 +261,7 @@ class RenderClient:
         quiet = _quiet_stdout() if self.backend == "egl" else contextlib.nullcontext()
         with quiet, contextlib.suppress(p.error):
             p.disconnect(physicsClientId=self.client_id)
+        _LIVE_EGL.discard(self.client_id)
 
     def __del__(self) -> None:
         with contextlib.suppress(Exception):
