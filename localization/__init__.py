@@ -12,6 +12,7 @@ One stage per module: :mod:`~localization.detect`, :mod:`~localization.associate
 :mod:`~localization.pipeline`. Conventions: :mod:`~localization.geometry`.
 """
 
+from localization.aruco import ARUCO_MODES, ArucoLocalizer, MarkerSpec
 from localization.associate import Association, assign, associate_paper, associate_robust
 from localization.detect import Detections, Detector, ProjectionDetector
 from localization.metrics import (
@@ -32,6 +33,9 @@ from localization.pipeline import ASSOCIATION_METHODS, Localizer, PoseEstimate
 from localization.pnp import PnPResult, PriorSigmas, pose_covariance, solve_pnp
 
 __all__ = [
+    "ARUCO_MODES",
+    "ArucoLocalizer",
+    "MarkerSpec",
     "ASSOCIATION_METHODS",
     "Association",
     "AssociationScores",

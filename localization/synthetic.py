@@ -6,6 +6,7 @@ package can be exercised and benchmarked without the simulator.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -20,6 +21,7 @@ __all__ = [
     "landmark_context",
     "paper_prior",
     "perturb_attitude",
+    "render_aruco_image",
     "sample_viewpoints",
 ]
 
@@ -137,4 +139,58 @@ def landmark_context(
             "in_frame": in_frame,
             "visible": in_frame.copy(),
         }
+    return out
+
+
+def render_aruco_image(
+    markers: Sequence[tuple[int, float, ArrayLike]],
+    K: ArrayLike,
+    cam_from_world: ArrayLike,
+    image_size: tuple[int, int] = PAPER_IMAGE_SIZE,
+    dictionary: int | None = None,
+    quiet_zone: float = 0.25,
+    background: int = 110,
+    marker_pixels: int = 240,
+) -> NDArray[np.uint8]:
+    """A grey (H, W) uint8 image of flat ArUco markers seen by a pinhole camera.
+
+    Each marker image (``cv2.aruco.generateImageMarker``, ``marker_pixels`` wide, with a white
+    quiet zone of ``quiet_zone`` times the side) is warped into the view by the homography of
+    its plane; markers behind the camera are skipped. A test double for rendered frames.
+
+    Args:
+        markers: ``(id, side_m, world_from_marker (4, 4))`` each.
+        K: (3, 3) intrinsics.
+        cam_from_world: (4, 4) camera pose.
+        image_size: (W, H).
+        dictionary: OpenCV predefined dictionary id (default ``DICT_4X4_50``).
+        quiet_zone: white border width as a fraction of the side.
+        background: grey level of the ground.
+        marker_pixels: resolution of the generated marker (black square), px.
+    """
+    import cv2
+
+    K = np.asarray(K, dtype=np.float64)
+    w, h = image_size
+    d = cv2.aruco.getPredefinedDictionary(
+        cv2.aruco.DICT_4X4_50 if dictionary is None else dictionary
+    )
+    out = np.full((h, w), background, dtype=np.uint8)
+    for mid, side, world_from_marker in markers:
+        tile = cv2.aruco.generateImageMarker(d, int(mid), marker_pixels)
+        pad = int(round(quiet_zone * marker_pixels))
+        tile = cv2.copyMakeBorder(tile, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
+        n = tile.shape[0]
+        half = side * (0.5 + quiet_zone)
+        plane = np.array([[-half, half, 0], [half, half, 0], [half, -half, 0], [-half, -half, 0]])
+        Tm = np.asarray(world_from_marker, dtype=np.float64)
+        world = plane @ Tm[:3, :3].T + Tm[:3, 3]
+        uv, depth = project(K, cam_from_world, world)
+        if np.any(depth <= 0.1):
+            continue
+        src = np.array([[-0.5, -0.5], [n - 0.5, -0.5], [n - 0.5, n - 0.5], [-0.5, n - 0.5]])
+        H = cv2.getPerspectiveTransform(src.astype(np.float32), uv.astype(np.float32))
+        warped = cv2.warpPerspective(tile, H, (w, h), flags=cv2.INTER_AREA)
+        mask = cv2.warpPerspective(np.full_like(tile, 255), H, (w, h), flags=cv2.INTER_NEAREST)
+        out[mask > 0] = warped[mask > 0]
     return out
