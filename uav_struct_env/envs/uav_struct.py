@@ -44,6 +44,7 @@ from pettingzoo import ParallelEnv
 from localization.geometry import invert
 from uav_struct_env.envs.config import EnvConfig, make_config
 from uav_struct_env.envs.render import MapView, UavMarker, compose_frame, draw_site_map
+from uav_struct_env.sim.airframes import Airframes
 from uav_struct_env.sim.attitude import world_from_cam_from_attitude
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.schedule import (
@@ -60,23 +61,6 @@ __all__ = ["ACTION_COMPONENTS", "UavStructParallelEnv"]
 
 #: Bound on the gnss observation box (m); far outside any reachable geofence.
 GNSS_BOUND = 1.0e4
-#: Half extents (m) of the box drawn for a UAV: DJI Mavic 2 Pro unfolded, 322 x 242 x 84 mm.
-UAV_HALF_EXTENTS = (0.161, 0.121, 0.042)
-UAV_RGBA = (0.18, 0.18, 0.2, 1.0)
-#: Where hidden UAV bodies go: far below the ground.
-_HIDDEN = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, -500.0], [0, 0, 0, 1.0]])
-
-
-def _body_pose(state: UavState) -> NDArray[np.float64]:
-    """``world_from_body`` of the drawn airframe.
-
-    Level, along the heading, its centre 0.1 m above the camera (the gimbal hangs under the body).
-    """
-    c, s = np.cos(state.yaw), np.sin(state.yaw)
-    out = np.eye(4)
-    out[:2, :2] = [[c, -s], [s, c]]
-    out[:3, 3] = state.xyz + (0.0, 0.0, 0.1)
-    return out
 
 
 class UavStructParallelEnv(ParallelEnv):
@@ -143,7 +127,7 @@ class UavStructParallelEnv(ParallelEnv):
         self._priors: dict[str, NDArray[np.float64]] = {}
         self._alive: dict[str, bool] = {}
         self._map_view: MapView | None = None
-        self._bodies: dict[str, int] = {}
+        self._airframes: Airframes | None = None
 
     # ------------------------------------------------------------------ spaces
     def _check_agent(self, agent: str) -> None:
@@ -174,16 +158,8 @@ class UavStructParallelEnv(ParallelEnv):
                 rng=np.random.default_rng(self.config.texture_seed),
             )
             if self.config.show_uavs:
-                self._bodies = {
-                    a: self._world.add_body(UAV_HALF_EXTENTS, UAV_RGBA, _HIDDEN)
-                    for a in self.possible_agents
-                }
+                self._airframes = Airframes(self._world, self.possible_agents)
         return self._world
-
-    def _place_bodies(self, flying: list[str]) -> None:
-        """Put the UAV bodies of ``flying`` agents at their poses and hide the others."""
-        for a, body in self._bodies.items():
-            self._world.move_body(body, _body_pose(self._states[a]) if a in flying else _HIDDEN)
 
     # ------------------------------------------------------------------ reset / step
     def reset(self, seed: int | None = None, options: dict | None = None):
@@ -345,8 +321,9 @@ class UavStructParallelEnv(ParallelEnv):
         observations: dict[str, dict[str, NDArray]] = {}
         infos: dict[str, dict[str, Any]] = {}
         clearance = self.obstacles.distances(np.array([self._states[a].xyz for a in agents]))
-        if self._bodies:
-            self._place_bodies(agents)
+        airframes = self._airframes
+        if airframes is not None:  # draw the flying UAVs, hide the finished ones
+            airframes.place({a: self._states[a] for a in agents})
         for k, agent in enumerate(agents):
             i = self._index[agent]
             state = self._states[agent]
@@ -360,12 +337,11 @@ class UavStructParallelEnv(ParallelEnv):
             att32 = np.clip(attitude, -np.pi, np.pi).astype(np.float32)
             world_from_cam = state.world_from_cam
             cam_from_world = invert(world_from_cam)
-            own = self._bodies.get(agent)
-            if own is not None:  # a camera does not see its own airframe
-                world.move_body(own, _HIDDEN)
+            if airframes is not None:  # a camera does not see its own airframe
+                airframes.set(agent, None)
             result = world.render(cam_from_world, self.camera, depth=need_depth)
-            if own is not None:
-                world.move_body(own, _body_pose(state))
+            if airframes is not None:
+                airframes.set(agent, state)
             obs = {"image": result.rgb, "gnss": gnss32, "attitude": att32}
             if cfg.observe_depth:
                 obs["depth"] = np.asarray(result.depth, dtype=np.float32)
@@ -426,6 +402,7 @@ class UavStructParallelEnv(ParallelEnv):
 
     def close(self) -> None:
         """Release the pybullet client."""
+        self._airframes = None
         if self._world is not None:
             self._world.close()
             self._world = None
