@@ -214,7 +214,8 @@ def main(images: int = 200, aruco_images: int = 40, seed: int = 0, json_out: str
                     f"{t['median'] / r['crb_position_median_m']:7.2f} "
                     f"{r['recall_0.25m_1deg']:7.2f} {r['detection_rate']:5.2f} "
                     f"{a['precision']:6.3f} {a['recall']:6.3f} {a['f1']:6.3f} "
-                    f"{1e3 * r['latency_cpu_s']['median']:7.2f} {1e3 * r['latency_cpu_s']['p90']:6.2f}"
+                    f"{1e3 * r['latency_cpu_s']['median']:7.2f} "
+                    f"{1e3 * r['latency_cpu_s']['p90']:6.2f}"
                 )
 
     if aruco_images > 0:
