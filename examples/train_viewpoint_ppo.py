@@ -1,0 +1,190 @@
+"""Train one viewpoint policy shared by the four UAVs with stable-baselines3 PPO.
+
+The env is a documented training config of :data:`uav_struct_env.wrappers.TRAIN_CONFIGS`
+(``state`` by default: state-only observations, anchor-quality ``error`` reward, 30-step episodes,
+random starts 15-35 m out with up to +-60 deg of heading error). SuperSuit turns the four agents
+into four slots of one vector env (``pettingzoo_env_to_vec_env_v1``) and stacks ``n_envs`` copies,
+``num_cpus`` subprocesses (``concat_vec_envs_v1``); observations and rewards are normalized
+(``VecNormalize``, saved beside the model).
+
+    .venv/bin/python examples/train_viewpoint_ppo.py --out runs/ppo_state --minutes 30
+    .venv/bin/tensorboard --logdir runs/ppo_state/tb
+
+Writes ``model.zip``, ``vecnormalize.pkl``, ``train.json`` (options, steps, wall clock,
+agent-steps per second), ``checkpoints/`` and ``tb/`` under ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+DEFAULTS: dict[str, Any] = {
+    "out": "runs/ppo_state",
+    "config": "state",
+    "total_timesteps": 400_000,
+    "minutes": None,
+    "n_envs": 4,
+    "num_cpus": 4,
+    "n_steps": 128,
+    "batch_size": 256,
+    "n_epochs": 10,
+    "learning_rate": 3e-4,
+    "gamma": 0.95,
+    "ent_coef": 0.0,
+    "net_arch": (64, 64),
+    "checkpoint_every": 50_000,
+    "seed": 0,
+    "progress_bar": True,
+}
+
+
+def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles: int | None = None):
+    """SuperSuit vector env over ``n_envs`` copies of the wrapped env (4 agent slots each).
+
+    Copies are seeded ``seed, seed + 1, ...`` (SuperSuit adds the copy index). Seeds are unique
+    only with one copy per subprocess (``num_cpus == n_envs``) or no subprocesses
+    (``num_cpus == 0``): SuperSuit adds both the process and the in-process index.
+    """
+    import supersuit as ss
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from uav_struct_env.wrappers import make_train_env
+
+    overrides = {} if max_cycles is None else {"max_cycles": max_cycles}
+    env = make_train_env(config, **overrides)
+    vec = ss.pettingzoo_env_to_vec_env_v1(env)
+    vec = ss.concat_vec_envs_v1(vec, n_envs, num_cpus=num_cpus, base_class="stable_baselines3")
+    vec.venv.reset(seed=seed)  # SB3's PPO(seed=...) would call vec.seed(), which SuperSuit lacks
+    return VecMonitor(vec)
+
+
+class _Progress:
+    """A tqdm progress bar and an optional wall-clock limit, as an SB3 callback."""
+
+    def __new__(cls, total: int, minutes: float | None, show: bool):
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        class Progress(BaseCallback):
+            def _on_training_start(self) -> None:
+                self.t0 = time.perf_counter()
+                self.bar = None
+                if show:
+                    from tqdm.auto import tqdm
+
+                    self.bar = tqdm(total=total, unit="step", smoothing=0.05)
+
+            def _on_step(self) -> bool:
+                if self.bar is not None:
+                    self.bar.update(self.training_env.num_envs)
+                if minutes is not None and time.perf_counter() - self.t0 > 60.0 * minutes:
+                    return False
+                return True
+
+            def _on_training_end(self) -> None:
+                if self.bar is not None:
+                    self.bar.close()
+
+        return Progress()
+
+
+def main(**kwargs: Any) -> dict[str, Any]:
+    """Train and save; returns the ``train.json`` summary. Keys: see :data:`DEFAULTS`."""
+    unknown = sorted(set(kwargs) - set(DEFAULTS) - {"max_cycles"})
+    if unknown:
+        raise ValueError(f"unknown options {unknown}; valid: {sorted(DEFAULTS)}")
+    opt = {**DEFAULTS, "max_cycles": None, **kwargs}
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.utils import set_random_seed
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    out = Path(opt["out"])
+    out.mkdir(parents=True, exist_ok=True)
+    set_random_seed(opt["seed"])
+    warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
+    torch.set_num_threads(1)
+    vec = make_vec_env(
+        opt["config"], opt["n_envs"], opt["num_cpus"], opt["seed"], opt["max_cycles"]
+    )
+    vec = VecNormalize(vec, norm_obs=True, norm_reward=True, gamma=opt["gamma"])
+    policy = "MultiInputPolicy"
+    model = PPO(
+        policy,
+        vec,
+        n_steps=opt["n_steps"],
+        batch_size=opt["batch_size"],
+        n_epochs=opt["n_epochs"],
+        learning_rate=opt["learning_rate"],
+        gamma=opt["gamma"],
+        ent_coef=opt["ent_coef"],
+        policy_kwargs={"net_arch": list(opt["net_arch"])},
+        tensorboard_log=str(out / "tb"),
+        device="cpu",
+        verbose=0,
+    )
+    n = vec.num_envs
+    callbacks = CallbackList(
+        [
+            CheckpointCallback(
+                max(opt["checkpoint_every"] // n, 1),
+                str(out / "checkpoints"),
+                name_prefix="ppo",
+                save_vecnormalize=True,
+            ),
+            _Progress(opt["total_timesteps"], opt["minutes"], opt["progress_bar"]),
+        ]
+    )
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=opt["total_timesteps"], callback=callbacks, tb_log_name="ppo")
+    wall = time.perf_counter() - t0
+    model.save(out / "model.zip")
+    vec.save(str(out / "vecnormalize.pkl"))
+    vec.close()
+    summary = {
+        "options": {k: (list(v) if isinstance(v, tuple) else v) for k, v in opt.items()},
+        "agent_steps": int(model.num_timesteps),
+        "wall_clock_s": wall,
+        "agent_steps_per_s": model.num_timesteps / wall if wall > 0 else float("nan"),
+        "n_agent_slots": n,
+    }
+    (out / "train.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+def _parse(argv: list[str] | None = None) -> dict[str, Any]:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", default=DEFAULTS["out"])
+    p.add_argument("--config", default=DEFAULTS["config"], help="TRAIN_CONFIGS name: state | image")
+    p.add_argument("--total-timesteps", type=int, default=DEFAULTS["total_timesteps"])
+    p.add_argument("--minutes", type=float, default=None, help="stop after this wall-clock time")
+    p.add_argument(
+        "--n-envs", type=int, default=DEFAULTS["n_envs"], help="env copies (4 agents each)"
+    )
+    p.add_argument(
+        "--num-cpus", type=int, default=DEFAULTS["num_cpus"], help="subprocesses (0: none)"
+    )
+    p.add_argument("--n-steps", type=int, default=DEFAULTS["n_steps"])
+    p.add_argument("--batch-size", type=int, default=DEFAULTS["batch_size"])
+    p.add_argument("--n-epochs", type=int, default=DEFAULTS["n_epochs"])
+    p.add_argument("--learning-rate", type=float, default=DEFAULTS["learning_rate"])
+    p.add_argument("--gamma", type=float, default=DEFAULTS["gamma"])
+    p.add_argument("--ent-coef", type=float, default=DEFAULTS["ent_coef"])
+    p.add_argument("--net-arch", type=int, nargs="+", default=list(DEFAULTS["net_arch"]))
+    p.add_argument("--checkpoint-every", type=int, default=DEFAULTS["checkpoint_every"])
+    p.add_argument("--max-cycles", type=int, default=None, help="override the episode length")
+    p.add_argument("--seed", type=int, default=DEFAULTS["seed"])
+    p.add_argument("--no-progress-bar", dest="progress_bar", action="store_false")
+    args = vars(p.parse_args(argv))
+    args["net_arch"] = tuple(args["net_arch"])
+    return args
+
+
+if __name__ == "__main__":
+    summary = main(**_parse())
+    print(json.dumps({k: v for k, v in summary.items() if k != "options"}, indent=2))
