@@ -18,11 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from localization import Localizer, ProjectionDetector, association_scores, cramer_rao_bound
+from localization import Localizer, ProjectionDetector, cramer_rao_bound
+from localization.aruco import ArucoLocalizer
 from localization.geometry import camera_center, invert, project
 from localization.metrics import pose_errors
 from uav_struct_env.site.io import load_site
 from uav_struct_env.study.protocol import METHODS, Method, Scene, StudyConfig
+from uav_struct_env.wrappers.frame import localize_frame
 
 __all__ = ["Overlay", "ImageResult", "iter_study", "run_units"]
 
@@ -82,9 +84,11 @@ _ENVS: dict[Scene, object] = {}
 
 
 def _env_for(config: StudyConfig, scene: Scene):
-    """The environment of ``scene``, built once per process."""
+    """The environment of ``scene``; at most one lives per process (pybullet's EGL renderer
+    supports one client per process), so switching scenes closes the previous one."""
     env = _ENVS.get(scene)
     if env is None:
+        _close_envs()
         import uav_struct_env
 
         env = uav_struct_env.parallel_env(
@@ -167,18 +171,15 @@ def _structural(config, method, uav, viewpoint, image, K, gt, prior, truth, mode
         method.landmarks, pixel_sigma=config.pixel_sigma, miss_rate=config.miss_rate,
         false_positives=config.false_positives, rng=_rng(config, method, uav, viewpoint),
     )
-    t0 = time.perf_counter()
-    det = detector.detect(image, {"landmarks": {method.landmarks: truth}, "image_size": (w, h)})
-    t_detect = time.perf_counter() - t0
     loc = Localizer(model_xyz, K, association=config.association,
                     pixel_sigma=max(config.pixel_sigma, 0.5), image_size=(w, h))
-    est = loc.localize(det.uv, prior)
-    scores = association_scores(est.assignment, det.true_ids, truth["ids"])
+    context = {"landmarks": {method.landmarks: truth}, "image_size": (w, h)}
+    frame = localize_frame(detector, loc, image, context, prior, gt, np.asarray(truth["ids"]))
+    est, det, scores = frame.estimate, frame.detections, frame.scores
     row = _row(
         method, uav, viewpoint, est, gt, prior, truth, K, max(config.pixel_sigma, 1e-3),
         n_detections=len(det), n_true_detections=scores.true_detections,
-        n_assigned=scores.assigned, n_correct=scores.correct,
-        latency_s=t_detect + est.timings.get("total", 0.0),
+        n_assigned=scores.assigned, n_correct=scores.correct, latency_s=frame.latency_s,
     )
     ids = np.asarray(truth["ids"])
     correct = (est.assignment >= 0) & (ids[np.maximum(est.assignment, 0)] == det.true_ids)
@@ -190,18 +191,16 @@ def _structural(config, method, uav, viewpoint, image, K, gt, prior, truth, mode
 
 
 def _aruco(config, method, uav, viewpoint, image, K, gt, prior, truth, markers):
-    from localization.aruco import ArucoLocalizer
-
-    loc = ArucoLocalizer(markers, K, mode=method.aruco_mode)
+    loc = ArucoLocalizer(markers, K, mode=method.aruco_mode, pixel_sigma=max(config.pixel_sigma, 0.5))
     t0 = time.perf_counter()
-    est = loc.localize(image, prior)
+    found, corners = loc.detect(image)
+    est = loc.localize_corners(found, corners, prior)
     latency = time.perf_counter() - t0
     # "Association" of markers is decoding their ids: a marker counts as visible when all its
     # corners are, and a detection is correct when its id is one of the visible markers.
     visible = np.asarray(truth["visible"], dtype=bool).reshape(-1, 4).all(axis=1)
     visible_ids = {int(m.id) for m, v in zip(markers, visible) if v}
-    found = [int(i) for i in est.marker_ids]
-    correct = sum(1 for i in found if i in visible_ids)
+    correct = sum(1 for i in found.tolist() if i in visible_ids)
     return _row(
         method, uav, viewpoint, est, gt, prior, truth, K, max(config.pixel_sigma, 1e-3),
         n_detections=len(found), n_true_detections=len(visible_ids),
@@ -230,9 +229,11 @@ def iter_study(config: StudyConfig) -> Iterator[tuple[list[ImageResult], list[Ov
             _close_envs()
         return
     ctx = mp.get_context("spawn")
-    with ctx.Pool(config.workers) as pool:
-        # Group by scene so each process mostly keeps one scene; chunksize 1 keeps progress fine.
-        yield from pool.imap_unordered(_worker, [(config, s, k) for s, k in units], chunksize=1)
+    # Units are ordered by scene; contiguous chunks keep each process on one scene most of the
+    # time, so a site is rarely loaded twice in one process.
+    chunk = max(1, -(-config.n_viewpoints // config.workers))
+    with ctx.Pool(min(config.workers, len(units))) as pool:
+        yield from pool.imap_unordered(_worker, [(config, s, k) for s, k in units], chunksize=chunk)
 
 
 def run_units(

@@ -1,0 +1,91 @@
+import csv
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+
+from uav_struct_env.errors import ConfigError
+from uav_struct_env.study import METHODS, StudyConfig
+from uav_struct_env.study.study import main
+
+SCHEMA_KEYS = {"successful", "total", "translation_error_m", "rotation_error_deg",
+               "detection_rate", "association_f1", "latency_s"}
+
+
+def _numbers(obj, path=""):
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _numbers(v, f"{path}.{k}")
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            yield from _numbers(v, f"{path}[{i}]")
+    elif isinstance(obj, (int, float)) and not isinstance(obj, bool):
+        yield path, obj
+
+
+@pytest.fixture(scope="module")
+def quick_study(tmp_path_factory):
+    out = tmp_path_factory.mktemp("study")
+    proc = subprocess.run(
+        [sys.executable, "-m", "uav_struct_env.study", "--quick", "--out", str(out), "--no-progress"],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return out, proc.stdout
+
+
+def test_quick_study_writes_the_schema_with_finite_computed_numbers(quick_study):
+    out, stdout = quick_study
+    results = json.loads((out / "results.json").read_text())
+    assert set(results) == {"config", "methods"}
+    assert results["config"]["n_viewpoints"] == 2
+    expected = {"slab_corners", "opening_corners", "column_tops", "aruco_0.5m", "aruco_1.0m", "all"}
+    assert expected <= set(results["methods"])
+    for key, entry in results["methods"].items():
+        assert SCHEMA_KEYS <= set(entry), key
+        assert entry["total"] == 8  # 4 UAVs x 2 viewpoints
+        assert 0 <= entry["successful"] <= entry["total"]
+        assert entry["latency_s"]["median"] > 0
+        for path, value in _numbers(entry):
+            assert math.isfinite(value), f"{key}{path} = {value}"
+    for key in ("slab_corners", "opening_corners", "column_tops", "all"):
+        entry = results["methods"][key]
+        assert entry["successful"] == 8
+        assert {"median", "p90"} == set(entry["translation_error_m"])
+        assert 0 < entry["translation_error_m"]["median"] < 2.0
+        assert 0 < entry["detection_rate"] <= 1 and 0 < entry["association_f1"] <= 1
+        assert entry["cramer_rao_translation_m"]["median"] > 0
+    # the tables are printed and written
+    assert "Table II" in stdout and "Column tops" in stdout
+    assert "| Slab corners |" in (out / "table2.md").read_text()
+    assert "| Column tops |" in (out / "table1.md").read_text()
+    for name in ("fig2_associations.png", "error_cdf.png", "viewpoint_map.png"):
+        assert (out / name).stat().st_size > 10_000, name
+
+
+def test_quick_study_csv_has_one_row_per_method_and_image(quick_study):
+    out, _ = quick_study
+    with (out / "per_image.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 8 * len(METHODS)
+    assert {"method", "uav", "viewpoint", "success", "translation_error_m", "n_detections",
+            "n_correct", "latency_s"} <= set(rows[0])
+    assert {r["uav"] for r in rows} == {"0", "1", "2", "3"}
+
+
+def test_bad_study_options_are_rejected_with_the_value():
+    with pytest.raises(ConfigError, match=r"association must be one of \('paper', 'robust'\), got 'best'"):
+        StudyConfig(association="best")
+    with pytest.raises(ConfigError, match=r"detector='learned' is not available yet"):
+        StudyConfig(detector="learned")
+    with pytest.raises(ConfigError, match=r"site must be 'paper', 'random' or an existing site file.*'mars.json'"):
+        StudyConfig(site="mars.json")
+    with pytest.raises(ConfigError, match=r"methods must be a non-empty subset of .* got \['doors'\]"):
+        StudyConfig(methods=("doors",))
+
+
+def test_cli_reports_bad_options_without_a_traceback(capsys):
+    assert main(["--detector", "magic", "--out", "unused"]) == 2
+    assert "detector must be one of ('projection',), got 'magic'" in capsys.readouterr().err
