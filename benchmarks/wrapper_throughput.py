@@ -1,0 +1,79 @@
+"""Throughput of the LocalizationWrapper at a training configuration, in agent-steps per second.
+
+Measures, in this process (one core), the bare env with the landmark truth the wrapper needs and
+the wrapped env, under the same seeded actions (``hold``: hover; ``random``: uniform; a crash
+ends the episode and the next one starts). One agent-step is one agent's observation.
+
+    .venv/bin/python benchmarks/wrapper_throughput.py --config state --steps 400
+
+Other processes sharing the machine's 2 cores lower the figure; ``uptime``'s load is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+# benchmarks/localization.py would shadow the localization package when run from this folder
+_HERE = Path(__file__).resolve().parent
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
+
+
+def measure(env, steps: int, policy: str, seed: int) -> tuple[float, int]:
+    """(agent-steps per second, agent-steps) over at least ``steps`` agent-steps."""
+    rng = np.random.default_rng(seed)
+    obs, _ = env.reset(seed=seed)
+    n = 0
+    t0 = time.perf_counter()
+    episode = 0
+    while n < steps:
+        if not env.agents:
+            episode += 1
+            env.reset(seed=seed + episode)
+        acts = {
+            a: (rng.uniform(-1, 1, 5) if policy == "random" else np.zeros(5)).astype(np.float32)
+            for a in env.agents
+        }
+        obs, *_ = env.step(acts)
+        n += len(obs)
+    return n / (time.perf_counter() - t0), n
+
+
+def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: int = 0) -> dict:
+    warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
+    from uav_struct_env.wrappers import make_train_env
+
+    wrapped = make_train_env(config)
+    bare = wrapped.env
+    measure(wrapped, 40, policy, seed)  # build the world, warm caches
+    bare_rate, _ = measure(bare, steps, policy, seed)
+    rate, n = measure(wrapped, steps, policy, seed)
+    wrapped.close()
+    out = {
+        "config": config,
+        "policy": policy,
+        "agent_steps": n,
+        "env_agent_steps_per_s": bare_rate,
+        "wrapped_agent_steps_per_s": rate,
+        "localization_ms_per_agent_step": 1e3 * (1 / rate - 1 / bare_rate),
+        "load_average_1min": os.getloadavg()[0],
+        "cpu_count": os.cpu_count(),
+    }
+    for k, v in out.items():
+        print(f"{k:34s} {v:.4g}" if isinstance(v, float) else f"{k:34s} {v}")
+    return out
+
+
+if __name__ == "__main__":
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--config", default="state")
+    p.add_argument("--steps", type=int, default=400)
+    p.add_argument("--policy", default="hold", choices=("hold", "random"))
+    p.add_argument("--seed", type=int, default=0)
+    main(**vars(p.parse_args()))
