@@ -60,10 +60,12 @@ def main(
                         world.render(pose, camera, depth=True, segmentation=segmentation)
                         times.append(time.perf_counter() - t)
                     rows.append({
-                        "backend": backend, "size": f"{width}x{height}", "segmentation": segmentation,
+                        "backend": backend, "size": f"{width}x{height}",
+                        "segmentation": segmentation,
                         "ms": 1e3 * statistics.median(times), "ms_min": 1e3 * min(times),
                     })
-    print(f"paper site, stage {stage!r}; median (min) ms per render (RGB + depth) over {repeats} frames")
+    print(f"paper site, stage {stage!r}; median (min) ms per render (RGB + depth), "
+          f"{repeats} frames")
     print(f"{'backend':8} {'size':>9}  {'no segmentation':>17}  {'with segmentation':>17}")
     for backend in dict.fromkeys(r["backend"] for r in rows):
         for width, height in sizes:

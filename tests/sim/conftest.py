@@ -1,8 +1,5 @@
 """Rendering fixtures: session-wide SiteWorlds (the site loads once per stage and backend).
 
-pybullet's EGL plugin supports one live client per process (see ``uav_struct_env.sim.client``),
-so the session keeps at most one EGL world open; tests that need their own EGL client take the
-``free_egl`` fixture, which closes it first.
 """
 
 from __future__ import annotations
@@ -13,7 +10,6 @@ import numpy as np
 import pytest
 
 from uav_struct_env.errors import RendererUnavailableError
-from uav_struct_env.sim import client as client_module
 from uav_struct_env.sim.client import RenderClient
 from uav_struct_env.sim.world import SiteWorld
 from uav_struct_env.site import paper_site
@@ -24,14 +20,11 @@ _EGL: list[bool] = []
 def egl_available() -> bool:
     """Whether the EGL plugin starts here (checked once)."""
     if not _EGL:
-        if client_module._LIVE_EGL:
+        try:
+            RenderClient("egl").close()
             _EGL.append(True)
-        else:
-            try:
-                RenderClient("egl").close()
-                _EGL.append(True)
-            except RendererUnavailableError:
-                _EGL.append(False)
+        except RendererUnavailableError:
+            _EGL.append(False)
     return _EGL[0]
 
 
@@ -52,8 +45,8 @@ def backend(request: pytest.FixtureRequest) -> str:
 class PaperWorlds:
     """``paper_world(stage, backend)``: the paper site, loaded once per stage and backend.
 
-    TinyRenderer worlds stay open for the session; the one EGL world is replaced when another
-    stage is asked for (two EGL clients cannot coexist in one process).
+    All stay open for the session (several EGL clients coexist: see
+    ``uav_struct_env.sim.client``).
     """
 
     def __init__(self) -> None:
@@ -62,16 +55,10 @@ class PaperWorlds:
     def __call__(self, stage: str, backend: str) -> SiteWorld:
         key = (stage, backend)
         if key not in self.worlds:
-            if backend == "egl":
-                self.release_egl()
             self.worlds[key] = SiteWorld(
                 paper_site(stage), renderer=backend, rng=np.random.default_rng(7)
             )
         return self.worlds[key]
-
-    def release_egl(self) -> None:
-        for key in [k for k in self.worlds if k[1] == "egl"]:
-            self.worlds.pop(key).close()
 
     def close(self) -> None:
         for world in self.worlds.values():
@@ -84,9 +71,3 @@ def paper_world() -> Iterator[PaperWorlds]:
     worlds = PaperWorlds()
     yield worlds
     worlds.close()
-
-
-@pytest.fixture
-def free_egl(paper_world: PaperWorlds) -> None:
-    """Close the session's EGL world so that the test can start its own EGL client."""
-    paper_world.release_egl()

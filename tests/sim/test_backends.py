@@ -52,7 +52,7 @@ def test_marker_detected_with_corners_in_opencv_order(backend, paper_world):
         gray = cv2.cvtColor(world.render(pose, camera).rgb, cv2.COLOR_RGB2GRAY)
         corners, ids, _ = detector.detectMarkers(gray)
         assert ids is not None, f"marker {marker.id} not detected ({backend})"
-        found = dict(zip(ids.ravel().tolist(), corners))
+        found = dict(zip(ids.ravel().tolist(), corners, strict=False))
         assert marker.id in found, (marker.id, ids.ravel())
         expected, _ = project(camera.K, pose, marker.corners_world)
         err = np.linalg.norm(found[marker.id].reshape(4, 2) - expected, axis=1)

@@ -41,13 +41,14 @@ def _plates(client: RenderClient, camera: Camera, cam_from_world: np.ndarray):
             ray = np.linalg.solve(camera.K, [uv[0], uv[1], 1.0])
             centre = (world_from_cam @ np.r_[10.0 * ray, 1.0])[:3]
             body = p.createMultiBody(0, -1, shape, basePosition=centre.tolist(),
-                                     baseOrientation=quat.tolist(), physicsClientId=client.client_id)
+                                     baseOrientation=quat.tolist(),
+                                     physicsClientId=client.client_id)
             out.append((body, centre))
     return out
 
 
 @pytest.mark.parametrize("name", list(CAMERAS))
-def test_plate_centroids_land_on_K_projection(backend, name, free_egl):
+def test_plate_centroids_land_on_K_projection(backend, name):
     camera = CAMERAS[name]
     cam_from_world = look_at([0.0, 0.0, 1.0], [10.0, 3.0, 2.0])
     client = RenderClient(backend)
@@ -75,7 +76,9 @@ def _column_top_pixels(result, camera, cam_from_world, body, z_top):
     return cols[top], rows[top]
 
 
-@pytest.mark.parametrize("camera", [Camera(), Camera(cx=600.0, cy=390.0)], ids=["centred", "off-centre"])
+@pytest.mark.parametrize(
+    "camera", [Camera(), Camera(cx=600.0, cy=390.0)], ids=["centred", "off-centre"]
+)
 def test_column_top_centres_land_on_K_projection(backend, paper_world, camera):
     world = paper_world("columns", backend)
     site = world.site

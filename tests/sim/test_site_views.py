@@ -27,7 +27,8 @@ def _view(site, side):
 
 def _bodies_near(segmentation, uv, radius=1):
     col, row = np.rint(uv).astype(int)
-    window = segmentation[max(row - radius, 0):row + radius + 1, max(col - radius, 0):col + radius + 1]
+    r0, c0 = max(row - radius, 0), max(col - radius, 0)
+    window = segmentation[r0:row + radius + 1, c0:col + radius + 1]
     return set(np.unique(window).tolist())
 
 
@@ -41,7 +42,7 @@ def test_all_column_tops_visible_where_K_predicts(backend, paper_world, side):
     assert truth["in_frame"].all() and truth["visible"].all(), truth["ids"][~truth["visible"]]
     uv, _ = project(CAMERA.K, cam_from_world, truth["xyz"])
     np.testing.assert_allclose(truth["uv"], uv)
-    for column, point_uv in zip(world.site.exposed_columns, truth["uv"]):
+    for column, point_uv in zip(world.site.exposed_columns, truth["uv"], strict=False):
         body = world.body_ids[f"column {column.name}"]
         assert body in _bodies_near(result.segmentation, point_uv), column.name
 
@@ -67,7 +68,7 @@ def test_slab_hides_far_corners_from_below(backend, paper_world):
     camera = CAMERA.scaled(640, 360)
     result = world.render(cam_from_world, camera, depth=True)
     truth = world.landmark_truth("slab_corners", cam_from_world, camera, result)
-    by_id = dict(zip(truth["ids"].tolist(), truth["visible"].tolist()))
+    by_id = dict(zip(truth["ids"].tolist(), truth["visible"].tolist(), strict=False))
     assert truth["in_frame"].all()
     assert by_id[100] is True
     assert by_id[102] is False

@@ -18,7 +18,7 @@ def _depth_of(points, fill):
     """A depth image that is ``fill`` everywhere except the landmark pixels, at landmark depth."""
     uv, z = project(CAMERA.K, POSE, points)
     depth = np.full((CAMERA.height, CAMERA.width), fill, np.float32)
-    for (u, v), d in zip(np.rint(uv).astype(int), z):
+    for (u, v), d in zip(np.rint(uv).astype(int), z, strict=False):
         if 0 <= u < CAMERA.width and 0 <= v < CAMERA.height:
             depth[v, u] = d
     return depth, uv, z
@@ -67,7 +67,9 @@ def test_out_of_frame_and_behind_camera():
 
 def test_image_border_is_half_a_pixel_out():
     W, H = CAMERA.width, CAMERA.height
-    rays = np.array([[-0.49, 10.0, 1.0], [W - 0.51, 10.0, 1.0], [-0.51, 10.0, 1.0], [W - 0.49, 10.0, 1.0]])
+    rays = np.array(
+        [[-0.49, 10.0, 1.0], [W - 0.51, 10.0, 1.0], [-0.51, 10.0, 1.0], [W - 0.49, 10.0, 1.0]]
+    )
     cam_pts = (np.linalg.solve(CAMERA.K, rays.T) * 20.0).T
     world = (np.linalg.inv(POSE) @ np.c_[cam_pts, np.ones(4)].T).T[:, :3]
     depth = np.full((H, W), 1e3, np.float32)
@@ -86,7 +88,7 @@ def test_accepts_landmark_sets():
 @pytest.mark.parametrize(
     ("kwargs", "error", "match"),
     [
-        ({"depth": np.zeros((10, 10))}, ValueError, r"depth must have shape \(H, W\)"),
+        ({"depth": np.zeros((10, 10))}, ValueError, r"depth must have the camera.s shape \(H, W\)"),
         ({"depth": None}, TypeError, "depth must be"),
         ({"cam_from_world": np.eye(3)}, ValueError, "cam_from_world"),
         ({"landmarks": np.zeros((3, 2))}, ValueError, "landmarks must have shape"),
@@ -105,4 +107,6 @@ def test_bad_inputs_raise(kwargs, error, match):
     args.update({k: v for k, v in kwargs.items() if k in args})
     extra = {k: v for k, v in kwargs.items() if k not in args}
     with pytest.raises(error, match=match):
-        landmark_visibility(args["landmarks"], args["cam_from_world"], args["camera"], args["depth"], **extra)
+        landmark_visibility(
+            args["landmarks"], args["cam_from_world"], args["camera"], args["depth"], **extra
+        )

@@ -46,7 +46,7 @@ def test_uvs_and_texture_shapes(elements):
 
 def test_column_box_geometry_and_outward_normals(elements):
     site = paper_site("columns")
-    for column, e in zip(site.columns, _by_kind(elements, "column")):
+    for column, e in zip(site.columns, _by_kind(elements, "column"), strict=False):
         sx, sy = column.section
         h = column.z_top - column.z_bottom
         assert e.mesh.area == pytest.approx(2 * (sx + sy) * h + 2 * sx * sy)
@@ -105,9 +105,10 @@ def test_marker_sheet_texture_orientation():
         e.mesh.vertex_normals[:, 2], 1.0)
     h = marker.footprint_half_extent
     cx, cy, _ = marker.center
-    for vertex, uv in zip(e.mesh.vertices[top], e.uv[top]):
+    for vertex, uv in zip(e.mesh.vertices[top], e.uv[top], strict=False):
         # (-h, +h) in the marker frame, the printed top-left, is texture (u, v) = (0, 1).
-        np.testing.assert_allclose(uv, [(vertex[0] - cx + h) / (2 * h), (vertex[1] - cy + h) / (2 * h)])
+        expected = [(vertex[0] - cx + h) / (2 * h), (vertex[1] - cy + h) / (2 * h)]
+        np.testing.assert_allclose(uv, expected)
     assert e.mesh.area == pytest.approx((2 * h) ** 2 + 4 * 2 * h * marker.center[2])
 
 
@@ -115,7 +116,7 @@ def test_textures_are_seeded_and_never_shared(elements):
     again = site_elements(paper_site("columns"), np.random.default_rng(1))
     other = site_elements(paper_site("columns"), np.random.default_rng(2))
     concrete = [e for e in elements if e.kind in ("column", "slab")]
-    for a, b, c in zip(elements, again, other):
+    for a, b, c in zip(elements, again, other, strict=False):
         np.testing.assert_array_equal(a.texture, b.texture)
         if a.kind != "marker":
             assert not np.array_equal(a.texture, c.texture)
@@ -133,7 +134,8 @@ def test_random_sites_build(rng):
 
 
 def test_face_cells_and_packing():
-    face = Face((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (4.0, 3.0), ((1.0, 1.0, 2.0, 2.0),))
+    hole = (1.0, 1.0, 2.0, 2.0)
+    face = Face((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (4.0, 3.0), (hole,))
     cells = face.cells()
     assert sum((a1 - a0) * (b1 - b0) for a0, b0, a1, b1 in cells) == pytest.approx(11.0)
     sides, top, bottom = box_faces((0, 0, 0), (1, 2, 5))
@@ -159,6 +161,7 @@ def test_write_obj_round_trip(tmp_path, elements):
     import trimesh
 
     path = write_obj(elements[0], tmp_path, "col")
-    assert (tmp_path / "col.png").exists() and "map_Kd col.png" in (tmp_path / "col.mtl").read_text()
+    assert (tmp_path / "col.png").exists()
+    assert "map_Kd col.png" in (tmp_path / "col.mtl").read_text()
     loaded = trimesh.load(path, process=False, force="mesh")
     assert loaded.area == pytest.approx(elements[0].mesh.area, rel=1e-5)

@@ -56,13 +56,15 @@ class Camera:
             object.__setattr__(self, name, int(value))
         for name in ("fx", "fy", "cx", "cy", "near", "far", "skew"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
                 raise TypeError(f"Camera.{name} must be a number, got {value!r}")
             if not np.isfinite(value):
                 raise ValueError(f"Camera.{name} must be finite, got {value!r}")
             object.__setattr__(self, name, float(value))
         if self.fx <= 0 or self.fy <= 0:
-            raise ValueError(f"Camera focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
+            raise ValueError(
+                f"Camera focal lengths must be positive, got fx={self.fx}, fy={self.fy}"
+            )
         if not 0 < self.near < self.far:
             raise ValueError(
                 f"Camera clip planes need 0 < near < far, got near={self.near}, far={self.far}"
@@ -115,7 +117,7 @@ class Camera:
 
 
 def projection_matrix(camera: Camera) -> tuple[float, ...]:
-    """pybullet's projection matrix (16 floats, column-major) derived exactly from ``camera.K``.
+    """Pybullet's projection matrix (16 floats, column-major) derived exactly from ``camera.K``.
 
     See the module docstring for the derivation.
     """
@@ -134,7 +136,7 @@ def projection_matrix(camera: Camera) -> tuple[float, ...]:
 
 
 def view_matrix(cam_from_world: ArrayLike) -> tuple[float, ...]:
-    """pybullet's view matrix (16 floats, column-major) of an OpenCV ``cam_from_world``.
+    """Pybullet's view matrix (16 floats, column-major) of an OpenCV ``cam_from_world``.
 
     Raises:
         TypeError, ValueError: if ``cam_from_world`` is not a 4x4 rigid transform.

@@ -19,14 +19,18 @@ measured by ``tests/sim/test_projection.py``:
   most 1024 x 768, each rendered with the same ``K`` shifted by the tile origin, and stitch them:
   exact, and at the same cost (two 640 x 720 tiles take as long as one stretched 1280 x 720).
 
-**One EGL client per process.** pybullet 3.2.7's EGL plugin keeps renderer state that is
-shared between the clients of one process: with two EGL clients alive, one client's shapes show
-up in the other's images (measured: correct positions, wrong box sizes), and disconnecting one
-can crash the process when the other renders next. Clients made one after another (the first
-closed before the next starts) render exactly like a fresh process. So at most one EGL client is
-alive per process: asking for a second raises :class:`RendererUnavailableError` (``"auto"`` then
-falls back to TinyRenderer with a warning). Use one process per EGL world (e.g. a subprocess
-vector env) to run several at EGL speed.
+**Several EGL clients in one process.** The plugin makes its EGL context current once, when it
+starts, and never again: with two EGL clients alive, every GL call (uploads at shape creation,
+rendering, and the clean-up at disconnect) goes to whichever context was made current last.
+Measured with pybullet 3.2.7: one client's shapes appear in the other's images (right positions,
+wrong sizes), and disconnecting one client while another's context is current deletes that
+other client's GL objects (its images go blank) or crashes the process. We therefore record
+each client's EGL display, surface and context (``eglGetCurrent*`` through ctypes, right after
+the plugin starts) and make them current (:meth:`RenderClient.activate`) before every pybullet
+call that may touch GL: shape loading, rendering, body changes and disconnect. With that, any
+number of EGL clients coexist and each renders exactly what a fresh process renders (tested).
+If libEGL cannot be reached through ctypes, at most one EGL client is allowed per process and a
+second raises :class:`RendererUnavailableError` (``"auto"`` then falls back to TinyRenderer).
 
 The plugin prints its OpenGL banner and per-frame chatter on the C-level stdout; those calls run
 with file descriptor 1 redirected to ``/dev/null``.
@@ -35,6 +39,7 @@ with file descriptor 1 redirected to ``/dev/null``.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
 import pkgutil
 import sys
@@ -70,8 +75,49 @@ EGL_MAX_TILE = (1024, 768)
 #: ``benchmarks/render.py``: on 2 llvmpipe cores TinyRenderer wins below about 320 x 180).
 AUTO_EGL_MIN_PIXELS = 320 * 180
 
-#: Client ids of the EGL clients alive in this process (at most one, see the module docstring).
+#: Client ids of the EGL clients alive in this process.
 _LIVE_EGL: set[int] = set()
+#: The client whose EGL context is current in this process (-1: none or unknown).
+_CURRENT_EGL = [-1]
+
+_EGL_DRAW, _EGL_READ = 0x3059, 0x305A
+
+
+class _EglApi:
+    """The few libEGL calls needed to switch between the plugin's per-client contexts."""
+
+    _instance: _EglApi | None | bool = False
+
+    def __init__(self, lib: ctypes.CDLL) -> None:
+        for name in ("eglGetCurrentDisplay", "eglGetCurrentContext"):
+            getattr(lib, name).restype = ctypes.c_void_p
+            getattr(lib, name).argtypes = []
+        lib.eglGetCurrentSurface.restype = ctypes.c_void_p
+        lib.eglGetCurrentSurface.argtypes = [ctypes.c_int]
+        lib.eglMakeCurrent.restype = ctypes.c_uint
+        lib.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
+        self._lib = lib
+
+    @classmethod
+    def get(cls) -> _EglApi | None:
+        """The process's libEGL (the one the plugin loads), or None if ctypes cannot load it."""
+        if cls._instance is False:
+            try:
+                cls._instance = cls(ctypes.CDLL("libEGL.so.1"))
+            except (OSError, AttributeError):
+                cls._instance = None
+        return cls._instance  # type: ignore[return-value]
+
+    def current(self) -> tuple[int, int, int, int] | None:
+        """(display, draw surface, read surface, context) current in this thread, or None."""
+        lib = self._lib
+        state = (lib.eglGetCurrentDisplay(), lib.eglGetCurrentSurface(_EGL_DRAW),
+                 lib.eglGetCurrentSurface(_EGL_READ), lib.eglGetCurrentContext())
+        return state if all(state) else None
+
+    def make_current(self, state: tuple[int, int, int, int]) -> bool:
+        """eglMakeCurrent(display, draw, read, context); True on success."""
+        return bool(self._lib.eglMakeCurrent(*state))
 
 
 @dataclass(frozen=True)
@@ -119,7 +165,9 @@ def resolve_renderer(renderer: str, image_size: tuple[int, int]) -> str:
     try:
         w, h = (int(x) for x in image_size)
     except (TypeError, ValueError):
-        raise ConfigError(f"image_size must be (width, height) in pixels, got {image_size!r}") from None
+        raise ConfigError(
+            f"image_size must be (width, height) in pixels, got {image_size!r}"
+        ) from None
     if w <= 0 or h <= 0:
         raise ConfigError(f"image_size must be positive (width, height), got {image_size!r}")
     if renderer != "auto":
@@ -144,8 +192,14 @@ class RenderClient:
         self.backend = backend
         self.client_id = -1
         self._closed = True
-        if backend == "egl" and _LIVE_EGL:
-            self._load_egl()  # raises before a client is made
+        self._egl_state: tuple[int, int, int, int] | None = None
+        if backend == "egl" and _LIVE_EGL and _EglApi.get() is None:
+            raise RendererUnavailableError(
+                f"EGL client {next(iter(_LIVE_EGL))} is alive and libEGL cannot be reached through "
+                "ctypes to switch contexts, so a second EGL client would render the first one's "
+                "scene; close that SiteWorld first, render in another process, or use "
+                "renderer='tiny'"
+            )
         self.client_id = p.connect(p.DIRECT)
         if self.client_id < 0:
             raise RendererUnavailableError("pybullet could not create a DIRECT client")
@@ -158,12 +212,6 @@ class RenderClient:
                 raise
 
     def _load_egl(self) -> None:
-        if _LIVE_EGL:
-            raise RendererUnavailableError(
-                f"pybullet's EGL plugin supports one client per process and client "
-                f"{next(iter(_LIVE_EGL))} still uses it; close that SiteWorld first, render in "
-                "another process, or use renderer='tiny'"
-            )
         path = egl_plugin_path()
         if path is None:
             raise RendererUnavailableError(
@@ -178,7 +226,31 @@ class RenderClient:
                 "driver; on a headless machine Mesa's llvmpipe is enough); use renderer='tiny'"
             )
         self._plugin = plugin
+        # The plugin has just made its new context current: remember it for activate().
+        api = _EglApi.get()
+        self._egl_state = None if api is None else api.current()
+        if self._egl_state is None and _LIVE_EGL:
+            raise RendererUnavailableError(
+                "could not read the EGL plugin's context, so a second EGL client cannot be used "
+                "safely; close the other EGL SiteWorld first or use renderer='tiny'"
+            )
         _LIVE_EGL.add(self.client_id)
+        _CURRENT_EGL[0] = self.client_id
+
+    def activate(self) -> None:
+        """Make this client's EGL context current (no-op for TinyRenderer).
+
+        Call before any pybullet call on this client that may reach the renderer: creating or
+        changing visual shapes and bodies, rendering, disconnecting.
+        """
+        if self.backend != "egl" or self._closed or _CURRENT_EGL[0] == self.client_id:
+            return
+        api = _EglApi.get()
+        if api is None or self._egl_state is None or not api.make_current(self._egl_state):
+            raise RendererUnavailableError(
+                f"could not make EGL client {self.client_id}'s context current"
+            )
+        _CURRENT_EGL[0] = self.client_id
 
     # ------------------------------------------------------------------------------ rendering
     def render(
@@ -199,6 +271,7 @@ class RenderClient:
         """
         if self._closed:
             raise RuntimeError("this RenderClient is closed")
+        self.activate()
         if self.backend == "tiny":
             du, dv = TINY_PIXEL_SHIFT
             shifted = replace(camera, cx=camera.cx - du, cy=camera.cy - dv)
@@ -257,10 +330,16 @@ class RenderClient:
         """Disconnect the client (idempotent)."""
         if self._closed:
             return
+        if self.backend == "egl" and self.client_id in _LIVE_EGL:
+            # The plugin deletes its GL objects in whatever context is current: make it ours.
+            with contextlib.suppress(RendererUnavailableError):
+                self.activate()
         self._closed = True
         quiet = _quiet_stdout() if self.backend == "egl" else contextlib.nullcontext()
         with quiet, contextlib.suppress(p.error):
             p.disconnect(physicsClientId=self.client_id)
+        if _CURRENT_EGL[0] == self.client_id:
+            _CURRENT_EGL[0] = -1  # the plugin released its context on the way out
         _LIVE_EGL.discard(self.client_id)
 
     def __del__(self) -> None:

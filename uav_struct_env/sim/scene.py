@@ -32,7 +32,9 @@ class LoadedScene:
         return [b for name, b in self.body_ids.items() if self.kinds[name] == kind]
 
 
-def load_elements(client_id: int, elements: Sequence[SiteElement], directory: str | Path) -> LoadedScene:
+def load_elements(
+    client_id: int, elements: Sequence[SiteElement], directory: str | Path
+) -> LoadedScene:
     """Write ``elements`` to ``directory`` and create one static body per element.
 
     Returns:

@@ -68,8 +68,10 @@ def landmark_visibility(
         depth: (H, W) metric depth along the optical axis (m), as ``SiteWorld.render`` returns.
         ids: (M,) ids when ``landmarks`` is an array (default ``0..M-1``).
         radius: half size of the pixel window searched for an unoccluded depth sample.
-        abs_tol, rel_tol, depth_bits: depth tolerance, see :func:`depth_tolerance`; pass the
-            camera with the near plane the depth was rendered with (``RenderResult.camera``).
+        abs_tol: constant part of the depth tolerance (m), see :func:`depth_tolerance`.
+        rel_tol: part of the tolerance proportional to the landmark's depth.
+        depth_bits: resolution of the depth buffer the depth came from (16 for EGL); pass the
+            camera with the near plane it was rendered with (``RenderResult.camera``).
 
     Returns:
         A dict of arrays: ``ids`` (M,) int64, ``xyz`` (M, 3) float64, ``uv`` (M, 2) float64
@@ -90,13 +92,16 @@ def landmark_visibility(
         ids_arr = ids_arr.astype(np.int64)
     T = check_transform("cam_from_world", cam_from_world)
     if not isinstance(camera, Camera):
-        raise TypeError(f"camera must be a uav_struct_env.sim.camera.Camera, got {type(camera).__name__}")
+        raise TypeError(
+            f"camera must be a uav_struct_env.sim.camera.Camera, got {type(camera).__name__}"
+        )
     if depth is None:
         raise TypeError("depth must be the (H, W) metric depth image of the render, got None")
     D = np.asarray(depth, dtype=np.float64)
     if D.shape != (camera.height, camera.width):
         raise ValueError(
-            f"depth must have shape (H, W) = {(camera.height, camera.width)} of the camera, got {D.shape}"
+            f"depth must have the camera's shape (H, W) = {(camera.height, camera.width)}, "
+            f"got {D.shape}"
         )
     if isinstance(radius, bool) or not isinstance(radius, (int, np.integer)) or radius < 0:
         raise ValueError(f"radius must be an int >= 0 (pixels), got {radius!r}")

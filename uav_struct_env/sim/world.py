@@ -108,7 +108,9 @@ class SiteWorld:
         if not isinstance(site, Site):
             raise TypeError(f"site must be a uav_struct_env.site.Site, got {type(site).__name__}")
         if rng is not None and not isinstance(rng, np.random.Generator):
-            raise TypeError(f"rng must be a numpy.random.Generator or None, got {type(rng).__name__}")
+            raise TypeError(
+                f"rng must be a numpy.random.Generator or None, got {type(rng).__name__}"
+            )
         start = time.perf_counter()
         backend = resolve_renderer(renderer, image_size)
         try:
@@ -133,6 +135,7 @@ class SiteWorld:
             elements = site_elements(
                 site, np.random.default_rng(0) if rng is None else rng, texture_size=texture_size
             )
+            client.activate()
             self.scene: LoadedScene = load_elements(client.client_id, elements, self._directory)
         except BaseException:
             self.close()
@@ -160,7 +163,7 @@ class SiteWorld:
 
     @property
     def body_ids(self) -> dict[str, int]:
-        """pybullet body id of every site element, by element name (``"column C1-03"``, ...)."""
+        """Pybullet body id of every site element, by element name (``"column C1-03"``, ...)."""
         return dict(self.scene.body_ids)
 
     @property
@@ -195,7 +198,9 @@ class SiteWorld:
         self._check_open()
         camera = self.camera if camera is None else camera
         if not isinstance(camera, Camera):
-            raise TypeError(f"camera must be a uav_struct_env.sim.camera.Camera, got {type(camera).__name__}")
+            raise TypeError(
+                f"camera must be a uav_struct_env.sim.camera.Camera, got {type(camera).__name__}"
+            )
         T = check_transform("cam_from_world", cam_from_world)
         used = replace(camera, near=self._near_plane(T, camera))
         raw = self._client.render(view_matrix(T), used, segmentation=segmentation, light=self.light)
@@ -212,8 +217,11 @@ class SiteWorld:
         return RenderResult(rgb, metric, raw.segmentation, used, bits)
 
     def _remember_depth(self, depth: NDArray[np.float32], camera: Camera, bits: int) -> None:
-        """Note how a returned depth image was made, so that passing the bare array to
-        :meth:`landmark_truth` still gets the tight tolerance (weak references, last 32 only)."""
+        """Note how a returned depth image was made.
+
+        Passing the bare array to :meth:`landmark_truth` then still gets the tight tolerance
+        (weak references, the last 32 renders only).
+        """
         self._depth_meta[id(depth)] = (weakref.ref(depth), camera.near, camera.far, bits)
         while len(self._depth_meta) > 32:
             self._depth_meta.pop(next(iter(self._depth_meta)))
@@ -226,7 +234,8 @@ class SiteWorld:
             extra = []
             for body in self._extra_bodies:
                 lo, hi = p.getAABB(body, physicsClientId=self.client_id)
-                extra.append(np.array(np.meshgrid(*np.array([lo, hi]).T, indexing="ij")).reshape(3, -1).T)
+                grid = np.meshgrid(*np.array([lo, hi]).T, indexing="ij")
+                extra.append(np.array(grid).reshape(3, -1).T)
             corners = np.concatenate([corners, np.stack(extra)])
         z = corners @ R[2] + t[2]  # (boxes, 8) depth of every box corner
         in_front = z.max(axis=1) > 0
@@ -239,7 +248,8 @@ class SiteWorld:
             return camera.near
         K_inv = np.linalg.inv(camera.K)
         W, H = camera.width, camera.height
-        rays = K_inv @ np.array([[-0.5, W - 0.5, W - 0.5, -0.5], [-0.5, -0.5, H - 0.5, H - 0.5], [1, 1, 1, 1]])
+        image_corners = [[-0.5, W - 0.5, W - 0.5, -0.5], [-0.5, -0.5, H - 0.5, H - 0.5], [1] * 4]
+        rays = K_inv @ np.array(image_corners)
         descent = -(R.T @ rays)[2]  # metres down per metre of depth
         if descent.max() > 0:
             nearest = min(nearest, centre_z / float(descent.max()))
@@ -298,6 +308,7 @@ class SiteWorld:
         self._check_open()
         if len(half_extents) != 3 or min(half_extents) <= 0:
             raise ValueError(f"half_extents must be three positive lengths, got {half_extents!r}")
+        self._client.activate()
         shape = p.createVisualShape(
             p.GEOM_BOX, halfExtents=list(map(float, half_extents)), rgbaColor=list(rgba),
             physicsClientId=self.client_id,
@@ -315,9 +326,12 @@ class SiteWorld:
         """Place a body added with :meth:`add_body` at the 4x4 pose ``world_from_body``."""
         self._check_open()
         if body_id not in self._extra_bodies:
-            raise ValueError(f"body {body_id!r} was not added with add_body (site bodies are static)")
+            raise ValueError(
+                f"body {body_id!r} was not added with add_body (site bodies are static)"
+            )
         T = check_transform("world_from_body", world_from_body)
         w, x, y, z = quat_wxyz_from_matrix(T)
+        self._client.activate()
         p.resetBasePositionAndOrientation(
             body_id, T[:3, 3].tolist(), [x, y, z, w], physicsClientId=self.client_id
         )
@@ -327,6 +341,7 @@ class SiteWorld:
         self._check_open()
         if body_id not in self._extra_bodies:
             raise ValueError(f"body {body_id!r} was not added with add_body")
+        self._client.activate()
         p.removeBody(body_id, physicsClientId=self.client_id)
         self._extra_bodies.discard(body_id)
 
@@ -343,4 +358,5 @@ class SiteWorld:
 
     def __repr__(self) -> str:
         state = "closed" if self.closed else f"client {self.client_id}"
-        return f"SiteWorld(site={self.site.name!r}, stage={self.site.stage!r}, backend={self.backend!r}, {state})"
+        return (f"SiteWorld(site={self.site.name!r}, stage={self.site.stage!r}, "
+                f"backend={self.backend!r}, {state})")

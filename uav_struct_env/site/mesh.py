@@ -55,7 +55,7 @@ _GUTTER_TEXELS = 4
 
 @dataclass(frozen=True)
 class Face:
-    """A planar rectangle ``origin + a * axis_a + b * axis_b``, ``0 <= a <= size[0]``, ``0 <= b <= size[1]``.
+    """A planar rectangle ``origin + a * axis_a + b * axis_b``, ``a, b`` within ``size``.
 
     The outward normal is ``axis_a x axis_b``. ``holes`` are rectangles ``(a0, b0, a1, b1)`` in
     the face's own coordinates that are cut out.
@@ -79,8 +79,8 @@ class Face:
         a_breaks = sorted({0.0, la, *[h[0] for h in self.holes], *[h[2] for h in self.holes]})
         b_breaks = sorted({0.0, lb, *[h[1] for h in self.holes], *[h[3] for h in self.holes]})
         out = []
-        for a0, a1 in zip(a_breaks[:-1], a_breaks[1:]):
-            for b0, b1 in zip(b_breaks[:-1], b_breaks[1:]):
+        for a0, a1 in zip(a_breaks[:-1], a_breaks[1:], strict=False):
+            for b0, b1 in zip(b_breaks[:-1], b_breaks[1:], strict=False):
                 am, bm = (a0 + a1) / 2, (b0 + b1) / 2
                 if any(h[0] < am < h[2] and h[1] < bm < h[3] for h in self.holes):
                     continue
@@ -133,7 +133,9 @@ def box_faces(lo: ArrayLike, hi: ArrayLike) -> tuple[list[Face], list[Face], lis
     return sides, [top], [bottom]
 
 
-def _pack(strips: Sequence[Sequence[Face]], gutter: float) -> tuple[list[tuple[float, float]], float]:
+def _pack(
+    strips: Sequence[Sequence[Face]], gutter: float
+) -> tuple[list[tuple[float, float]], float]:
     """Shelf-pack strips (faces laid side by side along u) into a square atlas.
 
     Returns the (u, v) offset in metres of each strip's lower-left corner and the atlas side in
@@ -175,7 +177,7 @@ def build_mesh(
     verts: list[NDArray[np.float64]] = []
     uvs: list[NDArray[np.float64]] = []
     normals: list[NDArray[np.float64]] = []
-    for strip, (u0, v0) in zip(strips, offsets):
+    for strip, (u0, v0) in zip(strips, offsets, strict=False):
         du = 0.0
         for face in strip:
             o, a, b = (np.asarray(x, float) for x in (face.origin, face.axis_a, face.axis_b))
@@ -313,8 +315,8 @@ def ground_elements(
     a_breaks = np.unique(np.concatenate([breaks + half, [h[i] for h in holes for i in (0, 2)]]))
     b_breaks = np.unique(np.concatenate([breaks + half, [h[i] for h in holes for i in (1, 3)]]))
     verts, uvs = [], []
-    for a0, a1 in zip(a_breaks[:-1], a_breaks[1:]):
-        for b0, b1 in zip(b_breaks[:-1], b_breaks[1:]):
+    for a0, a1 in zip(a_breaks[:-1], a_breaks[1:], strict=False):
+        for b0, b1 in zip(b_breaks[:-1], b_breaks[1:], strict=False):
             am, bm = (a0 + a1) / 2, (b0 + b1) / 2
             if any(h[0] < am < h[2] and h[1] < bm < h[3] for h in holes):
                 continue
@@ -389,7 +391,8 @@ def site_elements(
     """
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-    if isinstance(texture_size, bool) or not isinstance(texture_size, (int, np.integer)) or texture_size < 16:
+    if (isinstance(texture_size, bool) or not isinstance(texture_size, (int, np.integer))
+            or texture_size < 16):
         raise ValueError(f"texture_size must be an int >= 16 (pixels), got {texture_size!r}")
     if not (isinstance(texel_size, (int, float)) and texel_size > 0):
         raise ValueError(f"texel_size must be a positive length in metres, got {texel_size!r}")

@@ -179,7 +179,9 @@ def ground_texture(
     """
     rng = _check_rng(rng)
     size = _check_size(size)
-    soil, gravel = ground_palette(rng) if palette is None else (np.asarray(c, float) for c in palette)
+    if palette is None:
+        palette = ground_palette(rng)
+    soil, gravel = (np.asarray(c, dtype=np.float64) for c in palette)
     mix_field = fractal_noise(rng, size, extent, feature=6.0, octaves=4)
     mix = 1.0 / (1.0 + np.exp(-2.5 * (mix_field - 0.3)))  # 0 soil .. 1 gravel
     lum = 14.0 * fractal_noise(rng, size, extent, feature=1.5, octaves=5, persistence=0.55)
