@@ -147,7 +147,13 @@ def _row(method, uav, viewpoint, est, gt, prior, truth, K, pixel_sigma, **counts
     visible = np.asarray(truth["visible"], dtype=bool)
     t_err, r_err = pose_errors(est.cam_from_world, gt) if est.success else (float("nan"),) * 2
     p_err = pose_errors(prior, gt)
-    crb = cramer_rao_bound(np.asarray(truth["xyz"])[visible].reshape(-1, 3), gt, K, pixel_sigma)
+    # The bound assumes the detector's pixel noise, which is known for the projection detector
+    # only; for ArUco corners (sub-pixel, not 1 px) it would not bound anything, so it is NaN.
+    if method.structural:
+        crb = cramer_rao_bound(np.asarray(truth["xyz"])[visible].reshape(-1, 3), gt, K, pixel_sigma)
+        crb_t, crb_r = crb.position_rms_m, crb.rotation_rms_deg
+    else:
+        crb_t = crb_r = float("nan")
     c_gt, c_prior = camera_center(gt), camera_center(prior)
     c_est = camera_center(est.cam_from_world) if est.success else np.full(3, np.nan)
     return ImageResult(
@@ -157,7 +163,7 @@ def _row(method, uav, viewpoint, est, gt, prior, truth, K, pixel_sigma, **counts
         prior_translation_error_m=p_err[0], prior_rotation_error_deg=p_err[1],
         n_visible=int(visible.sum()),
         n_inliers=int(est.n_inliers), reprojection_rmse_px=float(est.reprojection_rmse_px),
-        crb_translation_m=crb.position_rms_m, crb_rotation_deg=crb.rotation_rms_deg,
+        crb_translation_m=crb_t, crb_rotation_deg=crb_r,
         gt_x=c_gt[0], gt_y=c_gt[1], gt_z=c_gt[2],
         prior_x=c_prior[0], prior_y=c_prior[1], prior_z=c_prior[2],
         est_x=c_est[0], est_y=c_est[1], est_z=c_est[2],
