@@ -37,6 +37,7 @@ DEFAULTS: dict[str, Any] = {
     "gamma": 0.95,
     "ent_coef": 0.0,
     "net_arch": (64, 64),
+    "log_std_init": -1.0,
     "checkpoint_every": 50_000,
     "seed": 0,
     "progress_bar": True,
@@ -123,7 +124,7 @@ def main(**kwargs: Any) -> dict[str, Any]:
         learning_rate=opt["learning_rate"],
         gamma=opt["gamma"],
         ent_coef=opt["ent_coef"],
-        policy_kwargs={"net_arch": list(opt["net_arch"])},
+        policy_kwargs={"net_arch": list(opt["net_arch"]), "log_std_init": opt["log_std_init"]},
         tensorboard_log=str(out / "tb"),
         device="cpu",
         verbose=0,
@@ -176,6 +177,12 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--gamma", type=float, default=DEFAULTS["gamma"])
     p.add_argument("--ent-coef", type=float, default=DEFAULTS["ent_coef"])
     p.add_argument("--net-arch", type=int, nargs="+", default=list(DEFAULTS["net_arch"]))
+    p.add_argument(
+        "--log-std-init",
+        type=float,
+        default=DEFAULTS["log_std_init"],
+        help="initial log std of the Gaussian actions (-1: std 0.37, starts near hovering)",
+    )
     p.add_argument("--checkpoint-every", type=int, default=DEFAULTS["checkpoint_every"])
     p.add_argument("--max-cycles", type=int, default=None, help="override the episode length")
     p.add_argument("--seed", type=int, default=DEFAULTS["seed"])

@@ -6,6 +6,7 @@ import pytest
 import uav_struct_env
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.wrappers import (
+    LAYOUT_COMPONENTS,
     LocalizationWrapper,
     make_localization_env,
     make_train_env,
@@ -54,6 +55,10 @@ def test_scripted_view_localizes_accurately_and_reports_quality():
         q = obs[a]["pose"][3:]
         assert np.linalg.norm(q) == pytest.approx(1.0, abs=1e-5)
         assert np.all(obs[a]["pose_std"] < 1.0) and obs[a]["localized"][0] == 1.0
+        layout = dict(zip(LAYOUT_COMPONENTS, obs[a]["layout"], strict=True))
+        assert layout["visible_frac"] > 0.5 and abs(layout["centroid_u"]) < 0.5
+        assert layout["site_dir_z"] > 0.9  # the scripted views aim at the building
+        assert 0.1 < layout["site_distance_hm"] < 0.6
     env.close()
 
 

@@ -9,9 +9,12 @@ and the wrapper adds to that agent's observation
 * ``pose_std``    float32 (6,): standard deviations from the estimate's covariance (camera
   centre x, y, z in m, rotation in rad); the localizer's prior sigmas where it failed;
 * ``localized``   float32 (1,): 1.0 if localization succeeded, else 0.0;
-* ``layout``      float32 (6,): landmark-layout features: visible landmarks / M, detections / M,
-  the detections' centroid (u, v) scaled to [-1, 1] and their spread (std of u, v) scaled by the
-  half image size (zeros when nothing is detected);
+* ``layout``      float32 (10,): landmark-layout features (:data:`LAYOUT_COMPONENTS`): visible
+  landmarks / M, detections / M, the detections' centroid (u, v) scaled to [-1, 1] and their
+  spread (std of u, v) scaled by the half image size (zeros when nothing is detected), then the
+  unit direction to the site centre in the camera frame (x right, y down, z forward) and its
+  distance in hectometres, both from the estimated pose (the prior's where localization failed)
+  and the BIM, so they need no ground truth;
 
 and to its info ``localization`` (success, translation_error_m, rotation_error_deg,
 prior_translation_error_m, n_correspondences, n_detections, n_visible, association_precision,
@@ -66,6 +69,10 @@ LAYOUT_COMPONENTS = (
     "centroid_v",
     "spread_u",
     "spread_v",
+    "site_dir_x",
+    "site_dir_y",
+    "site_dir_z",
+    "site_distance_hm",
 )
 
 
@@ -179,6 +186,7 @@ class LocalizationWrapper(BaseParallelWrapper):
         model = base.site.landmarks(landmarks)
         self.model_ids = np.asarray(model.ids, dtype=np.int64)
         self.K = np.asarray(base.camera.K, dtype=np.float64)
+        self._site_center = np.asarray(base.site.center, dtype=np.float64).reshape(3)
         self._aruco = None
         if detector == "aruco":
             if landmarks != "aruco":
@@ -333,6 +341,11 @@ class LocalizationWrapper(BaseParallelWrapper):
         m = max(len(self.model_ids), 1)
         w, h = self.image_size
         out = np.zeros(len(LAYOUT_COMPONENTS), np.float32)
+        cam_from_world = frame.estimate.cam_from_world
+        to_site = cam_from_world[:3, :3] @ self._site_center + cam_from_world[:3, 3]
+        dist = float(np.linalg.norm(to_site))
+        out[6:9] = to_site / dist if dist > 0 else 0.0
+        out[9] = min(dist / 100.0, 2.0)
         out[0] = float(np.sum(truth["visible"])) / m if truth is not None else 0.0
         uv = frame.detections.uv
         out[1] = min(len(uv) / m, 2.0)
