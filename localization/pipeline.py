@@ -119,6 +119,9 @@ class Localizer:
         ransac_threshold_px: RANSAC inlier threshold, px.
         max_position_std_m: if set, a pose whose covariance gives a position std (largest axis)
             above this fails as ill-conditioned.
+        max_prior_mahalanobis_sq: robust mode rejects association hypotheses whose pose is
+            farther from the prior than this squared Mahalanobis distance (6 dof; default the
+            chi-square 99.9 % quantile); None disables the check.
 
     Raises:
         TypeError, ValueError: on bad arguments, naming the value and what was expected.
@@ -141,6 +144,7 @@ class Localizer:
         ransac: bool = False,
         ransac_threshold_px: float = 8.0,
         max_position_std_m: float | None = None,
+        max_prior_mahalanobis_sq: float | None = 22.46,
     ) -> None:
         X = as_points("landmarks_xyz", landmarks_xyz, 3)
         if X.shape[0] == 0:
@@ -195,6 +199,11 @@ class Localizer:
             if max_position_std_m is None
             else _positive_number("max_position_std_m", max_position_std_m)
         )
+        self.max_prior_mahalanobis_sq = (
+            None
+            if max_prior_mahalanobis_sq is None
+            else _positive_number("max_prior_mahalanobis_sq", max_prior_mahalanobis_sq)
+        )
         self.coplanar = is_coplanar(X)
 
     @staticmethod
@@ -244,6 +253,7 @@ class Localizer:
             max_hypotheses=self.max_hypotheses,
             min_correspondences=self.min_correspondences,
             prior_sigmas=self.prior_sigmas,
+            max_prior_mahalanobis_sq=self.max_prior_mahalanobis_sq,
         )
 
     def localize(

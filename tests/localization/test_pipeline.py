@@ -124,3 +124,13 @@ def test_robust_beats_paper_with_misses_and_clutter(building):
     te_p, f1_p, _, ok_p = _run(building, "column_tops", "paper", 0.1, 1.0, 40, seed=3)
     assert np.percentile(te_r[ok_r], 90) < 0.4 and f1_r.mean() >= 0.98
     assert np.percentile(te_p[ok_p], 90) > 1.0 and f1_p.mean() < 0.9
+
+
+def test_paper_mode_with_ransac_drops_a_gross_outlier(building, center):
+    _, X = building["all"]
+    T = look_at([4, -22, 18], center)
+    uv, _ = project(PAPER_K, T, X)
+    uv[3] += [60.0, -45.0]  # one detection far off; the exact prior still assigns it
+    est = Localizer(X, PAPER_K, association="paper", ransac=True).localize(uv, T)
+    assert est.success and est.assignment[3] == -1
+    assert pose_errors(est.cam_from_world, T)[0] < 0.05
