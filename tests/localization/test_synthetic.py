@@ -47,3 +47,17 @@ def test_benchmark_smoke(capsys):
     out = mod.main(images=4, aruco_images=1, seed=0)
     assert "column_tops/miss10+fp1/robust" in out["structural"]
     assert "Cramér-Rao" in capsys.readouterr().out
+
+
+def test_package_is_pure():
+    """localization imports neither the environment, pybullet nor gymnasium."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, localization, localization.aruco, localization.synthetic; "
+        "bad = [m for m in sys.modules if m.split('.')[0] in "
+        "('uav_struct_env', 'pybullet', 'gymnasium', 'pettingzoo')]; print(bad)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
