@@ -161,7 +161,7 @@ def test_write_obj_round_trip(tmp_path, elements):
     import trimesh
 
     path = write_obj(elements[0], tmp_path, "col")
-    assert (tmp_path / "col.png").exists()
-    assert "map_Kd col.png" in (tmp_path / "col.mtl").read_text()
+    assert (tmp_path / "col.bmp").exists()
+    assert "map_Kd col.bmp" in (tmp_path / "col.mtl").read_text()
     loaded = trimesh.load(path, process=False, force="mesh")
     assert loaded.area == pytest.approx(elements[0].mesh.area, rel=1e-5)
