@@ -67,12 +67,16 @@ def test_plate_centroids_land_on_K_projection(backend, name):
 
 
 def _column_top_pixels(result, camera, cam_from_world, body, z_top):
-    """Pixels of ``body`` whose back-projected world height is the column top (+-3 cm)."""
+    """Pixels of ``body`` whose back-projected height is the column top (+-5 mm).
+
+    A looser band picks up the side faces just below the top edge and biases the centroid
+    downwards (0.6 px at +-3 cm).
+    """
     rows, cols = np.nonzero(result.segmentation == body)
     z = result.depth[rows, cols].astype(np.float64)
     rays = np.linalg.solve(camera.K, np.stack([cols, rows, np.ones_like(cols)]).astype(float))
     world = invert(cam_from_world) @ np.vstack([rays * z, np.ones_like(z)])
-    top = np.abs(world[2] - z_top) < 0.03
+    top = np.abs(world[2] - z_top) < 0.005
     return cols[top], rows[top]
 
 
@@ -93,6 +97,6 @@ def test_column_top_centres_land_on_K_projection(backend, paper_world, camera):
             continue
         uv, _ = project(camera.K, cam_from_world, np.array([column.top_center]))
         err = np.array([cols.mean(), rows.mean()]) - uv[0]
-        assert np.all(np.abs(err) < 1.0), f"{column.name}: top-face centroid off by {err} px"
+        assert np.all(np.abs(err) < 0.5), f"{column.name}: top-face centroid off by {err} px"
         checked += 1
     assert checked >= 10
