@@ -135,17 +135,21 @@ def egl_plugin_path() -> str | None:
     return None if loader is None else loader.get_filename()
 
 
+_DEVNULL: list[int] = []  # one descriptor on /dev/null, opened on first use
+
+
 @contextlib.contextmanager
 def _quiet_stdout() -> Iterator[None]:
     """Silence C-level writes to stdout (file descriptor 1) for the duration."""
     fd = 1  # C code writes to fd 1 whatever Python's sys.stdout is (pytest swaps it)
     with contextlib.suppress(Exception):
         sys.stdout.flush()
+    if not _DEVNULL:
+        _DEVNULL.append(os.open(os.devnull, os.O_WRONLY))
     saved = os.dup(fd)
     try:
-        with open(os.devnull, "w") as devnull:
-            os.dup2(devnull.fileno(), fd)
-            yield
+        os.dup2(_DEVNULL[0], fd)
+        yield
     finally:
         os.dup2(saved, fd)
         os.close(saved)
@@ -275,10 +279,12 @@ class RenderClient:
         if self.backend == "tiny":
             du, dv = TINY_PIXEL_SHIFT
             shifted = replace(camera, cx=camera.cx - du, cy=camera.cy - dv)
-            return self._render_once(view, shifted, segmentation, light, p.ER_TINY_RENDERER)
+            raw = self._render_once(view, shifted, segmentation, light, p.ER_TINY_RENDERER)
+            return RawImage(np.ascontiguousarray(raw.rgb), raw.depth_buffer, raw.segmentation)
         tw, th = EGL_MAX_TILE
         if camera.width <= tw and camera.height <= th:
-            return self._render_once(view, camera, segmentation, light, p.ER_BULLET_HARDWARE_OPENGL)
+            raw = self._render_once(view, camera, segmentation, light, p.ER_BULLET_HARDWARE_OPENGL)
+            return RawImage(np.ascontiguousarray(raw.rgb), raw.depth_buffer, raw.segmentation)
         nx, ny = -(-camera.width // tw), -(-camera.height // th)
         xs = np.linspace(0, camera.width, nx + 1).round().astype(int)
         ys = np.linspace(0, camera.height, ny + 1).round().astype(int)
@@ -318,7 +324,7 @@ class RenderClient:
         rgb = np.asarray(rgba, dtype=np.uint8).reshape(h, w, 4)[:, :, :3]
         depth = np.asarray(depth, dtype=np.float32).reshape(h, w)
         mask = np.asarray(seg, dtype=np.int32).reshape(h, w) if segmentation else None
-        return RawImage(np.ascontiguousarray(rgb), depth, mask)
+        return RawImage(rgb, depth, mask)  # rgb: a view of the RGBA buffer
 
     # ------------------------------------------------------------------------------ lifetime
     @property
