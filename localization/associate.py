@@ -504,7 +504,7 @@ def associate_robust(
                     current[keep] = a[keep]
             else:
                 T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, T, max_iterations=5)
-            step_gate = max(gate, coarse_gate_px / 2 ** (it + 1))
+            step_gate = max(gate, coarse_gate_px / 4 ** (it + 1))
             cidx, cproj = candidate_landmarks(landmarks_xyz, K, T, image_size, margin_px)
             local = assign(det[good], cproj, step_gate)
             new = np.full(n, -1, dtype=np.int64)

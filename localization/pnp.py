@@ -451,7 +451,7 @@ def solve_pnp(
                 K,
                 None,
                 reprojectionError=float(ransac_threshold_px),
-                iterationsCount=200,
+                iterationsCount=100,
                 flags=cv2.SOLVEPNP_AP3P,
             )
         except cv2.error:
@@ -465,16 +465,8 @@ def solve_pnp(
     cands = pnp_candidates(Xi, ui, K, coplanar=coplanar)
     if not cands:
         return fail("PnP solver found no pose (degenerate layout)")
-    if refine:
-        refined = (
-            [refine_pose(Xi, ui, K, T, max_iterations=8)[0] for T in cands]
-            if rule == "prior"
-            else cands
-        )
-    else:
-        refined = cands
     k = select_candidate(
-        refined,
+        cands,
         Xi,
         ui,
         K,
@@ -486,8 +478,8 @@ def solve_pnp(
     )
     if k is None:
         return fail("every PnP candidate puts landmarks behind the camera")
-    T = refined[k]
-    if refine and rule != "prior":
+    T = cands[k]
+    if refine:
         T, _ = refine_pose(Xi, ui, K, T)
     rmse, ok = _rmse_and_depth_ok(K, T, Xi, ui)
     if not ok or not np.isfinite(rmse):
