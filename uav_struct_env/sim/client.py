@@ -71,9 +71,11 @@ RENDERERS = ("auto", *BACKENDS)
 TINY_PIXEL_SHIFT = (0.5, -0.5)
 #: The EGL plugin's off-screen surface, (width, height); larger images are rendered in tiles.
 EGL_MAX_TILE = (1024, 768)
-#: "auto" uses EGL for images with at least this many pixels (measured crossover, see
-#: ``benchmarks/render.py``: on 2 llvmpipe cores TinyRenderer wins below about 320 x 180).
-AUTO_EGL_MIN_PIXELS = 320 * 180
+#: "auto" uses EGL for images with at least this many pixels (about 420 x 240). Measured with
+#: ``benchmarks/render.py`` on the paper site, 2 shared cores: TinyRenderer takes ~0.4 us a
+#: pixel (23 ms at 320 x 180, 90 ms at 640 x 360), EGL ~30 ms a frame plus ~0.12 us a pixel
+#: (38 ms and 58 ms): they cross near 1e5 pixels.
+AUTO_EGL_MIN_PIXELS = 100_000
 
 #: Client ids of the EGL clients alive in this process.
 _LIVE_EGL: set[int] = set()
