@@ -178,6 +178,13 @@ def table2_markdown(results: dict) -> str:
             f"{_f(rot['median'])} / {_f(rot['p90'])} | {paper_r} | "
             f"{_f(r['cramer_rao_rotation_deg']['median'])} |"
         )
+    first = next(iter(results["methods"].values()), None)
+    if first is not None:
+        t, rot = first["prior_translation_error_m"], first["prior_rotation_error_deg"]
+        lines.append(
+            f"| Onboard prior (GNSS + attitude, input) | — | {_f(t['median'])} / {_f(t['p90'])} | — | — "
+            f"| {_f(rot['median'])} / {_f(rot['p90'])} | — | — |"
+        )
     sigma = results["config"].get("pixel_sigma")
     lines += [
         "",
