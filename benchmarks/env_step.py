@@ -15,11 +15,18 @@ projections, dict building).
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
-import numpy as np
+# Run as a script, this directory comes first on sys.path, and benchmarks/localization.py would
+# shadow the localization package: drop it.
+_HERE = Path(__file__).resolve().parent
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 
-import uav_struct_env
+import numpy as np  # noqa: E402
+
+import uav_struct_env  # noqa: E402
 
 CONFIGS = {
     "paper 1280x720": ("paper", {}),
