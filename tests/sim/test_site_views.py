@@ -100,3 +100,30 @@ def test_box_in_line_of_sight_hides_one_column_top(backend, paper_world):
     assert not hidden["visible"][5]
     assert hidden["visible"].sum() >= 10
     assert clear["visible"].all()
+
+
+def test_visibility_holds_at_50_m(backend, paper_world):
+    """From 48-60 m every column top is visible, and a 0.5 m box 1 m in front of one still hides it."""
+    world = paper_world("columns", backend)
+    c = world.site.center
+    cam_from_world = look_at(c + [-34.0, -40.0, 20.0 - c[2]], c)
+    tops = world.site.landmarks("column_tops")
+    eye = np.linalg.inv(cam_from_world)[:3, 3]
+    distances = np.linalg.norm(tops.xyz - eye, axis=1)
+    assert distances.min() > 45.0
+    result = world.render(cam_from_world, CAMERA, depth=True)
+    truth = world.landmark_truth("column_tops", cam_from_world, CAMERA, result)
+    assert truth["visible"].all()
+    k = int(np.argmax(distances))
+    toward = (eye - tops.xyz[k]) / distances[k]
+    occluder = np.eye(4)
+    occluder[:3, 3] = tops.xyz[k] + 1.0 * toward
+    body = world.add_body(half_extents=(0.25, 0.25, 0.25), world_from_body=occluder)
+    try:
+        hidden = world.landmark_truth(
+            "column_tops", cam_from_world, CAMERA, world.render(cam_from_world, CAMERA, depth=True)
+        )
+    finally:
+        world.remove_body(body)
+    assert not hidden["visible"][k]
+    assert hidden["visible"].sum() == 11
