@@ -103,7 +103,7 @@ def test_box_in_line_of_sight_hides_one_column_top(backend, paper_world):
 
 
 def test_visibility_holds_at_50_m(backend, paper_world):
-    """From 48-60 m every column top is visible, and a 0.5 m box 1 m in front of one still hides it."""
+    """From 48-60 m all column tops are visible; a 0.5 m box 1 m in front of one hides it."""
     world = paper_world("columns", backend)
     c = world.site.center
     cam_from_world = look_at(c + [-34.0, -40.0, 20.0 - c[2]], c)
