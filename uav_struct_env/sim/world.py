@@ -120,7 +120,7 @@ class SiteWorld:
                 raise
             warnings.warn(
                 f"EGL rendering is unavailable ({exc}); falling back to TinyRenderer, which is "
-                "about 5x slower at 1280x720. Pass renderer='tiny' to silence this warning.",
+                "2-5x slower at 1280x720. Pass renderer='tiny' to silence this warning.",
                 RuntimeWarning,
                 stacklevel=2,
             )
@@ -158,8 +158,21 @@ class SiteWorld:
 
     @property
     def client_id(self) -> int:
-        """This world's pybullet client id (pass it as ``physicsClientId``)."""
+        """This world's pybullet client id (pass it as ``physicsClientId``).
+
+        Call :meth:`activate` before calling pybullet yourself with it (see there).
+        """
         return self._client.client_id
+
+    def activate(self) -> None:
+        """Make this world's EGL context current before direct pybullet calls on its client.
+
+        The EGL plugin never re-binds its own context, so with several EGL worlds in a process,
+        a pybullet call that creates, changes or removes visual shapes must run with the right
+        context current. :class:`SiteWorld`'s own methods do this; a no-op for TinyRenderer.
+        """
+        self._check_open()
+        self._client.activate()
 
     @property
     def body_ids(self) -> dict[str, int]:
