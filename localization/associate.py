@@ -143,13 +143,11 @@ def assign(
         out[rows] = cols
         return out
     g2 = float(gate_px) ** 2
-    cost = np.where(d2 <= g2, d2, _BIG)
-    # dummy column per detection: "unassigned" at cost g2
-    dummy = np.full((n, n), _BIG)
-    np.fill_diagonal(dummy, g2)
-    rows, cols = linear_sum_assignment(np.hstack([cost, dummy]))
-    real = cols < m
-    real &= cost[rows, np.minimum(cols, m - 1)] < _BIG
+    # Total cost = sum of assigned d2 + g2 per unassigned detection = n g2 + sum (d2 - g2) over
+    # the pairs: so minimize sum min(d2 - g2, 0); pairs beyond the gate cost 0 and are dropped.
+    cost = np.minimum(d2 - g2, 0.0)
+    rows, cols = linear_sum_assignment(cost)
+    real = cost[rows, cols] < 0.0
     out[rows[real]] = cols[real]
     return out
 
@@ -202,22 +200,31 @@ def _shift_votes(det: NDArray, proj: NDArray, vote_px: float, k: int) -> list[tu
     if shifts.shape[0] == 0:
         return []
     cells = np.floor(shifts / vote_px).astype(np.int64)
-    base = 2**20
-    keys = (cells[:, 0] + base) * 2**21 + (cells[:, 1] + base)
-    ukeys, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
-    inverse = inverse.reshape(-1)
-    ucells = np.stack([ukeys // 2**21 - base, ukeys % 2**21 - base], axis=1)
-    votes = np.zeros(ukeys.size, dtype=np.int64)
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            nk = (ucells[:, 0] + di + base) * 2**21 + (ucells[:, 1] + dj + base)
-            pos = np.minimum(np.searchsorted(ukeys, nk), ukeys.size - 1)
-            votes += np.where(ukeys[pos] == nk, counts[pos], 0)
+    cells -= cells.min(axis=0) - 1  # one empty cell of padding on each side
+    shape = cells.max(axis=0) + 2
+    flat = cells[:, 0] * shape[1] + cells[:, 1]
+    counts = np.bincount(flat, minlength=int(shape[0] * shape[1])).reshape(shape)
+    box = np.zeros_like(counts)
+    box[1:-1, 1:-1] = sum(
+        counts[1 + di : shape[0] - 1 + di, 1 + dj : shape[1] - 1 + dj]
+        for di in (-1, 0, 1)
+        for dj in (-1, 0, 1)
+    )
+    votes = box.reshape(-1)
+    k = min(k, int(np.count_nonzero(counts)))
+    top = np.argpartition(-votes, k - 1)[:k] if k < votes.size else np.arange(votes.size)
+    top = top[np.argsort(-votes[top], kind="stable")]
     out = []
-    for c in np.argsort(-votes, kind="stable")[:k]:
-        mean = shifts[inverse == c].mean(axis=0)
+    for c in top:
+        in_cell = flat == c
+        if not in_cell.any():  # a neighbour-only peak: take the shifts around it
+            in_cell = (
+                np.abs(flat // shape[1] - c // shape[1]) + np.abs(flat % shape[1] - c % shape[1])
+                <= 2
+            )
+        mean = shifts[in_cell].mean(axis=0)
         near = np.sum((shifts - mean) ** 2, axis=1) <= vote_px**2
-        out.append((int(votes[c]), shifts[near].mean(axis=0)))
+        out.append((int(votes[c]), shifts[near].mean(axis=0) if near.any() else mean))
     return out
 
 
@@ -232,16 +239,18 @@ def _prior_hypotheses(
     offsets: tuple[float, ...],
     gate_px: float,
     k: int,
+    min_pairs: int = 1,
 ) -> list[tuple[tuple, NDArray]]:
     """Coarse assignments from perturbed priors, each shifted by its best-voted image shifts.
 
     The prior camera centre is moved by each of ``offsets`` (in units of the prior's position
-    sigmas; the perspective and scale change that a shift cannot model), the
-    landmarks re-projected, and the projection shifted by zero and by its ``k`` best-voted shifts
-    (the attitude error, which mostly shifts the image). Each shifted layout gives a gated
-    assignment (``gate_px``); its shift is re-centred on the matched pairs once and the layout
-    re-assigned. Returns ``[(rank key, assignment into det rows), ...]``, best first: more
-    matches, then smaller mean squared distance, then smaller perturbation.
+    sigmas; the perspective and scale change that a shift cannot model), the landmarks
+    re-projected, and the projection shifted by zero and by its ``k`` best-voted shifts (the
+    attitude error, which mostly shifts the image). Each shifted layout gives a gated assignment
+    (``gate_px``); its shift is re-centred on the matched pairs once and the layout re-assigned;
+    layouts with fewer than ``min_pairs`` pairs are dropped. Returns ``[(rank key, assignment
+    into det rows), ...]``, best first: more matches, then smaller mean squared distance, then
+    smaller perturbation.
     """
     world_from_cam = invert(prior)
     sp = np.asarray(sig.position_m, dtype=np.float64)
@@ -256,14 +265,15 @@ def _prior_hypotheses(
         size = float(np.sum(np.square(o)))
         shifts = [np.zeros(2)] + [sh for _, sh in _shift_votes(det, proj, gate_px, k)]
         for shift in shifts:
-            for _ in range(2):
+            for rnd in range(2):
                 local = assign(det, proj + shift, gate_px)
                 ok = local >= 0
-                if not ok.any():
+                if ok.sum() < min_pairs:
                     break
                 resid = det[ok] - (proj[local[ok]] + shift)
-                shift = shift + resid.mean(axis=0)
-            if not ok.any():
+                if rnd == 0:
+                    shift = shift + resid.mean(axis=0)
+            if ok.sum() < min_pairs:
                 continue
             a = np.full(n, -1, dtype=np.int64)
             a[ok] = idx[local[ok]]
@@ -454,6 +464,7 @@ def associate_robust(
             position_offsets,
             coarse_gate_px,
             shifts_per_layout,
+            need,
         )
         for _, local_a in layouts:
             a = np.full(n, -1, dtype=np.int64)
