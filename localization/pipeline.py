@@ -112,7 +112,7 @@ class Localizer:
         min_correspondences: fewer inliers fail (>= 3; the paper and the default use 4).
         gate_px: robust final inlier gate, px; default ``max(5 * pixel_sigma, 3)``.
         coarse_gate_px: robust first-assignment gate, px.
-        max_hypotheses: robust shift hypotheses.
+        max_hypotheses: robust mode: distinct coarse assignments refined by PnP + re-association.
         prior_sigmas: :class:`~localization.pnp.PriorSigmas` or a 2-tuple
             ``(position_m, (tilt_x_deg, tilt_y_deg, yaw_deg))``; default 3 m and 2, 2, 5 degrees.
         ransac: in ``paper`` mode, reject outliers with RANSAC before LM when >= 6 pairs.
