@@ -15,3 +15,15 @@ def env(*args, **config):
     from uav_struct_env.envs import env as _env
 
     return _env(*args, **config)
+
+
+def _register() -> None:
+    import gymnasium
+
+    if "uav_struct_env/UavStruct-v0" not in gymnasium.registry:
+        gymnasium.register(
+            id="uav_struct_env/UavStruct-v0", entry_point="uav_struct_env.envs.gym_adapter:make_single"
+        )
+
+
+_register()
