@@ -1,0 +1,72 @@
+"""The landmark dataset generator: format, labels inside the image, seeded determinism."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from uav_struct_env.datasets import LANDMARK_TYPES, DatasetConfig, generate, load_labels
+from uav_struct_env.datasets.__main__ import main as cli_main
+from uav_struct_env.errors import ConfigError
+
+
+@pytest.fixture(scope="module")
+def tiny_dataset(tmp_path_factory):
+    out = tmp_path_factory.mktemp("lm")
+    cli_main([str(out), "--layouts", "1", "--views", "2", "--seed", "7", "--scale", "0.25"])
+    return out
+
+
+def test_format_and_labels(tiny_dataset):
+    data = load_labels(tiny_dataset)
+    assert data["types"] == list(LANDMARK_TYPES)
+    assert data["image_size"] == [320, 180]
+    assert len(data["images"]) == 2
+    n = 0
+    for rec in data["images"]:
+        img = cv2.imread(str(tiny_dataset / rec["file"]))
+        assert img.shape == (180, 320, 3)
+        kps = np.array(rec["keypoints"], dtype=np.float64).reshape(-1, 4)
+        n += len(kps)
+        assert np.all((kps[:, 0] >= -0.5) & (kps[:, 0] < 319.5))
+        assert np.all((kps[:, 1] >= -0.5) & (kps[:, 1] < 179.5))
+        assert set(kps[:, 2].astype(int)) <= {0, 1, 2}
+        assert np.asarray(rec["K"]).shape == (3, 3)
+        assert np.asarray(rec["cam_from_world"]).shape == (4, 4)
+    assert n > 0  # the camera is aimed at the building
+
+
+def test_labels_match_projection(tiny_dataset):
+    """Keypoints are the projections of the site's landmarks with the saved K and pose."""
+    from localization.geometry import project
+    from uav_struct_env.site import random_site
+
+    data = load_labels(tiny_dataset)
+    rng = np.random.default_rng([7, 0])
+    stage = str(rng.choice(["slab", "columns"]))
+    site = random_site(rng, stage=stage, marker_size=[None, 0.5, 1.0][int(rng.integers(3))])
+    xyz = {i: p for name in LANDMARK_TYPES
+           for i, p in zip(site.landmarks(name).ids, site.landmarks(name).xyz, strict=True)}
+    for rec in data["images"]:
+        for u, v, _, i in rec["keypoints"]:
+            K, T = np.asarray(rec["K"]), np.asarray(rec["cam_from_world"])
+            uv, _ = project(K, T, xyz[int(i)][None])
+            assert np.allclose(uv[0], (u, v), atol=1e-6)
+
+
+def test_seeded(tmp_path, tiny_dataset):
+    cfg = DatasetConfig(n_layouts=1, views_per_layout=2, seed=7, scale=0.25)
+    path = generate(cfg, tmp_path, progress=False)
+    a = json.loads(path.read_text())["images"]
+    b = load_labels(tiny_dataset)["images"]
+    assert [r["keypoints"] for r in a] == [r["keypoints"] for r in b]
+
+
+def test_bad_config():
+    with pytest.raises(ConfigError, match="scale"):
+        DatasetConfig(scale=2.0)
+    with pytest.raises(ConfigError, match="n_layouts"):
+        DatasetConfig(n_layouts=0)

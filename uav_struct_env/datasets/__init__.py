@@ -1,0 +1,11 @@
+"""Datasets rendered from the simulator (``python -m uav_struct_env.datasets --help``)."""
+
+from uav_struct_env.datasets.landmarks import (
+    LANDMARK_TYPES,
+    DatasetConfig,
+    generate,
+    load_labels,
+    render_layout,
+)
+
+__all__ = ["LANDMARK_TYPES", "DatasetConfig", "generate", "load_labels", "render_layout"]

@@ -1,0 +1,267 @@
+"""Labelled landmark images rendered from the simulator, with domain randomization.
+
+Used to train and evaluate the learned landmark detector (:mod:`localization.learned`).
+Each *layout* is one random site (:func:`uav_struct_env.site.random_site`, both construction
+stages, with or without ArUco markers) with its own concrete/ground textures, a random texture
+resolution and 3-14 clutter boxes (stacks of building material and equipment-sized boxes on the
+ground, a few small stacks on the slab away from its edges). Each layout is seen from
+``views_per_layout`` random viewpoints: any azimuth, 10-40 m out from the slab edge, 8-30 m up,
+aimed at the building centre with up to +-4 m (horizontal) / +-2 m (vertical) of jitter, so the
+building is sometimes cut by the image border. Every view draws a new sun direction
+(elevation 25-85 deg, any azimuth) and TinyRenderer ambient/diffuse coefficients (the EGL
+backend only uses the direction: that limitation is pybullet's).
+
+Images are rendered at the paper's 1280 x 720 and downscaled by ``scale`` with
+``cv2.INTER_AREA`` -- exactly what the detector does at inference -- so training and inference
+images come from the same pipeline.
+
+**Format** (``out_dir``)::
+
+    images/000000.png ...   RGB (saved as PNG; W*scale x H*scale)
+    labels.json             {"format": "uav-struct-landmarks-v1",
+                             "types": ["column_tops", "slab_corners", "opening_corners"],
+                             "image_size": [W', H'], "source_size": [1280, 720], "scale": 0.5,
+                             "config": {...generator arguments...},
+                             "images": [{"file": "images/000000.png", "layout": 0,
+                                         "stage": "columns", "K": 3x3 (of the saved image),
+                                         "cam_from_world": 4x4,
+                                         "keypoints": [[u, v, type, id], ...]}, ...]}
+
+``keypoints`` are the *visible* landmarks (in frame and not occluded, from
+:meth:`SiteWorld.landmark_truth`) in the saved image's pixel coordinates (integer pixel centres,
+``u' + 0.5 = (u + 0.5) * scale``); ``type`` indexes ``types``; ``id`` is the site's landmark id.
+Everything is drawn from ``numpy.random.default_rng([seed, layout])``: one seed, one dataset.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from localization.geometry import look_at
+from uav_struct_env.errors import ConfigError
+from uav_struct_env.site import Site, random_site
+
+__all__ = ["LANDMARK_TYPES", "DatasetConfig", "generate", "load_labels", "render_layout"]
+
+#: Heatmap channel order of the learned detector.
+LANDMARK_TYPES = ("column_tops", "slab_corners", "opening_corners")
+FORMAT = "uav-struct-landmarks-v1"
+
+_MATERIAL_RGB = (
+    (0.55, 0.42, 0.28), (0.62, 0.60, 0.57), (0.35, 0.36, 0.38), (0.70, 0.68, 0.62),
+    (0.20, 0.35, 0.55), (0.45, 0.20, 0.15), (0.80, 0.78, 0.74),
+)
+_EQUIPMENT_RGB = ((0.90, 0.70, 0.10), (0.85, 0.45, 0.10), (0.25, 0.25, 0.27), (0.90, 0.90, 0.88))
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    """Generator settings (all lengths in metres)."""
+
+    n_layouts: int = 200
+    views_per_layout: int = 15
+    seed: int = 0
+    scale: float = 0.5
+    distance: tuple[float, float] = (10.0, 40.0)
+    height: tuple[float, float] = (8.0, 30.0)
+    renderer: str = "auto"
+    source_size: tuple[int, int] = (1280, 720)
+
+    def __post_init__(self) -> None:
+        for name in ("n_layouts", "views_per_layout", "seed"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < (0 if name == "seed" else 1):
+                raise ConfigError(f"DatasetConfig.{name} must be a positive int, got {v!r}")
+        if not (0 < self.scale <= 1):
+            raise ConfigError(f"DatasetConfig.scale must be in (0, 1], got {self.scale!r}")
+        for name in ("distance", "height"):
+            lo, hi = getattr(self, name)
+            if not 0 < lo <= hi:
+                raise ConfigError(
+                    f"DatasetConfig.{name} must be (low, high), 0 < low <= high, got {(lo, hi)!r}"
+                )
+
+    @property
+    def image_size(self) -> tuple[int, int]:
+        """Size ``(W', H')`` of the saved images."""
+        w, h = self.source_size
+        return round(w * self.scale), round(h * self.scale)
+
+
+def _yaw_pose(x: float, y: float, z: float, yaw: float) -> NDArray[np.float64]:
+    T = np.eye(4)
+    c, s = math.cos(yaw), math.sin(yaw)
+    T[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def _add_clutter(world, site: Site, rng: np.random.Generator) -> None:
+    """Stacks of material and equipment-sized boxes around (and a few on) the building."""
+    xmin, ymin, xmax, ymax = site.building.slab_bounds
+    cx, cy = (xmin + xmax) / 2, (ymin + ymax) / 2
+    reach = max(xmax - xmin, ymax - ymin) / 2
+    for _ in range(int(rng.integers(3, 15))):
+        ang = rng.uniform(0, 2 * math.pi)
+        r = reach + rng.uniform(1.5, 14.0)
+        x, y, yaw = cx + r * math.cos(ang), cy + r * math.sin(ang), rng.uniform(0, math.pi)
+        if rng.random() < 0.35:  # equipment: container, excavator body, site cabin
+            he = (rng.uniform(1.0, 3.5), rng.uniform(0.8, 1.5), rng.uniform(0.8, 1.6))
+            rgb = _EQUIPMENT_RGB[int(rng.integers(len(_EQUIPMENT_RGB)))]
+            world.add_body(he, (*rgb, 1.0), _yaw_pose(x, y, he[2], yaw))
+        else:  # a stack of 1-4 pallets / bundles
+            he = (rng.uniform(0.4, 1.5), rng.uniform(0.4, 1.2), rng.uniform(0.1, 0.4))
+            z = 0.0
+            for _ in range(int(rng.integers(1, 5))):
+                rgb = _MATERIAL_RGB[int(rng.integers(len(_MATERIAL_RGB)))]
+                shade = rng.uniform(0.8, 1.1)
+                world.add_body(he, (*np.clip(np.array(rgb) * shade, 0, 1), 1.0),
+                               _yaw_pose(x, y, z + he[2], yaw + rng.uniform(-0.2, 0.2)))
+                z += 2 * he[2]
+    # Small stacks on the slab, kept 1 m inside its edges (they must not sit on a landmark).
+    top = site.building.first_floor_z
+    for _ in range(int(rng.integers(0, 3))):
+        if xmax - xmin < 3 or ymax - ymin < 3:
+            break
+        x, y = rng.uniform(xmin + 1.2, xmax - 1.2), rng.uniform(ymin + 1.2, ymax - 1.2)
+        he = (rng.uniform(0.3, 0.7), rng.uniform(0.3, 0.7), rng.uniform(0.1, 0.4))
+        rgb = _MATERIAL_RGB[int(rng.integers(len(_MATERIAL_RGB)))]
+        world.add_body(he, (*rgb, 1.0), _yaw_pose(x, y, top + he[2], rng.uniform(0, math.pi)))
+
+
+def _random_light(rng: np.random.Generator) -> dict:
+    az, el = rng.uniform(0, 2 * math.pi), math.radians(rng.uniform(25, 85))
+    return {
+        "lightDirection": (math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)),
+        "lightAmbientCoeff": float(rng.uniform(0.35, 0.7)),
+        "lightDiffuseCoeff": float(rng.uniform(0.3, 0.6)),
+        "lightSpecularCoeff": 0.0,
+    }
+
+
+def _random_view(
+    site: Site, rng: np.random.Generator, config: DatasetConfig
+) -> NDArray[np.float64]:
+    xmin, ymin, xmax, ymax = site.building.slab_bounds
+    centre = np.asarray(site.center, dtype=np.float64)
+    half = math.hypot(xmax - xmin, ymax - ymin) / 2
+    az = rng.uniform(0, 2 * math.pi)
+    r = half + rng.uniform(*config.distance)
+    eye = np.array([centre[0] + r * math.cos(az), centre[1] + r * math.sin(az),
+                    rng.uniform(*config.height)])
+    target = centre + rng.uniform([-4, -4, -2], [4, 4, 2])
+    return look_at(eye, target)
+
+
+def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = None):
+    """Render the views of one layout: a list of ``(rgb (H', W', 3), record)``.
+
+    ``record`` is the layout's entry for ``labels.json`` without ``file``. If ``out_dir`` is
+    given nothing is returned in memory (images are written as ``layout_view.png`` there).
+    """
+    from uav_struct_env.sim.camera import Camera
+    from uav_struct_env.sim.world import SiteWorld
+
+    rng = np.random.default_rng([config.seed, layout])
+    stage = str(rng.choice(["slab", "columns"]))
+    marker_size = [None, 0.5, 1.0][int(rng.integers(3))]
+    site = random_site(rng, stage=stage, marker_size=marker_size)
+    texture_size = int(rng.choice([128, 256, 512]))
+    camera = Camera().scaled(*config.source_size)
+    out_w, out_h = config.image_size
+    sx, sy = out_w / camera.width, out_h / camera.height
+    K_out = camera.scaled(out_w, out_h).K
+    out = []
+    with SiteWorld(site, renderer=config.renderer, image_size=config.source_size,
+                   rng=rng.spawn(1)[0], texture_size=texture_size) as world:
+        _add_clutter(world, site, rng)
+        for view in range(config.views_per_layout):
+            cam_from_world = _random_view(site, rng, config)
+            world.light = _random_light(rng)
+            result = world.render(cam_from_world, camera, depth=True)
+            keypoints = []
+            for t, name in enumerate(LANDMARK_TYPES):
+                truth = world.landmark_truth(name, cam_from_world, camera, result)
+                for i, uv, vis in zip(truth["ids"], truth["uv"], truth["visible"], strict=True):
+                    if vis:
+                        u = (uv[0] + 0.5) * sx - 0.5
+                        v = (uv[1] + 0.5) * sy - 0.5
+                        keypoints.append([float(u), float(v), t, int(i)])
+            rgb = result.rgb
+            if (out_w, out_h) != (camera.width, camera.height):
+                rgb = cv2.resize(rgb, (out_w, out_h), interpolation=cv2.INTER_AREA)
+            record = {"layout": layout, "view": view, "stage": stage, "K": K_out.tolist(),
+                      "cam_from_world": cam_from_world.tolist(), "keypoints": keypoints}
+            out.append((rgb, record))
+    return out
+
+
+def _layout_job(args):
+    config, layout, out_dir = args
+    records = []
+    for rgb, record in render_layout(config, layout):
+        name = f"images/{layout:05d}_{record['view']:02d}.png"
+        cv2.imwrite(str(Path(out_dir) / name), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+        records.append({"file": name, **record})
+    return records
+
+
+def generate(config: DatasetConfig, out_dir: str | Path, workers: int = 1,
+             progress: bool = True) -> Path:
+    """Render the dataset of ``config`` into ``out_dir`` (see the module docstring).
+
+    Returns:
+        The path of ``labels.json``.
+    """
+    from tqdm import tqdm
+
+    out = Path(out_dir)
+    (out / "images").mkdir(parents=True, exist_ok=True)
+    jobs = [(config, k, str(out)) for k in range(config.n_layouts)]
+    records: list[dict] = []
+    bar = tqdm(total=config.n_layouts * config.views_per_layout, unit="img", disable=not progress)
+    if workers == 1:
+        results = map(_layout_job, jobs)
+        pool = None
+    else:
+        import multiprocessing as mp
+
+        # One EGL client per process: each worker renders its layouts one after another.
+        pool = mp.get_context("spawn").Pool(workers)
+        results = pool.imap(_layout_job, jobs)
+    try:
+        for recs in results:
+            records += recs
+            bar.update(len(recs))
+    finally:
+        bar.close()
+        if pool is not None:
+            pool.close()
+            pool.join()
+    labels = {
+        "format": FORMAT, "types": list(LANDMARK_TYPES), "image_size": list(config.image_size),
+        "source_size": list(config.source_size), "scale": config.scale,
+        "config": asdict(config), "images": records,
+    }
+    path = out / "labels.json"
+    path.write_text(json.dumps(labels))
+    return path
+
+
+def load_labels(path: str | Path) -> dict:
+    """Read a ``labels.json`` (or its directory) and check its format."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "labels.json"
+    data = json.loads(path.read_text())
+    if data.get("format") != FORMAT:
+        raise ValueError(f"{path} is not a {FORMAT} label file (format={data.get('format')!r})")
+    data["root"] = str(path.parent)
+    return data
