@@ -62,6 +62,9 @@ class Method:
     scene: Scene
     landmarks: str  # landmark set: a structural set, or "aruco"
     aruco_mode: str | None = None  # "average" (the paper's) or "joint"; None for structural
+    #: ArUco: the prior picks each marker's IPPE solution (True) or the lowest reprojection
+    #: error does (False: what a plain implementation does; it flips on small markers).
+    aruco_prior: bool = True
     paper: PaperFigures | None = None
 
     @property
@@ -86,6 +89,10 @@ METHODS: tuple[Method, ...] = (
            paper=PaperFigures(39, 40, 14.929, 35.958, 35.862, 93.235)),
     Method("aruco_1.0m", "ArUco, 1.0 m", _SLAB, "aruco", "average",
            paper=PaperFigures(38, 40, 0.658, 1.533, 0.698, 1.631)),
+    Method("aruco_0.5m_no_prior", "ArUco, 0.5 m, no prior tie-break", Scene("slab", 0.5), "aruco",
+           "average", aruco_prior=False),
+    Method("aruco_1.0m_no_prior", "ArUco, 1.0 m, no prior tie-break", _SLAB, "aruco", "average",
+           aruco_prior=False),
     Method("aruco_0.5m_joint", "ArUco, 0.5 m, joint PnP", Scene("slab", 0.5), "aruco", "joint"),
     Method("aruco_1.0m_joint", "ArUco, 1.0 m, joint PnP", _SLAB, "aruco", "joint"),
 )

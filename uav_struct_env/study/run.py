@@ -200,7 +200,7 @@ def _aruco(config, method, uav, viewpoint, image, K, gt, prior, truth, markers):
     loc = ArucoLocalizer(markers, K, mode=method.aruco_mode, pixel_sigma=max(config.pixel_sigma, 0.5))
     t0 = time.perf_counter()
     found, corners = loc.detect(image)
-    est = loc.localize_corners(found, corners, prior)
+    est = loc.localize_corners(found, corners, prior if method.aruco_prior else None)
     latency = time.perf_counter() - t0
     # "Association" of markers is decoding their ids: a marker counts as visible when all its
     # corners are, and a detection is correct when its id is one of the visible markers.
