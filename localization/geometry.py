@@ -42,10 +42,10 @@ def as_points(name: str, points: ArrayLike, dim: int) -> NDArray[np.float64]:
         ValueError: if the shape is not ``(N, dim)``.
     """
     arr = np.asarray(points)
-    if arr.dtype == object or not (
-        np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_
-    ):
-        raise TypeError(f"{name} must be a numeric array of shape (N, {dim}), got dtype {arr.dtype}")
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_):
+        raise TypeError(
+            f"{name} must be a numeric array of shape (N, {dim}), got dtype {arr.dtype}"
+        )
     if arr.ndim == 1 and arr.size == 0:
         arr = arr.reshape(0, dim)
     if arr.ndim != 2 or arr.shape[1] != dim:
@@ -94,9 +94,13 @@ def check_intrinsics(name: str, K: ArrayLike) -> NDArray[np.float64]:
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {arr.tolist()}")
     if arr[0, 0] <= 0 or arr[1, 1] <= 0:
-        raise ValueError(f"{name} focal lengths must be positive, got fx={arr[0, 0]}, fy={arr[1, 1]}")
+        raise ValueError(
+            f"{name} focal lengths must be positive, got fx={arr[0, 0]}, fy={arr[1, 1]}"
+        )
     if not np.allclose(arr[2], [0.0, 0.0, 1.0]) or arr[1, 0] != 0:
-        raise ValueError(f"{name} must be upper triangular with last row [0, 0, 1], got {arr.tolist()}")
+        raise ValueError(
+            f"{name} must be upper triangular with last row [0, 0, 1], got {arr.tolist()}"
+        )
     return arr
 
 
@@ -224,11 +228,7 @@ def so3_exp(rotvec: ArrayLike) -> NDArray[np.float64]:
     W = skew(w)
     if theta < 1e-8:
         return np.eye(3) + W + 0.5 * W @ W
-    return (
-        np.eye(3)
-        + (np.sin(theta) / theta) * W
-        + ((1.0 - np.cos(theta)) / theta**2) * W @ W
-    )
+    return np.eye(3) + (np.sin(theta) / theta) * W + ((1.0 - np.cos(theta)) / theta**2) * W @ W
 
 
 def so3_log(R: ArrayLike) -> NDArray[np.float64]:

@@ -22,7 +22,8 @@ def _register() -> None:
 
     if "uav_struct_env/UavStruct-v0" not in gymnasium.registry:
         gymnasium.register(
-            id="uav_struct_env/UavStruct-v0", entry_point="uav_struct_env.envs.gym_adapter:make_single"
+            id="uav_struct_env/UavStruct-v0",
+            entry_point="uav_struct_env.envs.gym_adapter:make_single",
         )
 
 

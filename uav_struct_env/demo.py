@@ -12,15 +12,23 @@ import cv2
 __all__ = ["main", "render_views"]
 
 
-def render_views(out: str | Path, *, stage: str = "columns", seed: int = 0, viewpoint: int = 0,
-                 renderer: str = "auto", image_size: tuple[int, int] = (1280, 720)) -> list[Path]:
+def render_views(
+    out: str | Path,
+    *,
+    stage: str = "columns",
+    seed: int = 0,
+    viewpoint: int = 0,
+    renderer: str = "auto",
+    image_size: tuple[int, int] = (1280, 720),
+) -> list[Path]:
     """Render every UAV's view at scripted ``viewpoint`` plus the ``rgb_array`` frame; return the paths."""
     import uav_struct_env
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    env = uav_struct_env.parallel_env(stage=stage, renderer=renderer, image_size=image_size,
-                                      render_mode="rgb_array")
+    env = uav_struct_env.parallel_env(
+        stage=stage, renderer=renderer, image_size=image_size, render_mode="rgb_array"
+    )
     try:
         obs, _ = env.reset(seed=seed, options={"viewpoint": viewpoint})
         paths = []
@@ -47,8 +55,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     stages = ("slab", "columns") if args.stage == "both" else (args.stage,)
     for stage in stages:
-        for path in render_views(args.out, stage=stage, seed=args.seed, viewpoint=args.viewpoint,
-                                 renderer=args.renderer):
+        for path in render_views(
+            args.out, stage=stage, seed=args.seed, viewpoint=args.viewpoint, renderer=args.renderer
+        ):
             print(path.resolve())
     return 0
 

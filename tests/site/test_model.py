@@ -90,12 +90,20 @@ def test_marker_pose_with_yaw_rotates_corners():
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        (dict(openings=(Opening("stair", (2.0, 5.5), (3.6, 2.6)),), column_section=(0.5, 0.5)),
-         r"opening 'stair' .* overlaps the column at \(0\.0, 4\.0\)"),
-        (dict(openings=(Opening("hole", (8.0, 5.5), (1.0, 1.0)),)), r"opening 'hole' .* outside the slab"),
+        (
+            dict(openings=(Opening("stair", (2.0, 5.5), (3.6, 2.6)),), column_section=(0.5, 0.5)),
+            r"opening 'stair' .* overlaps the column at \(0\.0, 4\.0\)",
+        ),
+        (
+            dict(openings=(Opening("hole", (8.0, 5.5), (1.0, 1.0)),)),
+            r"opening 'hole' .* outside the slab",
+        ),
         (dict(column_section=(4.5, 0.4)), r"columns overlap: spans_x\[0\] = 4\.0 m"),
         (dict(slab_thickness=-0.1), r"slab_thickness must be a positive finite length.*-0\.1"),
-        (dict(storey_heights=(3.5, 0.2)), r"storey_heights\[1\] = 0\.2 m must exceed slab_thickness"),
+        (
+            dict(storey_heights=(3.5, 0.2)),
+            r"storey_heights\[1\] = 0\.2 m must exceed slab_thickness",
+        ),
         (dict(slab_overhang=0.05), r"slab_overhang = 0\.05 m must cover"),
     ],
 )
@@ -106,7 +114,9 @@ def test_impossible_buildings_raise_naming_the_value(kwargs, match):
 
 
 def test_impossible_grid_and_opening_sizes_raise():
-    with pytest.raises(SiteGeometryError, match=r"spans_y\[1\] must be a positive finite length.*0"):
+    with pytest.raises(
+        SiteGeometryError, match=r"spans_y\[1\] must be a positive finite length.*0"
+    ):
         ColumnGrid((4.0,), (4.0, 0.0))
     with pytest.raises(SiteGeometryError, match=r"spans_x must be a non-empty"):
         ColumnGrid((), (4.0,))
@@ -121,7 +131,9 @@ def test_sites_with_bad_markers_or_stage_raise():
     m = ArucoMarker(id=1, side=1.0, center=(-4.0, 0.0, 0.01))
     with pytest.raises(SiteGeometryError, match=r"duplicate marker ids \[1\]"):
         Site(b, markers=(m, ArucoMarker(id=1, side=1.0, center=(-4.0, 6.0, 0.01))))
-    with pytest.raises(SiteGeometryError, match=r"marker 2 at \(4\.0, 4\.0\) lies under the building"):
+    with pytest.raises(
+        SiteGeometryError, match=r"marker 2 at \(4\.0, 4\.0\) lies under the building"
+    ):
         Site(b, markers=(ArucoMarker(id=2, side=1.0, center=(4.0, 4.0, 0.0)),))
     with pytest.raises(SiteGeometryError, match=r"markers 1 and 5 overlap"):
         Site(b, markers=(m, ArucoMarker(id=5, side=1.0, center=(-4.2, 0.5, 0.01))))
@@ -129,7 +141,9 @@ def test_sites_with_bad_markers_or_stage_raise():
         ArucoMarker(id=50, side=1.0, center=(0, 0, 0))
     with pytest.raises(SiteGeometryError, match=r"marker 0 side must be a positive.*0\.0"):
         ArucoMarker(id=0, side=0.0, center=(0, 0, 0))
-    with pytest.raises(SiteGeometryError, match=r"stage must be one of \('slab', 'columns'\), got 'roof'"):
+    with pytest.raises(
+        SiteGeometryError, match=r"stage must be one of \('slab', 'columns'\), got 'roof'"
+    ):
         Site(b, stage="roof")
     with pytest.raises(ValueError, match=r"landmark set must be one of .* got 'doors'"):
         paper_site().landmarks("doors")
@@ -142,7 +156,10 @@ def test_any_building_is_expressible():
         column_section=(0.5, 0.3),
         slab_thickness=0.3,
         slab_overhang=0.4,
-        openings=(Opening("stair", (8.5, 3.5), (2.0, 5.0)), Opening("shaft", (17.0, 3.5), (1.5, 1.5))),
+        openings=(
+            Opening("stair", (8.5, 3.5), (2.0, 5.0)),
+            Opening("shaft", (17.0, 3.5), (1.5, 1.5)),
+        ),
     )
     site = Site(b, stage="columns")
     assert len(site.landmarks("column_tops")) == 10
@@ -165,7 +182,10 @@ def test_random_sites_are_seeded_and_plausible():
 def test_make_site_resolves_names_and_errors():
     assert make_site("paper", stage="slab").stage == "slab"
     assert make_site(paper_site("slab"), stage="columns").stage == "columns"
-    with pytest.raises(ValueError, match=r"site must be a Site, 'random', a site file \(\*\.json\) or one of \['paper'\], got 'moon'"):
+    with pytest.raises(
+        ValueError,
+        match=r"site must be a Site, 'random', a site file \(\*\.json\) or one of \['paper'\], got 'moon'",
+    ):
         make_site("moon")
     with pytest.raises(ValueError, match=r"site='random' needs a numpy.random.Generator"):
         make_site("random")

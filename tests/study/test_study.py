@@ -10,8 +10,15 @@ from uav_struct_env.errors import ConfigError
 from uav_struct_env.study import METHODS, StudyConfig
 from uav_struct_env.study.study import main
 
-SCHEMA_KEYS = {"successful", "total", "translation_error_m", "rotation_error_deg",
-               "detection_rate", "association_f1", "latency_s"}
+SCHEMA_KEYS = {
+    "successful",
+    "total",
+    "translation_error_m",
+    "rotation_error_deg",
+    "detection_rate",
+    "association_f1",
+    "latency_s",
+}
 
 
 def _numbers(obj, path=""):
@@ -29,8 +36,18 @@ def _numbers(obj, path=""):
 def quick_study(tmp_path_factory):
     out = tmp_path_factory.mktemp("study")
     proc = subprocess.run(
-        [sys.executable, "-m", "uav_struct_env.study", "--quick", "--out", str(out), "--no-progress"],
-        capture_output=True, text=True, timeout=600,
+        [
+            sys.executable,
+            "-m",
+            "uav_struct_env.study",
+            "--quick",
+            "--out",
+            str(out),
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out, proc.stdout
@@ -70,19 +87,33 @@ def test_quick_study_csv_has_one_row_per_method_and_image(quick_study):
     with (out / "per_image.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == 8 * len(METHODS)
-    assert {"method", "uav", "viewpoint", "success", "translation_error_m", "n_detections",
-            "n_correct", "latency_s"} <= set(rows[0])
+    assert {
+        "method",
+        "uav",
+        "viewpoint",
+        "success",
+        "translation_error_m",
+        "n_detections",
+        "n_correct",
+        "latency_s",
+    } <= set(rows[0])
     assert {r["uav"] for r in rows} == {"0", "1", "2", "3"}
 
 
 def test_bad_study_options_are_rejected_with_the_value():
-    with pytest.raises(ConfigError, match=r"association must be one of \('paper', 'robust'\), got 'best'"):
+    with pytest.raises(
+        ConfigError, match=r"association must be one of \('paper', 'robust'\), got 'best'"
+    ):
         StudyConfig(association="best")
     with pytest.raises(ConfigError, match=r"detector='learned' is not available yet"):
         StudyConfig(detector="learned")
-    with pytest.raises(ConfigError, match=r"site must be 'paper', 'random' or an existing site file.*'mars.json'"):
+    with pytest.raises(
+        ConfigError, match=r"site must be 'paper', 'random' or an existing site file.*'mars.json'"
+    ):
         StudyConfig(site="mars.json")
-    with pytest.raises(ConfigError, match=r"methods must be a non-empty subset of .* got \['doors'\]"):
+    with pytest.raises(
+        ConfigError, match=r"methods must be a non-empty subset of .* got \['doors'\]"
+    ):
         StudyConfig(methods=("doors",))
 
 

@@ -37,7 +37,9 @@ class SingleUavEnv(gym.Env):
 
     def __init__(self, parallel: ParallelEnv, agent: str | None = None) -> None:
         if not isinstance(parallel, ParallelEnv):
-            raise TypeError(f"parallel must be a pettingzoo ParallelEnv, got {type(parallel).__name__}")
+            raise TypeError(
+                f"parallel must be a pettingzoo ParallelEnv, got {type(parallel).__name__}"
+            )
         agents = list(parallel.possible_agents)
         agent = agents[0] if agent is None else agent
         if agent not in agents:
@@ -61,8 +63,13 @@ class SingleUavEnv(gym.Env):
         actions = {a: self._hold[a] for a in self.parallel.agents if a != self.agent}
         actions[self.agent] = action
         obs, rewards, terms, truncs, infos = self.parallel.step(actions)
-        return (obs[self.agent], float(rewards[self.agent]), bool(terms[self.agent]),
-                bool(truncs[self.agent]), infos[self.agent])
+        return (
+            obs[self.agent],
+            float(rewards[self.agent]),
+            bool(terms[self.agent]),
+            bool(truncs[self.agent]),
+            infos[self.agent],
+        )
 
     def render(self):
         """The parallel env's frame (``render_mode="rgb_array"``)."""

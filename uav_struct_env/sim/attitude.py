@@ -40,7 +40,9 @@ def world_from_cam_from_attitude(position: ArrayLike, attitude: ArrayLike) -> ND
     return out
 
 
-def attitude_from_world_from_cam(world_from_cam: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def attitude_from_world_from_cam(
+    world_from_cam: ArrayLike,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Inverse of :func:`world_from_cam_from_attitude`: ``(position (3,), (roll, pitch, yaw) (3,))``.
 
     Yaw is in (-pi, pi], pitch in [-pi/2, pi/2]; at pitch = +-pi/2 (gimbal lock) roll is set to 0.

@@ -13,7 +13,13 @@ from uav_struct_env.site.model import (
     Site,
     Slab,
 )
-from uav_struct_env.site.presets import make_site, markers_around, paper_building, paper_site, random_site
+from uav_struct_env.site.presets import (
+    make_site,
+    markers_around,
+    paper_building,
+    paper_site,
+    random_site,
+)
 
 __all__ = [
     "LANDMARK_SETS",

@@ -37,7 +37,9 @@ def _build(cls, data: Any, where: str, **nested):
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(data) - names)
     if unknown:
-        raise SiteGeometryError(f"{where} has unknown keys {unknown}; expected some of {sorted(names)}")
+        raise SiteGeometryError(
+            f"{where} has unknown keys {unknown}; expected some of {sorted(names)}"
+        )
     kwargs = {}
     for key, value in data.items():
         if key in nested:
@@ -58,6 +60,7 @@ def site_from_dict(data: dict[str, Any]) -> Site:
     Raises:
         SiteGeometryError: on unknown keys, missing keys or impossible geometry.
     """
+
     def grid(v, where):
         return _build(ColumnGrid, v, where)
 

@@ -183,7 +183,9 @@ class ArucoMarker:
             )
         n = ARUCO_DICTIONARY_SIZES[self.dictionary]
         if not isinstance(self.id, (int, np.integer)) or not 0 <= self.id < n:
-            raise SiteGeometryError(f"marker id must be an int in [0, {n}) for {self.dictionary}, got {self.id!r}")
+            raise SiteGeometryError(
+                f"marker id must be an int in [0, {n}) for {self.dictionary}, got {self.id!r}"
+            )
         if self.quiet_zone < 0:
             raise SiteGeometryError(f"marker {self.id} quiet_zone must be >= 0, got {self.quiet_zone!r}")
         object.__setattr__(self, "center", tuple(float(c) for c in self.center))
@@ -199,7 +201,7 @@ class ArucoMarker:
 
     @property
     def corners_marker(self) -> NDArray[np.float64]:
-        """(4, 3) corners in the marker frame, OpenCV order: top-left, top-right, bottom-right, bottom-left."""
+        """(4, 3) corners in the marker frame, OpenCV order (TL, TR, BR, BL as printed)."""
         h = self.side / 2
         return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
 
@@ -247,14 +249,13 @@ class Building:
     def __post_init__(self) -> None:
         if len(self.storey_heights) < 2:
             raise SiteGeometryError(
-                f"storey_heights needs at least two storeys (ground and first floor), got {self.storey_heights!r}"
+                "storey_heights needs at least two storeys (ground and first floor), "
+                f"got {self.storey_heights!r}"
             )
         t = _positive("slab_thickness", self.slab_thickness)
         for k, h in enumerate(self.storey_heights):
             if _positive(f"storey_heights[{k}]", h) <= t:
-                raise SiteGeometryError(
-                    f"storey_heights[{k}] = {h} m must exceed slab_thickness = {t} m"
-                )
+                raise SiteGeometryError(f"storey_heights[{k}] = {h} m must exceed slab_thickness = {t} m")
         sx = _positive("column_section[0]", self.column_section[0])
         sy = _positive("column_section[1]", self.column_section[1])
         for axis, spans, sec in (("x", self.grid.spans_x, sx), ("y", self.grid.spans_y, sy)):
@@ -278,8 +279,12 @@ class Building:
                 )
             for x in self.grid.xs:
                 for y in self.grid.ys:
-                    if (oxmin < x + sx / 2 and oxmax > x - sx / 2
-                            and oymin < y + sy / 2 and oymax > y - sy / 2):
+                    if (
+                        oxmin < x + sx / 2
+                        and oxmax > x - sx / 2
+                        and oymin < y + sy / 2
+                        and oymax > y - sy / 2
+                    ):
                         raise SiteGeometryError(
                             f"opening {op.name!r} with bounds {op.bounds} overlaps the column at ({x}, {y})"
                         )
@@ -304,8 +309,15 @@ class Building:
         z1 = z0 + self.storey_heights[storey] - self.slab_thickness
         nx, _ = self.grid.shape
         return tuple(
-            Column(index=iy * nx + ix, storey=storey, x=float(x), y=float(y),
-                   section=self.column_section, z_bottom=z0, z_top=z1)
+            Column(
+                index=iy * nx + ix,
+                storey=storey,
+                x=float(x),
+                y=float(y),
+                section=self.column_section,
+                z_bottom=z0,
+                z_top=z1,
+            )
             for iy, y in enumerate(self.grid.ys)
             for ix, x in enumerate(self.grid.xs)
         )
@@ -341,12 +353,13 @@ class Site:
             x, y, _ = m.center
             if x + h > xmin and x - h < xmax and y + h > ymin and y - h < ymax:
                 raise SiteGeometryError(
-                    f"marker {m.id} at ({x}, {y}) lies under the building footprint {self.building.slab_bounds}"
+                    f"marker {m.id} at ({x}, {y}) lies under the building footprint "
+                    f"{self.building.slab_bounds}"
                 )
             if max(abs(x), abs(y)) + h > self.ground_size / 2 + max(xmax, ymax):
                 raise SiteGeometryError(f"marker {m.id} at ({x}, {y}) lies off the ground")
         for i, a in enumerate(self.markers):
-            for b in self.markers[i + 1:]:
+            for b in self.markers[i + 1 :]:
                 d = max(abs(a.center[0] - b.center[0]), abs(a.center[1] - b.center[1]))
                 if d < a.footprint_half_extent + b.footprint_half_extent:
                     raise SiteGeometryError(f"markers {a.id} and {b.id} overlap")
@@ -364,8 +377,15 @@ class Site:
     def slabs(self) -> tuple[Slab, ...]:
         """All cast slabs at this stage (the first-floor slab)."""
         b = self.building
-        return (Slab(level=1, bounds=b.slab_bounds, z_top=b.first_floor_z,
-                     thickness=b.slab_thickness, openings=b.openings),)
+        return (
+            Slab(
+                level=1,
+                bounds=b.slab_bounds,
+                z_top=b.first_floor_z,
+                thickness=b.slab_thickness,
+                openings=b.openings,
+            ),
+        )
 
     @property
     def exposed_columns(self) -> tuple[Column, ...]:
@@ -405,7 +425,13 @@ class Site:
             for slab in self.slabs:
                 for j, op in enumerate(slab.openings):
                     for k, (x, y) in enumerate(_rect_corners(op.bounds)):
-                        points.append((_ID_BASE[name] + 4 * j + k, (x, y, slab.z_top), f"{op.name} corner {k}"))
+                        points.append(
+                            (
+                                _ID_BASE[name] + 4 * j + k,
+                                (x, y, slab.z_top),
+                                f"{op.name} corner {k}",
+                            )
+                        )
         elif name == "column_tops":
             for col in self.exposed_columns:
                 points.append((_ID_BASE[name] + col.index, col.top_center, f"{col.name} top"))
@@ -430,4 +456,3 @@ class Site:
 def _rect_corners(bounds: Sequence[float]) -> list[tuple[float, float]]:
     xmin, ymin, xmax, ymax = bounds
     return [(xmin, ymin), (xmax, ymin), (xmax, ymax), (xmin, ymax)]
-

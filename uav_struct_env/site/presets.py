@@ -72,14 +72,18 @@ def paper_site(stage: str = "columns", marker_size: float | None = 1.0) -> Site:
 
 # Two per side, 3 m outside the slab edge (slab: x -0.3..8.3, y -0.3..11.3): S, N, W, E.
 _PAPER_MARKER_CENTRES = (
-    (2.0, -3.3), (6.0, -3.3), (2.0, 14.3), (6.0, 14.3),
-    (-3.3, 3.0), (-3.3, 8.0), (11.3, 3.0), (11.3, 8.0),
+    (2.0, -3.3),
+    (6.0, -3.3),
+    (2.0, 14.3),
+    (6.0, 14.3),
+    (-3.3, 3.0),
+    (-3.3, 8.0),
+    (11.3, 3.0),
+    (11.3, 8.0),
 )
 
 
-def random_site(
-    rng: np.random.Generator, stage: str | None = None, marker_size: float | None = 1.0
-) -> Site:
+def random_site(rng: np.random.Generator, stage: str | None = None, marker_size: float | None = 1.0) -> Site:
     """A random plausible site for domain randomization.
 
     Draws 2-4 x 2-5 columns, spans 3-6.5 m, storey heights 3-4 m, square column sections
@@ -113,8 +117,10 @@ def random_site(
     )
     if stage is None:
         stage = str(rng.choice(["slab", "columns"]))
-    markers = () if marker_size is None else markers_around(
-        building, marker_size, distance=float(rng.uniform(2.0, 4.0))
+    markers = (
+        ()
+        if marker_size is None
+        else markers_around(building, marker_size, distance=float(rng.uniform(2.0, 4.0)))
     )
     return Site(building, stage=stage, markers=markers, name="random")
 
@@ -128,8 +134,10 @@ def make_site(
     marker_size: float | None = 1.0,
     rng: np.random.Generator | None = None,
 ) -> Site:
-    """Resolve a site argument at ``stage``: a :class:`Site`, a preset name, ``"random"`` (needs
-    ``rng``) or the path of a site file (``*.json``, see :mod:`uav_struct_env.site.io`).
+    """Resolve a site argument at ``stage``.
+
+    ``site`` is a :class:`Site`, a preset name, ``"random"`` (needs ``rng``) or the path of a
+    site file (``*.json``, see :mod:`uav_struct_env.site.io`).
 
     For a :class:`Site` or a site file, ``marker_size`` resizes its markers (a site without
     markers gets two per side 3 m out); None removes them.
@@ -153,5 +161,7 @@ def make_site(
             raise ConfigError("site='random' needs a numpy.random.Generator (rng)")
         return random_site(rng, stage=stage, marker_size=marker_size)
     if site not in PRESETS:
-        raise ConfigError(f"site must be a Site, 'random', a site file (*.json) or one of {sorted(PRESETS)}, got {site!r}")
+        raise ConfigError(
+            f"site must be a Site, 'random', a site file (*.json) or one of {sorted(PRESETS)}, got {site!r}"
+        )
     return PRESETS[site](stage=stage, marker_size=marker_size)

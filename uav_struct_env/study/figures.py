@@ -15,7 +15,13 @@ from uav_struct_env.study.run import ImageResult, Overlay
 __all__ = ["draw_overlay", "plot_error_cdfs", "plot_fig2", "plot_viewpoint_map"]
 
 # BGR-free: images are RGB, so colours are RGB tuples.
-_GREEN, _RED, _YELLOW, _CYAN, _MAGENTA = (40, 220, 40), (235, 40, 40), (255, 220, 0), (0, 220, 255), (255, 0, 255)
+_GREEN, _RED, _YELLOW, _CYAN, _MAGENTA = (
+    (40, 220, 40),
+    (235, 40, 40),
+    (255, 220, 0),
+    (0, 220, 255),
+    (255, 0, 255),
+)
 
 
 def _pyplot():
@@ -28,8 +34,11 @@ def _pyplot():
 
 
 def draw_overlay(ov: Overlay) -> np.ndarray:
-    """The image with detections (circles), associations (lines to the prior projection of the
-    assigned landmark: green correct, red wrong) and final-pose reprojections (cyan crosses)."""
+    """Draw one image's detections, associations and final-pose reprojections.
+
+    Circles are detections, lines join each to the prior projection of its assigned landmark
+    (green correct, red wrong), cyan crosses are the final-pose reprojections.
+    """
     img = np.ascontiguousarray(ov.image.copy())
     h, w = img.shape[:2]
     s = max(1, round(w / 640))
@@ -46,7 +55,14 @@ def draw_overlay(ov: Overlay) -> np.ndarray:
     for i, uv in enumerate(ov.detections_uv):
         j = ov.assignment[i]
         if j >= 0 and inside(ov.model_uv_prior[j]):
-            cv2.line(img, pt(uv), pt(ov.model_uv_prior[j]), _GREEN if ov.correct[i] else _RED, s, cv2.LINE_AA)
+            cv2.line(
+                img,
+                pt(uv),
+                pt(ov.model_uv_prior[j]),
+                _GREEN if ov.correct[i] else _RED,
+                s,
+                cv2.LINE_AA,
+            )
         cv2.circle(img, pt(uv), 7 * s, _MAGENTA if j < 0 else _GREEN, s, cv2.LINE_AA)
     if ov.success:
         for uv in ov.model_uv_final:
@@ -66,16 +82,18 @@ def plot_fig2(overlays: Sequence[Overlay], path: Path) -> None:
     if not chosen:
         return
     fig, axes = plt.subplots(1, len(chosen), figsize=(6 * len(chosen), 3.9), squeeze=False)
-    for ax, ov in zip(axes[0], chosen):
+    for ax, ov in zip(axes[0], chosen, strict=True):
         ax.imshow(draw_overlay(ov))
         label = next(m.label for m in METHODS if m.key == ov.method)
         ax.set_title(f"{label} — UAV {ov.uav}, viewpoint {ov.viewpoint}", fontsize=10)
         ax.axis("off")
     fig.text(
-        0.5, 0.01,
+        0.5,
+        0.01,
         "circles: detections · yellow diamonds: BIM landmarks projected with the onboard prior · "
         "lines: association (green correct, red wrong) · cyan crosses: final-pose reprojection",
-        ha="center", fontsize=8,
+        ha="center",
+        fontsize=8,
     )
     fig.tight_layout(rect=(0, 0.04, 1, 1))
     fig.savefig(path, dpi=110)
@@ -94,8 +112,12 @@ def plot_error_cdfs(rows: Sequence[ImageResult], path: Path) -> None:
         for ax, attr in ((ax_t, "translation_error_m"), (ax_r, "rotation_error_deg")):
             v = np.sort([getattr(r, attr) for r in mine if r.success])
             if v.size:
-                ax.step(np.concatenate([[v[0] * 0.5], v]), np.arange(v.size + 1) / n, where="post",
-                        label=f"{m.label} ({v.size}/{n})")
+                ax.step(
+                    np.concatenate([[v[0] * 0.5], v]),
+                    np.arange(v.size + 1) / n,
+                    where="post",
+                    label=f"{m.label} ({v.size}/{n})",
+                )
     for ax, xlabel in ((ax_t, "translation error (m)"), (ax_r, "rotation error (°)")):
         ax.set_xscale("log")
         ax.set_xlabel(xlabel)

@@ -25,7 +25,7 @@ __all__ = [
     "StudyConfig",
 ]
 
-DETECTORS = ("projection",)
+DETECTORS = ("projection", "learned")
 ASSOCIATIONS = ("paper", "robust")
 NOISES = ("paper", "gnss_ins")
 
@@ -78,21 +78,60 @@ _COLUMNS = Scene("columns", 1.0)
 
 #: Every method the study evaluates, in table order. The paper's figures: Tables I and II.
 METHODS: tuple[Method, ...] = (
-    Method("slab_corners", "Slab corners", _SLAB, "slab_corners",
-           paper=PaperFigures(39, 40, 0.185, 0.363, 0.615, 1.142, 99.10, 100.00, 13.28)),
-    Method("opening_corners", "Opening corners", _SLAB, "opening_corners",
-           paper=PaperFigures(39, 40, 1.192, 2.607, 2.664, 6.220, 96.88, 100.00, 13.91)),
-    Method("column_tops", "Column tops", _COLUMNS, "column_tops",
-           paper=PaperFigures(40, 40, 0.163, 3.323, 0.470, 11.503, 95.65, 94.21, 27.13)),
+    Method(
+        "slab_corners",
+        "Slab corners",
+        _SLAB,
+        "slab_corners",
+        paper=PaperFigures(39, 40, 0.185, 0.363, 0.615, 1.142, 99.10, 100.00, 13.28),
+    ),
+    Method(
+        "opening_corners",
+        "Opening corners",
+        _SLAB,
+        "opening_corners",
+        paper=PaperFigures(39, 40, 1.192, 2.607, 2.664, 6.220, 96.88, 100.00, 13.91),
+    ),
+    Method(
+        "column_tops",
+        "Column tops",
+        _COLUMNS,
+        "column_tops",
+        paper=PaperFigures(40, 40, 0.163, 3.323, 0.470, 11.503, 95.65, 94.21, 27.13),
+    ),
     Method("all", "All structural (columns stage)", _COLUMNS, "all"),
-    Method("aruco_0.5m", "ArUco, 0.5 m", Scene("slab", 0.5), "aruco", "average",
-           paper=PaperFigures(39, 40, 14.929, 35.958, 35.862, 93.235)),
-    Method("aruco_1.0m", "ArUco, 1.0 m", _SLAB, "aruco", "average",
-           paper=PaperFigures(38, 40, 0.658, 1.533, 0.698, 1.631)),
-    Method("aruco_0.5m_no_prior", "ArUco, 0.5 m, no prior tie-break", Scene("slab", 0.5), "aruco",
-           "average", aruco_prior=False),
-    Method("aruco_1.0m_no_prior", "ArUco, 1.0 m, no prior tie-break", _SLAB, "aruco", "average",
-           aruco_prior=False),
+    Method(
+        "aruco_0.5m",
+        "ArUco, 0.5 m",
+        Scene("slab", 0.5),
+        "aruco",
+        "average",
+        paper=PaperFigures(39, 40, 14.929, 35.958, 35.862, 93.235),
+    ),
+    Method(
+        "aruco_1.0m",
+        "ArUco, 1.0 m",
+        _SLAB,
+        "aruco",
+        "average",
+        paper=PaperFigures(38, 40, 0.658, 1.533, 0.698, 1.631),
+    ),
+    Method(
+        "aruco_0.5m_no_prior",
+        "ArUco, 0.5 m, no prior tie-break",
+        Scene("slab", 0.5),
+        "aruco",
+        "average",
+        aruco_prior=False,
+    ),
+    Method(
+        "aruco_1.0m_no_prior",
+        "ArUco, 1.0 m, no prior tie-break",
+        _SLAB,
+        "aruco",
+        "average",
+        aruco_prior=False,
+    ),
     Method("aruco_0.5m_joint", "ArUco, 0.5 m, joint PnP", Scene("slab", 0.5), "aruco", "joint"),
     Method("aruco_1.0m_joint", "ArUco, 1.0 m, joint PnP", _SLAB, "aruco", "joint"),
 )
@@ -105,7 +144,9 @@ class StudyConfig:
     Attributes:
         seed: seeds textures, detector noise and the ``gnss_ins`` prior.
         detector: ``"projection"`` (ground-truth projections + pixel noise, as the paper isolated
-            association and pose from its vision model).
+            association and pose from its vision model) or ``"learned"`` (the trained keypoint
+            network of :mod:`localization.learned` on the rendered image; ``pixel_sigma``,
+            ``miss_rate`` and ``false_positives`` then only set the localizer's noise model).
         association: ``"robust"`` or ``"paper"`` (plain linear assignment).
         noise: onboard prior model, ``"paper"`` (3 m, 2/2/5 deg, alternating signs) or
             ``"gnss_ins"``.
@@ -141,18 +182,15 @@ class StudyConfig:
             if getattr(self, name) not in options:
                 raise ConfigError(f"{name} must be one of {options}, got {getattr(self, name)!r}")
 
-        if self.detector == "learned":
-            raise ConfigError(
-                "detector='learned' is not available yet (the learned landmark detector is a "
-                f"separate issue); use one of {DETECTORS}"
-            )
         choice("detector", DETECTORS)
         choice("association", ASSOCIATIONS)
         choice("noise", NOISES)
         if not isinstance(self.site, str) or not (
             self.site in ("paper", "random") or Path(self.site).is_file()
         ):
-            raise ConfigError(f"site must be 'paper', 'random' or an existing site file (*.json), got {self.site!r}")
+            raise ConfigError(
+                f"site must be 'paper', 'random' or an existing site file (*.json), got {self.site!r}"
+            )
         for name in ("seed",):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
@@ -161,8 +199,11 @@ class StudyConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(f"{name} must be a positive int, got {v!r}")
-        for name, lo, hi in (("pixel_sigma", 0.0, math.inf), ("miss_rate", 0.0, 1.0),
-                             ("false_positives", 0.0, math.inf)):
+        for name, lo, hi in (
+            ("pixel_sigma", 0.0, math.inf),
+            ("miss_rate", 0.0, 1.0),
+            ("false_positives", 0.0, math.inf),
+        ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi) or math.isnan(v):
                 raise ConfigError(f"{name} must be a number in [{lo}, {hi}], got {v!r}")
@@ -186,4 +227,3 @@ class StudyConfig:
             if m.scene not in out:
                 out.append(m.scene)
         return tuple(out)
-

@@ -52,8 +52,11 @@ def summarize(method: Method, rows: Sequence[ImageResult]) -> dict:
     detection_rate = _ratio(true_det, visible) if method.structural else _ratio(correct, true_det)
     precision = _ratio(correct, assigned)
     recall = _ratio(correct, true_det)
-    f1 = (2 * precision * recall / (precision + recall)
-          if precision is not None and recall is not None and precision + recall > 0 else None)
+    f1 = (
+        2 * precision * recall / (precision + recall)
+        if precision is not None and recall is not None and precision + recall > 0
+        else None
+    )
     t = [r.translation_error_m for r in ok]
     rot = [r.rotation_error_deg for r in ok]
     crb_t = _stats([r.crb_translation_m for r in rows])
@@ -80,12 +83,16 @@ def summarize(method: Method, rows: Sequence[ImageResult]) -> dict:
         "cramer_rao_rotation_deg": crb_r,
         "median_error_over_bound": (
             t_stats["median"] / crb_t["median"]
-            if t_stats["median"] is not None and crb_t["median"] not in (None, 0.0) else None
+            if t_stats["median"] is not None and crb_t["median"] not in (None, 0.0)
+            else None
         ),
         "recall_at": {
-            f"{tm}m_{rd}deg": sum(r.translation_error_m <= tm and r.rotation_error_deg <= rd for r in ok) / len(rows)
+            f"{tm}m_{rd}deg": sum(r.translation_error_m <= tm and r.rotation_error_deg <= rd for r in ok)
+            / len(rows)
             for tm, rd in RECALL_THRESHOLDS
-        } if rows else {},
+        }
+        if rows
+        else {},
         "prior_translation_error_m": _stats([r.prior_translation_error_m for r in rows]),
         "prior_rotation_error_deg": _stats([r.prior_rotation_error_deg for r in rows]),
         "failures": failures,

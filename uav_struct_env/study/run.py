@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from localization import Localizer, ProjectionDetector, cramer_rao_bound
+from localization.learned import LearnedDetector
 from localization.aruco import ArucoLocalizer
 from localization.geometry import camera_center, invert, project
 from localization.metrics import pose_errors
@@ -171,12 +172,28 @@ def _row(method, uav, viewpoint, est, gt, prior, truth, K, pixel_sigma, **counts
     )
 
 
-def _structural(config, method, uav, viewpoint, image, K, gt, prior, truth, model_xyz):
-    w, h = config.image_size
-    detector = ProjectionDetector(
+_LEARNED: dict[tuple[str, float], LearnedDetector] = {}
+
+
+def _detector(config, method, uav, viewpoint):
+    if config.detector == "learned":
+        # One network per process and landmark set; the model runs on the image downscaled to
+        # 640 px wide, as trained. Its true_ids come from matching to the visible ground truth
+        # within 3 px: scoring only (see localization.learned).
+        scale = min(1.0, 640.0 / config.image_size[0])
+        key = (method.landmarks, scale)
+        if key not in _LEARNED:
+            _LEARNED[key] = LearnedDetector(method.landmarks, scale=scale)
+        return _LEARNED[key]
+    return ProjectionDetector(
         method.landmarks, pixel_sigma=config.pixel_sigma, miss_rate=config.miss_rate,
         false_positives=config.false_positives, rng=_rng(config, method, uav, viewpoint),
     )
+
+
+def _structural(config, method, uav, viewpoint, image, K, gt, prior, truth, model_xyz):
+    w, h = config.image_size
+    detector = _detector(config, method, uav, viewpoint)
     loc = Localizer(model_xyz, K, association=config.association,
                     pixel_sigma=max(config.pixel_sigma, 0.5), image_size=(w, h))
     context = {"landmarks": {method.landmarks: truth}, "image_size": (w, h)}

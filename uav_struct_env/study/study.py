@@ -37,8 +37,13 @@ def run_study(config: StudyConfig, out: str | Path, *, progress: bool = True, fi
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    bar = tqdm(total=len(config.scenes) * config.n_viewpoints, unit="viewpoint",
-               desc="study", disable=not progress, file=sys.stderr)
+    bar = tqdm(
+        total=len(config.scenes) * config.n_viewpoints,
+        unit="viewpoint",
+        desc="study",
+        disable=not progress,
+        file=sys.stderr,
+    )
 
     def tick(done: int, total: int) -> None:
         bar.update(done - bar.n)
@@ -56,8 +61,7 @@ def run_study(config: StudyConfig, out: str | Path, *, progress: bool = True, fi
     if figures:
         plot_fig2(overlays, out / "fig2_associations.png")
         plot_error_cdfs(rows, out / "error_cdf.png")
-        site = make_site(config.site, stage="slab", marker_size=1.0,
-                         rng=np.random.default_rng(config.seed))
+        site = make_site(config.site, stage="slab", marker_size=1.0, rng=np.random.default_rng(config.seed))
         structural = [m.key for m in config.selected_methods if m.structural]
         if structural:
             plot_viewpoint_map(site, rows, structural[0], out / "viewpoint_map.png")
@@ -74,15 +78,20 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--detector", default="projection", help=f"landmark detector: {', '.join(DETECTORS)}")
     p.add_argument("--association", default="robust", choices=ASSOCIATIONS)
     p.add_argument("--noise", default="paper", choices=NOISES, help="onboard prior model")
-    p.add_argument("--quick", action="store_true",
-                   help=f"{QUICK_VIEWPOINTS} viewpoints per UAV instead of 10 (for tests)")
-    p.add_argument("--site", default="paper",
-                   help="site: paper, random (drawn from --seed) or a site file (*.json)")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"{QUICK_VIEWPOINTS} viewpoints per UAV instead of 10 (for tests)",
+    )
+    p.add_argument(
+        "--site",
+        default="paper",
+        help="site: paper, random (drawn from --seed) or a site file (*.json)",
+    )
     p.add_argument("--workers", type=int, default=1, help="parallel processes (default 1)")
     p.add_argument("--pixel-sigma", type=float, default=1.0, help="projection detector noise, px")
     p.add_argument("--miss-rate", type=float, default=0.0, help="projection detector miss rate")
-    p.add_argument("--false-positives", type=float, default=0.0,
-                   help="mean false detections per image")
+    p.add_argument("--false-positives", type=float, default=0.0, help="mean false detections per image")
     p.add_argument("--renderer", default="auto", choices=("auto", "tiny", "egl"))
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -94,22 +103,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
         config = StudyConfig(
-            seed=args.seed, detector=args.detector, association=args.association,
-            noise=args.noise, site=args.site,
+            seed=args.seed,
+            detector=args.detector,
+            association=args.association,
+            noise=args.noise,
+            site=args.site,
             n_viewpoints=QUICK_VIEWPOINTS if args.quick else 10,
-            pixel_sigma=args.pixel_sigma, miss_rate=args.miss_rate,
-            false_positives=args.false_positives, renderer=args.renderer, workers=args.workers,
+            pixel_sigma=args.pixel_sigma,
+            miss_rate=args.miss_rate,
+            false_positives=args.false_positives,
+            renderer=args.renderer,
+            workers=args.workers,
         )
     except ValueError as err:
         print(f"uav-struct study: error: {err}", file=sys.stderr)
         return 2
     results = run_study(config, args.out, progress=not args.no_progress, figures=not args.no_figures)
     out = Path(args.out)
-    print(f"\nTable II — camera-pose accuracy ({config.association} association, {config.noise} prior, "
-          f"{config.detector} detector at {config.pixel_sigma} px, seed {config.seed}):\n")
+    print(
+        f"\nTable II — camera-pose accuracy ({config.association} association, {config.noise} prior, "
+        f"{config.detector} detector at {config.pixel_sigma} px, seed {config.seed}):\n"
+    )
     print((out / "table2.md").read_text())
     print("Table I — detection and association:\n")
     print((out / "table1.md").read_text())
-    print(f"Wrote {out.resolve()}/ (results.json, table1.md, table2.md, per_image.csv, figures) "
-          f"in {results['config']['elapsed_s']} s")
+    print(
+        f"Wrote {out.resolve()}/ (results.json, table1.md, table2.md, per_image.csv, figures) "
+        f"in {results['config']['elapsed_s']} s"
+    )
     return 0
