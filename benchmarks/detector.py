@@ -1,0 +1,98 @@
+"""Benchmark the learned landmark detector on held-out renders.
+
+Renders ``--layouts`` random sites x ``--views`` viewpoints at 1280 x 720 with the dataset
+generator's domain randomization, from a dataset seed never used for training or validation
+(the committed model: training seed 0, validation seed 1; default here: 2), runs
+:class:`localization.learned.LearnedDetector` on every full-resolution image and prints, per
+landmark type, precision and recall at 3 px, the median pixel error of true positives, and the
+detection latency per 1280 x 720 image on one core (``cv2.setNumThreads(1)``).
+
+    python benchmarks/detector.py --seed 2 --layouts 20 --views 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+# benchmarks/localization.py would shadow the localization package: keep this folder off sys.path.
+_HERE = str(Path(__file__).resolve().parent)
+sys.path[:] = [p for p in sys.path if str(Path(p or ".").resolve()) != _HERE]
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+from localization.learned import LANDMARK_TYPES, LearnedDetector, match_detections  # noqa: E402
+from uav_struct_env.datasets import DatasetConfig, render_layout  # noqa: E402
+
+
+def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0,
+         threshold: float | None = None, model: str | None = None, threads: int = 1,
+         json_out: str | None = None) -> dict:
+    cv2.setNumThreads(threads)
+    kwargs = {} if threshold is None else {"score_threshold": threshold}
+    det = LearnedDetector("all", model=model, **kwargs)
+    config = DatasetConfig(n_layouts=layouts, views_per_layout=views, seed=seed, scale=1.0)
+    counts = {t: {"tp": 0, "fp": 0, "fn": 0, "err": []} for t in LANDMARK_TYPES}
+    latencies = []
+    n_images = 0
+    det.detect_all(np.zeros((720, 1280, 3), np.uint8))  # warm-up
+    for layout in range(layouts):
+        for rgb, rec in render_layout(config, layout):
+            t0 = time.perf_counter()
+            uv, _, kinds = det.detect_all(rgb)
+            latencies.append(time.perf_counter() - t0)
+            n_images += 1
+            kps = np.array(rec["keypoints"], np.float64).reshape(-1, 4)
+            for t, name in enumerate(LANDMARK_TYPES):
+                gt = kps[kps[:, 2] == t, :2]
+                m, d = match_detections(uv[kinds == t], gt, match_px)
+                c = counts[name]
+                c["tp"] += int((m >= 0).sum())
+                c["fp"] += int((m < 0).sum())
+                c["fn"] += len(gt) - int((m >= 0).sum())
+                c["err"] += d[m >= 0].tolist()
+    lat = np.array(latencies) * 1e3
+    report = {"seed": seed, "layouts": layouts, "views": views, "images": n_images,
+              "match_px": match_px, "threads": threads, "score_threshold": det.score_threshold,
+              "latency_ms": {"median": float(np.median(lat)), "p90": float(np.percentile(lat, 90)),
+                             "mean": float(lat.mean())},
+              "types": {}}
+    print(f"held-out renders: dataset seed {seed}, {layouts} layouts x {views} views = "
+          f"{n_images} images at 1280x720; match radius {match_px} px")
+    print(f"{'landmark type':<16} {'GT':>5} {'det':>5} {'precision':>9} {'recall':>7} "
+          f"{'median err px':>13}")
+    tot = {"tp": 0, "fp": 0, "fn": 0, "err": []}
+    for c in counts.values():
+        for k in tot:
+            tot[k] += c[k]
+    for name, c in [*counts.items(), ("all", tot)]:
+        p = c["tp"] / max(c["tp"] + c["fp"], 1)
+        r = c["tp"] / max(c["tp"] + c["fn"], 1)
+        e = float(np.median(c["err"])) if c["err"] else float("nan")
+        report["types"][name] = {"gt": c["tp"] + c["fn"], "detections": c["tp"] + c["fp"],
+                                 "precision": p, "recall": r, "median_error_px": e}
+        print(f"{name:<16} {c['tp'] + c['fn']:>5} {c['tp'] + c['fp']:>5} {100 * p:>8.1f}% "
+              f"{100 * r:>6.1f}% {e:>13.2f}")
+    print(f"latency per 1280x720 image, {threads} thread(s): median {np.median(lat):.1f} ms, "
+          f"p90 {np.percentile(lat, 90):.1f} ms (resize + network + decoding)")
+    if json_out:
+        Path(json_out).write_text(json.dumps(report, indent=2))
+    return report
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seed", type=int, default=2, help="held-out dataset seed (not 0 or 1)")
+    ap.add_argument("--layouts", type=int, default=20)
+    ap.add_argument("--views", type=int, default=5)
+    ap.add_argument("--match-px", type=float, default=3.0)
+    ap.add_argument("--threshold", type=float, default=None)
+    ap.add_argument("--model", default=None)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--json", dest="json_out", default=None)
+    a = ap.parse_args()
+    main(a.seed, a.layouts, a.views, a.match_px, a.threshold, a.model, a.threads, a.json_out)

@@ -1,0 +1,300 @@
+"""Stage 1, detection with a learned network: the real-time structural-landmark detector.
+
+:class:`LearnedDetector` runs a small fully-convolutional keypoint network (trained on simulator
+renders by :mod:`uav_struct_env.train_detector`; weights and their figures in
+``localization/models/``) with OpenCV's DNN module -- no PyTorch at inference -- and decodes its
+output into anonymous sub-pixel detections with scores, following the :class:`Detector` protocol
+of :mod:`localization.detect`, so the localizer takes it in place of the projection detector.
+
+Pipeline for an ``(H, W, 3)`` uint8 RGB image:
+
+1. downscale by ``scale`` (default 0.5: 1280 x 720 -> 640 x 360) with ``cv2.INTER_AREA`` and pad
+   (edge-replicate, bottom/right) to multiples of 16;
+2. the network returns, at stride 4, one heatmap per landmark type (:data:`LANDMARK_TYPES`,
+   sigmoid scores) and two sub-cell offset channels;
+3. :func:`decode`: local maxima of each requested heatmap (3 x 3 max filter) above
+   ``score_threshold``, refined to sub-pixel with the regressed offsets (or, for a heatmap-only
+   output, a per-axis parabola through the log-scores), then non-maximum suppression by distance
+   (``nms_px``) per type;
+4. pixel coordinates mapped back to the full image (``u + 0.5 = (u' + 0.5) / scale``).
+
+**Ground truth is used for scoring only.** When the context carries the ground truth of the
+requested landmark set (as the environment and the study provide), :meth:`LearnedDetector.detect`
+fills ``Detections.true_ids`` by matching detections one-to-one to the *visible* ground-truth
+projections within ``match_px`` (3 px) -- a detection farther than that from every visible
+landmark is a false positive (-1). This is bookkeeping for detection rate / association scores;
+``uv`` and ``scores`` never depend on the context, and the localizer never reads ``true_ids``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import linear_sum_assignment
+
+from localization.detect import Detections
+from localization.geometry import as_points
+
+__all__ = [
+    "DEFAULT_MODEL",
+    "LANDMARK_TYPES",
+    "LearnedDetector",
+    "decode",
+    "match_detections",
+    "subpixel_parabola",
+]
+
+#: Heatmap channel order of the network.
+LANDMARK_TYPES = ("column_tops", "slab_corners", "opening_corners")
+#: The committed model (see ``localization/models/MODEL_CARD.md``).
+DEFAULT_MODEL = Path(__file__).with_name("models") / "landmarks_v1.onnx"
+STRIDE = 4
+_PAD = 16
+
+
+def subpixel_parabola(heat: NDArray, rows: NDArray, cols: NDArray) -> NDArray[np.float64]:
+    """Sub-cell offsets ``(N, 2)`` (du, dv in cells, within +-0.5) of peaks of ``heat``.
+
+    Fits a parabola through the log-scores of each peak and its two neighbours per axis (exact
+    for a sampled Gaussian); peaks on the border get 0 along that axis.
+    """
+    h, w = heat.shape
+    logh = np.log(np.maximum(heat.astype(np.float64), 1e-12))
+    out = np.zeros((len(rows), 2))
+    for k, (r, c) in enumerate(zip(rows, cols, strict=True)):
+        for axis in (0, 1):  # axis 0 varies the column (u), axis 1 the row (v)
+            if axis == 0:
+                if not 0 < c < w - 1:
+                    continue
+                left, mid, right = logh[r, c - 1], logh[r, c], logh[r, c + 1]
+            else:
+                if not 0 < r < h - 1:
+                    continue
+                left, mid, right = logh[r - 1, c], logh[r, c], logh[r + 1, c]
+            den = left - 2 * mid + right
+            if den < -1e-12:
+                out[k, axis] = np.clip(0.5 * (left - right) / den, -0.5, 0.5)
+    return out
+
+
+def decode(
+    output: ArrayLike,
+    types: Sequence[int] = (0, 1, 2),
+    image_size: tuple[int, int] | None = None,
+    score_threshold: float = 0.3,
+    nms_px: float = 4.0,
+    max_per_type: int = 64,
+    use_offsets: bool = True,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """Detections from one network output.
+
+    Args:
+        output: ``(C, h, w)`` array: ``C - 2`` sigmoid heatmaps then 2 offset channels (du, dv,
+            in cells), or ``C`` heatmaps only with ``use_offsets=False``.
+        types: heatmap channels to decode.
+        image_size: ``(W, H)`` of the network input before padding; detections outside it are
+            dropped (None: keep all).
+        score_threshold: minimum heatmap score of a peak.
+        nms_px: detections of one type closer than this (input pixels) keep only the best.
+        max_per_type: at most this many detections per type, best first.
+        use_offsets: refine with the offset channels; False uses :func:`subpixel_parabola`.
+
+    Returns:
+        ``uv (N, 2)`` in network-input pixels, ``scores (N,)``, ``types (N,)``; sorted by score.
+    """
+    out = np.asarray(output, dtype=np.float32)
+    if out.ndim == 4 and out.shape[0] == 1:
+        out = out[0]
+    if out.ndim != 3:
+        raise ValueError(f"output must have shape (C, h, w), got {out.shape}")
+    n_heat = out.shape[0] - 2 if use_offsets else out.shape[0]
+    kernel = np.ones((3, 3), np.uint8)
+    all_uv, all_s, all_t = [], [], []
+    for t in types:
+        if not 0 <= int(t) < n_heat:
+            raise ValueError(f"type channel {t} out of range [0, {n_heat})")
+        heat = out[int(t)]
+        peaks = (heat >= cv2.dilate(heat, kernel)) & (heat >= score_threshold)
+        rows, cols = np.nonzero(peaks)
+        scores = heat[rows, cols].astype(np.float64)
+        order = np.argsort(-scores, kind="stable")[: 4 * max_per_type]
+        rows, cols, scores = rows[order], cols[order], scores[order]
+        if use_offsets:
+            off = np.stack([out[n_heat, rows, cols], out[n_heat + 1, rows, cols]], axis=1)
+        else:
+            off = subpixel_parabola(heat, rows, cols)
+        cells = np.stack([cols, rows], axis=1) + off.astype(np.float64)
+        uv = (cells + 0.5) * STRIDE - 0.5
+        if image_size is not None:
+            w, h = image_size
+            inside = ((uv[:, 0] >= -0.5) & (uv[:, 0] < w - 0.5)
+                      & (uv[:, 1] >= -0.5) & (uv[:, 1] < h - 0.5))
+            uv, scores = uv[inside], scores[inside]
+        keep: list[int] = []
+        for i in range(len(uv)):
+            if len(keep) >= max_per_type:
+                break
+            if keep and np.min(np.hypot(*(uv[keep] - uv[i]).T)) < nms_px:
+                continue
+            keep.append(i)
+        all_uv.append(uv[keep])
+        all_s.append(scores[keep])
+        all_t.append(np.full(len(keep), int(t), dtype=np.int64))
+    uv = np.concatenate(all_uv).reshape(-1, 2) if all_uv else np.zeros((0, 2))
+    scores = np.concatenate(all_s) if all_s else np.zeros(0)
+    kinds = np.concatenate(all_t) if all_t else np.zeros(0, np.int64)
+    order = np.argsort(-scores, kind="stable")
+    return uv[order], scores[order], kinds[order]
+
+
+def match_detections(
+    uv: ArrayLike, truth_uv: ArrayLike, max_px: float = 3.0
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """One-to-one matching of detections to ground-truth points within ``max_px``.
+
+    Returns:
+        ``match (N,)``: index into ``truth_uv`` or -1, and ``dist (N,)``: the pixel distance to
+        the matched point (NaN when unmatched). Minimizes the total distance (Hungarian).
+    """
+    uv = as_points("uv", uv, 2)
+    gt = as_points("truth_uv", truth_uv, 2)
+    match = np.full(len(uv), -1, dtype=np.int64)
+    dist = np.full(len(uv), np.nan)
+    if len(uv) == 0 or len(gt) == 0:
+        return match, dist
+    d = np.hypot(uv[:, None, 0] - gt[None, :, 0], uv[:, None, 1] - gt[None, :, 1])
+    cost = np.where(d <= max_px, d, 1e6)
+    rows, cols = linear_sum_assignment(cost)
+    ok = d[rows, cols] <= max_px
+    match[rows[ok]] = cols[ok]
+    dist[rows[ok]] = d[rows[ok], cols[ok]]
+    return match, dist
+
+
+class LearnedDetector:
+    """The learned structural-landmark detector (see the module docstring).
+
+    Args:
+        landmarks: which types to return: a name of :data:`LANDMARK_TYPES`, ``"all"`` (the three
+            together), or a sequence of names. It is also the set looked up in
+            ``context["landmarks"]`` for the ground-truth bookkeeping (``true_ids``).
+        model: path of the ONNX model (default :data:`DEFAULT_MODEL`).
+        score_threshold: minimum heatmap score of a detection.
+        nms_px: detections of one type closer than this (full-resolution px) keep only the best.
+        scale: downscale factor applied before the network (the model is trained at 0.5).
+        match_px: radius of the ground-truth matching used only to fill ``true_ids``.
+        max_per_type: cap on the detections per type.
+
+    Raises:
+        ValueError: for an unknown landmark type or bad numbers; FileNotFoundError for a
+            missing model file.
+    """
+
+    def __init__(
+        self,
+        landmarks: str | Sequence[str] = "column_tops",
+        model: str | Path | None = None,
+        score_threshold: float = 0.3,
+        nms_px: float = 8.0,
+        scale: float = 0.5,
+        match_px: float = 3.0,
+        max_per_type: int = 64,
+    ) -> None:
+        if isinstance(landmarks, str):
+            names = LANDMARK_TYPES if landmarks == "all" else (landmarks,)
+        else:
+            names = tuple(landmarks)
+        unknown = [n for n in names if n not in LANDMARK_TYPES]
+        if unknown or not names:
+            raise ValueError(
+                f"landmarks must be one of {LANDMARK_TYPES}, 'all' or a sequence of them, "
+                f"got {landmarks!r}"
+            )
+        for name, value, lo, hi in (("score_threshold", score_threshold, 0.0, 1.0),
+                                    ("scale", scale, 1e-3, 1.0)):
+            if not isinstance(value, (int, float)) or not lo < value <= hi:
+                raise ValueError(f"{name} must be a number in ({lo}, {hi}], got {value!r}")
+        for name, value in (("nms_px", nms_px), ("match_px", match_px)):
+            if not isinstance(value, (int, float)) or not value > 0:
+                raise ValueError(f"{name} must be a positive number of pixels, got {value!r}")
+        path = Path(DEFAULT_MODEL if model is None else model)
+        if not path.is_file():
+            raise FileNotFoundError(f"learned detector model not found: {path}")
+        self.landmarks = landmarks if isinstance(landmarks, str) else tuple(landmarks)
+        self.types = tuple(LANDMARK_TYPES.index(n) for n in names)
+        self.model_path = path
+        self.score_threshold = float(score_threshold)
+        self.nms_px = float(nms_px)
+        self.scale = float(scale)
+        self.match_px = float(match_px)
+        self.max_per_type = int(max_per_type)
+        self._net = cv2.dnn.readNetFromONNX(str(path))
+
+    # --------------------------------------------------------------------------------- core
+    def infer(self, image: ArrayLike) -> tuple[NDArray[np.float32], tuple[float, float]]:
+        """Network output ``(C, h, w)`` for an RGB image, and the (sx, sy) it was scaled by."""
+        img = np.asarray(image)
+        if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
+            raise ValueError(
+                f"image must be an (H, W, 3) uint8 RGB array, got shape {img.shape}, "
+                f"dtype {img.dtype}"
+            )
+        h, w = img.shape[:2]
+        sw, sh = max(1, round(w * self.scale)), max(1, round(h * self.scale))
+        small = (img if (sw, sh) == (w, h)
+                 else cv2.resize(img, (sw, sh), interpolation=cv2.INTER_AREA))
+        ph, pw = -(-sh // _PAD) * _PAD, -(-sw // _PAD) * _PAD
+        if (ph, pw) != (sh, sw):
+            small = cv2.copyMakeBorder(small, 0, ph - sh, 0, pw - sw, cv2.BORDER_REPLICATE)
+        self._net.setInput(cv2.dnn.blobFromImage(small))
+        out = np.asarray(self._net.forward())[0]
+        return out, (sw / w, sh / h)
+
+    def detect_all(
+        self, image: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+        """All detections of this detector's landmark types, best first.
+
+        Returns:
+            ``uv (N, 2)`` full-resolution pixels, ``scores (N,)``, ``types (N,)`` (indices of
+            :data:`LANDMARK_TYPES`).
+        """
+        out, (sx, sy) = self.infer(image)
+        h, w = np.asarray(image).shape[:2]
+        size = (max(1, round(w * self.scale)), max(1, round(h * self.scale)))
+        uv, scores, kinds = decode(
+            out, self.types, size, self.score_threshold, self.nms_px * min(sx, sy),
+            self.max_per_type,
+        )
+        full = np.empty_like(uv)
+        full[:, 0] = (uv[:, 0] + 0.5) / sx - 0.5
+        full[:, 1] = (uv[:, 1] + 0.5) / sy - 0.5
+        return full, scores, kinds
+
+    def detect(self, image: Any, context: Mapping[str, Any] | None = None) -> Detections:
+        """Detections of this detector's landmark types in ``image`` ((H, W, 3) uint8 RGB).
+
+        ``true_ids`` is filled only when ``context["landmarks"][self.landmarks]`` holds ground
+        truth (``ids``, ``uv``, ``visible``): scoring bookkeeping, see the module docstring.
+        """
+        uv, scores, _ = self.detect_all(image)
+        true_ids = None
+        truth = None
+        if isinstance(context, Mapping) and isinstance(self.landmarks, str):
+            truth = context.get("landmarks", {}).get(self.landmarks)
+        if truth is not None:
+            visible = np.asarray(truth["visible"], dtype=bool).reshape(-1)
+            ids = np.asarray(truth["ids"]).astype(np.int64).reshape(-1)
+            gt_uv = np.asarray(truth["uv"], dtype=np.float64).reshape(-1, 2)
+            match, _ = match_detections(uv, gt_uv[visible], self.match_px)
+            true_ids = np.where(match >= 0, ids[visible][np.maximum(match, 0)], -1)
+        return Detections(uv=uv, scores=scores, true_ids=true_ids)
+
+    def __repr__(self) -> str:
+        return (f"LearnedDetector(landmarks={self.landmarks!r}, model={self.model_path.name!r}, "
+                f"score_threshold={self.score_threshold})")

@@ -1,0 +1,121 @@
+"""The learned detector: heatmap decoding on synthetic heatmaps, matching, and a real render."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from localization.learned import (
+    DEFAULT_MODEL,
+    LearnedDetector,
+    decode,
+    match_detections,
+    subpixel_parabola,
+)
+
+
+def _gauss(h, w, centres, sigma=1.0, peak=1.0):
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    out = np.zeros((h, w))
+    for cu, cv in centres:
+        out = np.maximum(out, peak * np.exp(-((xs - cu) ** 2 + (ys - cv) ** 2) / (2 * sigma**2)))
+    return out.astype(np.float32)
+
+
+def test_parabola_recovers_gaussian_centre(rng):
+    for _ in range(20):
+        cu, cv = rng.uniform(3, 27), rng.uniform(3, 17)
+        heat = _gauss(20, 30, [(cu, cv)])
+        r, c = np.unravel_index(np.argmax(heat), heat.shape)
+        off = subpixel_parabola(heat, np.array([r]), np.array([c]))[0]
+        assert abs(c + off[0] - cu) < 1e-3 and abs(r + off[1] - cv) < 1e-3
+
+
+def test_decode_heatmap_only_subpixel_in_pixels():
+    centres = [(5.3, 4.7), (20.6, 12.2)]  # cells
+    heat = _gauss(20, 30, centres)[None]
+    uv, scores, kinds = decode(heat, (0,), use_offsets=False, score_threshold=0.5)
+    want = (np.array(centres) + 0.5) * 4 - 0.5  # stride 4, pixel-centre convention
+    order = np.argsort(uv[:, 0])
+    assert np.allclose(uv[order], want, atol=0.01)
+    assert np.all(scores > 0.9) and np.all(kinds == 0)
+
+
+def test_decode_offsets_threshold_types_and_bounds():
+    h, w = 20, 30
+    heat = np.zeros((3, h, w), np.float32)
+    off = np.zeros((2, h, w), np.float32)
+    heat[0, 5, 7], off[:, 5, 7] = 0.9, (0.25, -0.4)
+    heat[1, 10, 3] = 0.2  # below the threshold
+    heat[2, 19, 29], off[:, 19, 29] = 0.8, (0.4, 0.4)  # refined outside a 118 x 78 image
+    out = np.concatenate([heat, off])
+    uv, scores, kinds = decode(out, (0, 1, 2), image_size=(118, 78), score_threshold=0.3)
+    assert kinds.tolist() == [0]
+    assert np.allclose(uv[0], ((7.25 + 0.5) * 4 - 0.5, (4.6 + 0.5) * 4 - 0.5))
+    uv, _, kinds = decode(out, (2,), score_threshold=0.3)
+    assert kinds.tolist() == [2]
+
+
+def test_decode_nms_keeps_best_of_close_peaks():
+    heat = np.zeros((1, 20, 30), np.float32)
+    heat[0, 5, 5], heat[0, 5, 7], heat[0, 15, 20] = 0.9, 0.8, 0.7  # 8 px apart, then far
+    out = np.concatenate([heat, np.zeros((2, 20, 30), np.float32)])
+    uv, scores, _ = decode(out, (0,), nms_px=10.0)
+    assert np.allclose(scores, [0.9, 0.7])
+    uv, scores, _ = decode(out, (0,), nms_px=4.0)
+    assert np.allclose(scores, [0.9, 0.8, 0.7])
+    with pytest.raises(ValueError, match="out of range"):
+        decode(out, (1,))
+
+
+def test_match_detections_one_to_one_within_radius():
+    gt = np.array([[10.0, 10.0], [50.0, 50.0]])
+    uv = np.array([[11.0, 10.0], [10.5, 10.0], [60.0, 50.0]])
+    m, d = match_detections(uv, gt, 3.0)
+    assert m.tolist() == [-1, 0, -1]
+    assert d[1] == pytest.approx(0.5) and np.isnan(d[0])
+    m, _ = match_detections(np.zeros((0, 2)), gt)
+    assert m.shape == (0,)
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="landmarks must be"):
+        LearnedDetector("aruco")
+    with pytest.raises(ValueError, match="score_threshold"):
+        LearnedDetector("column_tops", score_threshold=2.0)
+    with pytest.raises(FileNotFoundError, match="not found"):
+        LearnedDetector("column_tops", model="/nonexistent.onnx")
+
+
+needs_model = pytest.mark.skipif(not DEFAULT_MODEL.is_file(), reason="no committed model")
+
+
+@needs_model
+def test_bad_image():
+    with pytest.raises(ValueError, match="uint8 RGB"):
+        LearnedDetector("column_tops").detect(np.zeros((10, 10)), {})
+
+
+@needs_model
+def test_real_render_column_tops():
+    """On a paper-site render the detector finds the visible column tops within 3 px."""
+    pytest.importorskip("pybullet")
+    from localization.geometry import look_at
+    from uav_struct_env.sim.world import SiteWorld
+    from uav_struct_env.site import paper_site
+
+    site = paper_site("columns", marker_size=1.0)
+    with SiteWorld(site, image_size=(1280, 720), rng=np.random.default_rng(123)) as world:
+        centre = site.center
+        cam_from_world = look_at(centre + np.array([-6.0, -30.0, 16.0]), centre)
+        res = world.render(cam_from_world, depth=True)
+        truth = world.landmark_truth("column_tops", cam_from_world, None, res)
+    det = LearnedDetector("column_tops").detect(
+        res.rgb, {"landmarks": {"column_tops": truth}, "image_size": (1280, 720)}
+    )
+    n_visible = int(np.sum(truth["visible"]))
+    n_true = int(np.sum(det.true_ids >= 0))
+    assert n_visible >= 8
+    assert n_true >= n_visible - 2
+    assert len(det) - n_true <= 2
+    assert det.scores is not None and np.all(det.scores >= 0.3)

@@ -1,0 +1,362 @@
+"""Train the learned landmark detector (PyTorch, CPU) and export it to ONNX.
+
+Only this module imports torch (the ``train`` extra). The exported model runs without it, in
+:class:`localization.learned.LearnedDetector` (OpenCV DNN).
+
+The network is a small fully-convolutional CenterNet-style keypoint net: an encoder to stride 16,
+a two-step top-down path back to stride 4, and a head with one heatmap per landmark type
+(:data:`uav_struct_env.datasets.LANDMARK_TYPES`, sigmoid included in the graph) and two
+sub-cell offset channels. Input: ``(1, 3, H, W)`` float RGB in 0..255 (normalized inside the
+graph), ``H`` and ``W`` multiples of 16. Output: ``(1, 5, H/4, W/4)``.
+
+Cell ``j`` of the output covers input pixels ``4j .. 4j + 3``; a keypoint at input pixel ``u``
+has cell coordinate ``c = (u + 0.5) / 4 - 0.5``. Targets: a Gaussian (``sigma`` cells) splat
+around ``c`` per type with 1 at the nearest cell (penalty-reduced focal loss, as CenterNet), and
+the offsets ``c - j`` (L1) in the 3 x 3 cells around it.
+
+Example (the committed model, see ``localization/models/MODEL_CARD.md``)::
+
+    python -m uav_struct_env.datasets /tmp/lmdata/train --layouts 200 --views 15 --seed 0
+    python -m uav_struct_env.datasets /tmp/lmdata/val --layouts 10 --views 10 --seed 1
+    python -m uav_struct_env.train_detector --data /tmp/lmdata/train --val /tmp/lmdata/val \
+        --out runs/detector --minutes 45
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+import warnings
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from uav_struct_env.datasets.landmarks import LANDMARK_TYPES, load_labels
+
+__all__ = ["KeypointNet", "export_onnx", "main", "train"]
+
+STRIDE = 4
+N_TYPES = len(LANDMARK_TYPES)
+
+
+def _cbr(cin: int, cout: int, stride: int = 1) -> nn.Sequential:
+    return nn.Sequential(nn.Conv2d(cin, cout, 3, stride, 1, bias=False), nn.BatchNorm2d(cout),
+                         nn.ReLU(inplace=True))
+
+
+class KeypointNet(nn.Module):
+    """The keypoint network (see the module docstring). ``width`` scales every layer."""
+
+    def __init__(self, width: int = 16) -> None:
+        super().__init__()
+        c1, c2, c3, c4 = width, int(1.5 * width), 3 * width, 4 * width
+        self.s4 = nn.Sequential(_cbr(3, c1, 2), _cbr(c1, c2, 2), _cbr(c2, c2))
+        self.s8 = nn.Sequential(_cbr(c2, c3, 2), _cbr(c3, c3))
+        self.s16 = nn.Sequential(_cbr(c3, c4, 2), _cbr(c4, c4), _cbr(c4, c4))
+        self.lat16 = nn.Conv2d(c4, c3, 1)
+        self.fuse8 = _cbr(c3, c3)
+        self.lat8 = nn.Conv2d(c3, c2, 1)
+        self.fuse4 = _cbr(c2, c2)
+        self.head = nn.Conv2d(c2, N_TYPES + 2, 1)
+        nn.init.constant_(self.head.bias[:N_TYPES], -4.0)  # start near "no keypoint"
+        nn.init.zeros_(self.head.bias[N_TYPES:])
+
+    def logits(self, x: torch.Tensor) -> torch.Tensor:
+        """Raw outputs: heatmap logits and offsets, ``(B, 5, H/4, W/4)``."""
+        x = x * (1.0 / 127.5) - 1.0
+        f4 = self.s4(x)
+        f8 = self.s8(f4)
+        f16 = self.s16(f8)
+        f8 = self.fuse8(f8 + F.interpolate(self.lat16(f16), scale_factor=2.0, mode="nearest"))
+        f4 = self.fuse4(f4 + F.interpolate(self.lat8(f8), scale_factor=2.0, mode="nearest"))
+        return self.head(f4)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Heatmaps (sigmoid) and offsets, as the exported graph returns them."""
+        out = self.logits(x)
+        return torch.cat([torch.sigmoid(out[:, :N_TYPES]), out[:, N_TYPES:]], dim=1)
+
+
+# ------------------------------------------------------------------------------------ data
+def _targets(kps: np.ndarray, h: int, w: int, sigma: float):
+    """Heatmap (T, h, w), offsets (2, h, w) and offset mask (h, w) at stride 4."""
+    heat = np.zeros((N_TYPES, h, w), np.float32)
+    off = np.zeros((2, h, w), np.float32)
+    mask = np.zeros((h, w), np.float32)
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    for u, v, t in kps:
+        cu, cv_ = (u + 0.5) / STRIDE - 0.5, (v + 0.5) / STRIDE - 0.5
+        ju, jv = int(round(cu)), int(round(cv_))
+        if not (0 <= ju < w and 0 <= jv < h):
+            continue
+        g = np.exp(-((xs - cu) ** 2 + (ys - cv_) ** 2) / (2 * sigma**2))
+        g[jv, ju] = 1.0
+        heat[int(t)] = np.maximum(heat[int(t)], g)
+        for dv in (-1, 0, 1):
+            for du in (-1, 0, 1):
+                a, b = jv + dv, ju + du
+                if 0 <= a < h and 0 <= b < w:
+                    off[0, a, b], off[1, a, b] = cu - b, cv_ - a
+                    mask[a, b] = 1.0 if (du, dv) == (0, 0) else max(mask[a, b], 0.5)
+    return heat, off, mask
+
+
+class LandmarkCrops(torch.utils.data.Dataset):
+    """Random augmented crops of a landmark dataset, with stride-4 targets."""
+
+    def __init__(self, labels: dict, crop: tuple[int, int], seed: int, sigma: float = 1.0,
+                 augment: bool = True, epoch_size: int | None = None) -> None:
+        self.root = Path(labels["root"])
+        self.records = labels["images"]
+        self.crop, self.sigma, self.augment = crop, sigma, augment
+        self.seed = seed
+        self.epoch_size = epoch_size or len(self.records)
+        self.calls = 0
+
+    def __len__(self) -> int:
+        return self.epoch_size
+
+    def __getitem__(self, index: int):
+        rng = np.random.default_rng([self.seed, index, self.calls])
+        self.calls += 1
+        rec = self.records[index % len(self.records)]
+        img = cv2.cvtColor(cv2.imread(str(self.root / rec["file"])), cv2.COLOR_BGR2RGB)
+        kps = np.array([k[:3] for k in rec["keypoints"]], np.float64).reshape(-1, 3)
+        cw, ch = self.crop
+        if self.augment:
+            s = float(np.exp(rng.uniform(np.log(0.8), np.log(1.25))))
+            # Centre the crop on a random keypoint most of the time (landmarks are sparse).
+            if len(kps) and rng.random() < 0.8:
+                cx, cy = kps[rng.integers(len(kps)), :2] * s + rng.uniform(-0.4, 0.4, 2) * (cw, ch)
+            else:
+                cx, cy = rng.uniform(0, img.shape[1] * s), rng.uniform(0, img.shape[0] * s)
+            flip = rng.random() < 0.5
+        else:
+            s, flip = 1.0, False
+            cx, cy = img.shape[1] / 2, img.shape[0] / 2
+        # Affine map (pixel centres at integers): x' = s x + t.
+        tx, ty = cw / 2 - cx, ch / 2 - cy
+        A = np.array([[s, 0, tx], [0, s, ty]])
+        if flip:
+            A = np.array([[-1, 0, cw - 1], [0, 1, 0]]) @ np.vstack([A, [0, 0, 1]])
+        crop = cv2.warpAffine(img, A, (cw, ch), flags=cv2.INTER_LINEAR,
+                              borderMode=cv2.BORDER_REFLECT101)
+        uv = kps[:, :2] @ A[:, :2].T + A[:, 2]
+        keep = (uv[:, 0] > -0.5) & (uv[:, 0] < cw - 0.5) & (uv[:, 1] > -0.5) & (uv[:, 1] < ch - 0.5)
+        kps = np.column_stack([uv, kps[:, 2]])[keep]
+        if self.augment:
+            crop = self._photometric(crop, rng)
+        heat, off, mask = _targets(kps, ch // STRIDE, cw // STRIDE, self.sigma)
+        x = torch.from_numpy(np.ascontiguousarray(crop.transpose(2, 0, 1))).float()
+        return x, torch.from_numpy(heat), torch.from_numpy(off), torch.from_numpy(mask)
+
+    @staticmethod
+    def _photometric(img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        x = img.astype(np.float32)
+        x = x * rng.uniform(0.7, 1.3) + rng.uniform(-25, 25)  # contrast, brightness
+        x = x * rng.uniform(0.9, 1.1, 3)  # colour balance
+        if rng.random() < 0.5:
+            gamma = rng.uniform(0.7, 1.4)
+            x = 255.0 * (np.clip(x, 0, 255) / 255.0) ** gamma
+        if rng.random() < 0.3:
+            x = cv2.GaussianBlur(x, (0, 0), rng.uniform(0.3, 0.9))
+        x = x + rng.normal(0, rng.uniform(0, 6), x.shape)
+        return np.clip(x, 0, 255).astype(np.uint8)
+
+
+# ------------------------------------------------------------------------------------ loss
+def focal_loss(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """CenterNet's penalty-reduced pixel-wise focal loss (alpha 2, beta 4), per keypoint."""
+    p = torch.sigmoid(logits).clamp(1e-4, 1 - 1e-4)
+    pos = target.eq(1.0).float()
+    pos_loss = -torch.log(p) * (1 - p) ** 2 * pos
+    neg_loss = -torch.log(1 - p) * p**2 * (1 - target) ** 4 * (1 - pos)
+    n = pos.sum().clamp(min=1.0)
+    return (pos_loss.sum() + neg_loss.sum()) / n
+
+
+def loss_fn(out, heat, off, mask):
+    """Focal loss on the heatmaps plus L1 on the offsets (weight 1)."""
+    hm = focal_loss(out[:, :N_TYPES], heat)
+    m = mask.unsqueeze(1)
+    l1 = (torch.abs(out[:, N_TYPES:] - off) * m).sum() / m.sum().clamp(min=1.0)
+    return hm + l1, hm.detach(), l1.detach()
+
+
+# ------------------------------------------------------------------------------------ export
+def export_onnx(model: KeypointNet, path: str | Path, size: tuple[int, int] = (640, 368)) -> Path:
+    """Export ``model`` to ONNX and check that cv2.dnn reproduces it.
+
+    Eval mode (batch norm folded); traced at ``size = (W, H)`` with H and W as dynamic axes.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    model = model.eval()
+    x = torch.rand(1, 3, size[1], size[0]) * 255
+    with warnings.catch_warnings():  # the TorchScript exporter's deprecation notice
+        warnings.simplefilter("ignore", DeprecationWarning)
+        torch.onnx.export(model, x, str(path), opset_version=13, dynamo=False,
+                          input_names=["image"], output_names=["heatmaps_offsets"],
+                          do_constant_folding=True,
+                          dynamic_axes={"image": {2: "height", 3: "width"},
+                                        "heatmaps_offsets": {2: "h4", 3: "w4"}})
+    net = cv2.dnn.readNetFromONNX(str(path))
+    net.setInput(x.numpy())
+    got = net.forward()
+    with torch.no_grad():
+        want = model(x).numpy()
+    err = float(np.abs(got - want).max())
+    if err > 1e-3:
+        raise RuntimeError(f"cv2.dnn output differs from torch by {err:.2e} (> 1e-3)")
+    return path
+
+
+# ------------------------------------------------------------------------------------ training
+def _evaluate(model: KeypointNet, labels: dict, tmp_onnx: Path) -> dict:
+    """P/R at 1.5 px (3 px full resolution) on a validation set, with the numpy decoder."""
+    from localization.learned import decode, match_detections
+
+    model.eval()
+    root = Path(labels["root"])
+    tp = fp = fn = 0
+    errs = []
+    for rec in labels["images"]:
+        img = cv2.cvtColor(cv2.imread(str(root / rec["file"])), cv2.COLOR_BGR2RGB)
+        h, w = img.shape[:2]
+        ph, pw = -(-h // 16) * 16, -(-w // 16) * 16
+        pad = cv2.copyMakeBorder(img, 0, ph - h, 0, pw - w, cv2.BORDER_REPLICATE)
+        with torch.no_grad():
+            out = model(torch.from_numpy(pad.transpose(2, 0, 1)[None].copy()).float())[0].numpy()
+        kps = np.array([k[:3] for k in rec["keypoints"]], np.float64).reshape(-1, 3)
+        for t in range(N_TYPES):
+            uv, _, _ = decode(out, types=(t,), image_size=(w, h))
+            gt = kps[kps[:, 2] == t, :2]
+            m, d = match_detections(uv, gt, 1.5)
+            tp += int((m >= 0).sum())
+            fp += int((m < 0).sum())
+            fn += len(gt) - int((m >= 0).sum())
+            errs += d[m >= 0].tolist()
+    model.train()
+    p = tp / max(tp + fp, 1)
+    r = tp / max(tp + fn, 1)
+    return {"precision": p, "recall": r, "f1": 2 * p * r / max(p + r, 1e-9),
+            "median_err_px": float(np.median(errs)) if errs else float("nan")}
+
+
+def train(data: str, out: str, val: str | None = None, minutes: float = 45.0,
+          max_steps: int | None = None, batch: int = 16, crop: tuple[int, int] = (256, 192),
+          lr: float = 3e-3, width: int = 16, seed: int = 0, threads: int = 2,
+          eval_every: int = 500, workers: int = 1, log=print) -> dict:
+    """Train from scratch; writes ``out/{last,best}.pt``, ``out/log.jsonl``, ``out/model.onnx``.
+
+    Stops after ``minutes`` of wall time or ``max_steps`` steps (the cosine learning-rate
+    schedule runs over the time budget). Returns a summary dict.
+    """
+    torch.manual_seed(seed)
+    torch.set_num_threads(threads)
+    cv2.setNumThreads(1)
+    out_dir = Path(out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    labels = load_labels(data)
+    val_labels = load_labels(val) if val else None
+    ds = LandmarkCrops(labels, crop, seed, epoch_size=10**7)
+    loader = torch.utils.data.DataLoader(
+        ds, batch_size=batch, shuffle=True, num_workers=workers, drop_last=True,
+        generator=torch.Generator().manual_seed(seed), persistent_workers=workers > 0)
+    model = KeypointNet(width)
+    n_params = sum(p.numel() for p in model.parameters())
+    opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
+    budget = minutes * 60.0
+    t0 = time.perf_counter()
+    step, best, summary = 0, -1.0, {}
+    logf = open(out_dir / "log.jsonl", "a")
+    ema = None
+    for x, heat, off, mask in loader:
+        elapsed = time.perf_counter() - t0
+        frac = elapsed / budget
+        if max_steps is not None:
+            frac = max(frac, step / max_steps)
+        if frac >= 1.0:
+            break
+        warm = min(1.0, (step + 1) / 200)
+        for g in opt.param_groups:
+            g["lr"] = lr * warm * 0.5 * (1 + math.cos(math.pi * frac))
+        loss, hm, l1 = loss_fn(model.logits(x), heat, off, mask)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        step += 1
+        ema = loss.item() if ema is None else 0.98 * ema + 0.02 * loss.item()
+        if step % 50 == 0:
+            rec = {"step": step, "time_s": round(elapsed, 1), "loss": round(ema, 4),
+                   "heat": round(hm.item(), 4), "offset": round(l1.item(), 4),
+                   "lr": opt.param_groups[0]["lr"]}
+            logf.write(json.dumps(rec) + "\n")
+            logf.flush()
+            log(rec)
+        if val_labels is not None and step % eval_every == 0:
+            metrics = _evaluate(model, val_labels, out_dir / "tmp.onnx")
+            metrics.update(step=step, time_s=round(time.perf_counter() - t0, 1))
+            logf.write(json.dumps({"val": metrics}) + "\n")
+            logf.flush()
+            log({"val": metrics})
+            if metrics["f1"] > best:
+                best = metrics["f1"]
+                torch.save(model.state_dict(), out_dir / "best.pt")
+                summary["best_val"] = metrics
+        if step % 200 == 0:
+            torch.save(model.state_dict(), out_dir / "last.pt")
+    torch.save(model.state_dict(), out_dir / "last.pt")
+    if val_labels is not None:
+        metrics = _evaluate(model, val_labels, out_dir / "tmp.onnx")
+        metrics.update(step=step, time_s=round(time.perf_counter() - t0, 1))
+        logf.write(json.dumps({"val": metrics}) + "\n")
+        log({"val": metrics})
+        if metrics["f1"] >= best:
+            torch.save(model.state_dict(), out_dir / "best.pt")
+            summary["best_val"] = metrics
+    logf.close()
+    chosen = out_dir / ("best.pt" if (out_dir / "best.pt").exists() else "last.pt")
+    model.load_state_dict(torch.load(chosen))
+    onnx_path = export_onnx(model, out_dir / "model.onnx")
+    summary.update(steps=step, params=n_params, train_images=len(labels["images"]),
+                   wall_s=round(time.perf_counter() - t0, 1), checkpoint=chosen.name,
+                   onnx=str(onnx_path), seed=seed, batch=batch, crop=list(crop), width=width)
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+def main(argv: list[str] | None = None) -> dict:
+    """Command line: ``python -m uav_struct_env.train_detector --data DIR --out DIR``."""
+    ap = argparse.ArgumentParser(prog="python -m uav_struct_env.train_detector",
+                                 description="Train the learned landmark detector.")
+    ap.add_argument("--data", required=True, help="training dataset (labels.json or its folder)")
+    ap.add_argument("--val", default=None, help="validation dataset (checkpoint selection)")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--minutes", type=float, default=45.0)
+    ap.add_argument("--max-steps", type=int, default=None)
+    ap.add_argument("--batch", type=int, default=16)
+    ap.add_argument("--crop", type=int, nargs=2, default=(256, 192), metavar=("W", "H"))
+    ap.add_argument("--lr", type=float, default=3e-3)
+    ap.add_argument("--width", type=int, default=16)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--workers", type=int, default=1, help="data-loading processes")
+    ap.add_argument("--eval-every", type=int, default=500)
+    a = ap.parse_args(argv)
+    if a.crop[0] % 16 or a.crop[1] % 16:
+        raise SystemExit(f"--crop must be multiples of 16, got {a.crop}")
+    summary = train(a.data, a.out, a.val, a.minutes, a.max_steps, a.batch, tuple(a.crop), a.lr,
+                    a.width, a.seed, a.threads, a.eval_every, a.workers)
+    print(json.dumps(summary, indent=2))
+    return summary
+
+
+if __name__ == "__main__":
+    main()
