@@ -37,7 +37,7 @@ DEFAULTS: dict[str, Any] = {
     "episodes": 20,
     "seed": 10_000,
     "policies": POLICIES,
-    "plot": "examples/figures/policy_evaluation.png",
+    "plot": "docs/figures/policy_evaluation.png",
     "json_out": None,
     "max_cycles": None,
 }
