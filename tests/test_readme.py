@@ -15,5 +15,6 @@ def test_readme_python_blocks_run():
             exec(compile(block, str(README), "exec"), namespace)  # noqa: S102
         assert namespace["est"].success, namespace["est"].failure_reason
     finally:
-        if "env" in namespace:
-            namespace["env"].close()
+        for name in ("env", "aec", "wenv", "train_env"):
+            if name in namespace:
+                namespace[name].close()
