@@ -25,6 +25,7 @@ import numpy as np
 
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.schedule import ScheduleSpec
+from uav_struct_env.sim.imaging import ImagingModel, make_imaging
 from uav_struct_env.sim.sensors import SensorModel, make_noise
 from uav_struct_env.sim.uav import FlightLimits, Geofence
 from uav_struct_env.site import LANDMARK_SETS, STAGES, Site
@@ -46,6 +47,9 @@ class EnvConfig:
         marker_size: ArUco marker side (m), or None for no markers.
         image_size: ``(W, H)`` of the observed images. The intrinsics are the paper's camera
             scaled to this size (same field of view).
+        imaging: camera effects on the observed image (:mod:`uav_struct_env.sim.imaging`):
+            ``"ideal"`` (none, the default), ``"camera"`` (blur, noise, JPEG) or an
+            ``ImagingModel``. Landmark truth is unaffected.
         noise: onboard sensor model: ``"paper"``, ``"gnss_ins"``, ``"none"`` or a model object
             from :mod:`uav_struct_env.sim.sensors`.
         renderer: ``"auto"`` (EGL if it starts, else TinyRenderer), ``"tiny"`` or ``"egl"``.
@@ -79,6 +83,7 @@ class EnvConfig:
     marker_size: float | None = 1.0
     image_size: tuple[int, int] = (1280, 720)
     noise: str | SensorModel = "paper"
+    imaging: str | ImagingModel = "ideal"
     renderer: str = "auto"
     max_cycles: int = 100
     render_mode: str | None = None
@@ -124,6 +129,7 @@ class EnvConfig:
             raise ConfigError(f"image_size must be (width, height) ints >= 16, got {size!r}")
         object.__setattr__(self, "image_size", (int(size[0]), int(size[1])))
         object.__setattr__(self, "noise", make_noise(self.noise))
+        object.__setattr__(self, "imaging", make_imaging(self.imaging))
         if self.renderer not in RENDERERS:
             raise ConfigError(f"renderer must be one of {RENDERERS}, got {self.renderer!r}")
         for name in ("max_cycles", "n_agents", "render_view_height", "render_fps"):

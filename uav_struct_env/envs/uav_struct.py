@@ -342,7 +342,8 @@ class UavStructParallelEnv(ParallelEnv):
             result = world.render(cam_from_world, self.camera, depth=need_depth)
             if airframes is not None:
                 airframes.set(agent, state)
-            obs = {"image": result.rgb, "gnss": gnss32, "attitude": att32}
+            image = cfg.imaging.apply(result.rgb, self._rng)
+            obs = {"image": image, "gnss": gnss32, "attitude": att32}
             if cfg.observe_depth:
                 obs["depth"] = np.asarray(result.depth, dtype=np.float32)
             prior = world_from_cam_from_attitude(
@@ -364,7 +365,7 @@ class UavStructParallelEnv(ParallelEnv):
                 "truncation_reason": None,
                 "reward_terms": {},
             }
-            self._last_images[agent] = result.rgb
+            self._last_images[agent] = image
             self._priors[agent] = prior
         return observations, infos
 
