@@ -105,8 +105,10 @@ def test_bad_study_options_are_rejected_with_the_value():
         ConfigError, match=r"association must be one of \('paper', 'robust'\), got 'best'"
     ):
         StudyConfig(association="best")
-    with pytest.raises(ConfigError, match=r"detector='learned' is not available yet"):
-        StudyConfig(detector="learned")
+    with pytest.raises(
+        ConfigError, match=r"detector must be one of \('projection', 'learned'\), got 'vlm'"
+    ):
+        StudyConfig(detector="vlm")
     with pytest.raises(
         ConfigError, match=r"site must be 'paper', 'random' or an existing site file.*'mars.json'"
     ):
@@ -119,4 +121,4 @@ def test_bad_study_options_are_rejected_with_the_value():
 
 def test_cli_reports_bad_options_without_a_traceback(capsys):
     assert main(["--detector", "magic", "--out", "unused"]) == 2
-    assert "detector must be one of ('projection',), got 'magic'" in capsys.readouterr().err
+    assert "detector must be one of ('projection', 'learned'), got 'magic'" in capsys.readouterr().err

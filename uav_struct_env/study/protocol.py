@@ -158,6 +158,9 @@ class StudyConfig:
         miss_rate: the projection detector's probability of missing a visible landmark.
         false_positives: mean clutter detections per image.
         renderer: ``"auto"``, ``"tiny"`` or ``"egl"``.
+        imaging: camera effects on the rendered images (``"ideal"`` or ``"camera"``, see
+            :mod:`uav_struct_env.sim.imaging`); they matter to pixel-reading detectors (ArUco,
+            learned), not to the projection detector.
         workers: processes rendering and localizing in parallel.
         methods: keys of :data:`METHODS` to run (default all).
     """
@@ -174,6 +177,7 @@ class StudyConfig:
     miss_rate: float = 0.0
     false_positives: float = 0.0
     renderer: str = "auto"
+    imaging: str = "ideal"
     workers: int = 1
     methods: tuple[str, ...] = field(default_factory=lambda: tuple(m.key for m in METHODS))
 
@@ -183,6 +187,7 @@ class StudyConfig:
                 raise ConfigError(f"{name} must be one of {options}, got {getattr(self, name)!r}")
 
         choice("detector", DETECTORS)
+        choice("imaging", ("ideal", "camera"))
         choice("association", ASSOCIATIONS)
         choice("noise", NOISES)
         if not isinstance(self.site, str) or not (

@@ -19,9 +19,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from localization import Localizer, ProjectionDetector, cramer_rao_bound
-from localization.learned import LearnedDetector
 from localization.aruco import ArucoLocalizer
 from localization.geometry import camera_center, invert, project
+from localization.learned import LearnedDetector
 from localization.metrics import pose_errors
 from uav_struct_env.site.io import load_site
 from uav_struct_env.study.protocol import METHODS, Method, Scene, StudyConfig
@@ -85,8 +85,11 @@ _ENVS: dict[Scene, object] = {}
 
 
 def _env_for(config: StudyConfig, scene: Scene):
-    """The environment of ``scene``; at most one lives per process (pybullet's EGL renderer
-    supports one client per process), so switching scenes closes the previous one."""
+    """The environment of ``scene``, kept for the next viewpoints of the same scene.
+
+    One lives per process at a time: switching scenes closes the previous one (memory; a site
+    is loaded once per contiguous run of viewpoints).
+    """
     env = _ENVS.get(scene)
     if env is None:
         _close_envs()
@@ -99,6 +102,7 @@ def _env_for(config: StudyConfig, scene: Scene):
             image_size=config.image_size,
             noise=config.noise,
             renderer=config.renderer,
+            imaging=config.imaging,
             n_agents=config.n_agents,
             texture_seed=config.seed,
         )
@@ -134,8 +138,18 @@ def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoin
         for method in methods:
             truth = info["landmarks"][method.landmarks]
             if method.structural:
-                res, ov = _structural(config, method, uav, viewpoint, image, K, gt, prior, truth,
-                                      site.landmarks(method.landmarks).xyz)
+                res, ov = _structural(
+                    config,
+                    method,
+                    uav,
+                    viewpoint,
+                    image,
+                    K,
+                    gt,
+                    prior,
+                    truth,
+                    site.landmarks(method.landmarks).xyz,
+                )
                 if ov is not None and viewpoint == overlay_viewpoint and uav == 0:
                     overlays.append(ov)
             else:
@@ -158,16 +172,29 @@ def _row(method, uav, viewpoint, est, gt, prior, truth, K, pixel_sigma, **counts
     c_gt, c_prior = camera_center(gt), camera_center(prior)
     c_est = camera_center(est.cam_from_world) if est.success else np.full(3, np.nan)
     return ImageResult(
-        method=method.key, uav=uav, viewpoint=viewpoint, success=bool(est.success),
+        method=method.key,
+        uav=uav,
+        viewpoint=viewpoint,
+        success=bool(est.success),
         failure_reason=est.failure_reason or "",
-        translation_error_m=t_err, rotation_error_deg=r_err,
-        prior_translation_error_m=p_err[0], prior_rotation_error_deg=p_err[1],
+        translation_error_m=t_err,
+        rotation_error_deg=r_err,
+        prior_translation_error_m=p_err[0],
+        prior_rotation_error_deg=p_err[1],
         n_visible=int(visible.sum()),
-        n_inliers=int(est.n_inliers), reprojection_rmse_px=float(est.reprojection_rmse_px),
-        crb_translation_m=crb_t, crb_rotation_deg=crb_r,
-        gt_x=c_gt[0], gt_y=c_gt[1], gt_z=c_gt[2],
-        prior_x=c_prior[0], prior_y=c_prior[1], prior_z=c_prior[2],
-        est_x=c_est[0], est_y=c_est[1], est_z=c_est[2],
+        n_inliers=int(est.n_inliers),
+        reprojection_rmse_px=float(est.reprojection_rmse_px),
+        crb_translation_m=crb_t,
+        crb_rotation_deg=crb_r,
+        gt_x=c_gt[0],
+        gt_y=c_gt[1],
+        gt_z=c_gt[2],
+        prior_x=c_prior[0],
+        prior_y=c_prior[1],
+        prior_z=c_prior[2],
+        est_x=c_est[0],
+        est_y=c_est[1],
+        est_z=c_est[2],
         **counts,
     )
 
@@ -186,30 +213,59 @@ def _detector(config, method, uav, viewpoint):
             _LEARNED[key] = LearnedDetector(method.landmarks, scale=scale)
         return _LEARNED[key]
     return ProjectionDetector(
-        method.landmarks, pixel_sigma=config.pixel_sigma, miss_rate=config.miss_rate,
-        false_positives=config.false_positives, rng=_rng(config, method, uav, viewpoint),
+        method.landmarks,
+        pixel_sigma=config.pixel_sigma,
+        miss_rate=config.miss_rate,
+        false_positives=config.false_positives,
+        rng=_rng(config, method, uav, viewpoint),
     )
 
 
 def _structural(config, method, uav, viewpoint, image, K, gt, prior, truth, model_xyz):
     w, h = config.image_size
     detector = _detector(config, method, uav, viewpoint)
-    loc = Localizer(model_xyz, K, association=config.association,
-                    pixel_sigma=max(config.pixel_sigma, 0.5), image_size=(w, h))
+    loc = Localizer(
+        model_xyz,
+        K,
+        association=config.association,
+        pixel_sigma=max(config.pixel_sigma, 0.5),
+        image_size=(w, h),
+    )
     context = {"landmarks": {method.landmarks: truth}, "image_size": (w, h)}
     frame = localize_frame(detector, loc, image, context, prior, gt, np.asarray(truth["ids"]))
     est, det, scores = frame.estimate, frame.detections, frame.scores
     row = _row(
-        method, uav, viewpoint, est, gt, prior, truth, K, max(config.pixel_sigma, 1e-3),
-        n_detections=len(det), n_true_detections=scores.true_detections,
-        n_assigned=scores.assigned, n_correct=scores.correct, latency_s=frame.latency_s,
+        method,
+        uav,
+        viewpoint,
+        est,
+        gt,
+        prior,
+        truth,
+        K,
+        max(config.pixel_sigma, 1e-3),
+        n_detections=len(det),
+        n_true_detections=scores.true_detections,
+        n_assigned=scores.assigned,
+        n_correct=scores.correct,
+        latency_s=frame.latency_s,
     )
     ids = np.asarray(truth["ids"])
     correct = (est.assignment >= 0) & (ids[np.maximum(est.assignment, 0)] == det.true_ids)
     uv_prior, _ = project(K, prior, model_xyz)
     uv_final, _ = project(K, est.cam_from_world, model_xyz)
-    overlay = Overlay(method.key, uav, viewpoint, image, det.uv, est.assignment, correct,
-                      uv_prior, uv_final, bool(est.success))
+    overlay = Overlay(
+        method.key,
+        uav,
+        viewpoint,
+        image,
+        det.uv,
+        est.assignment,
+        correct,
+        uv_prior,
+        uv_final,
+        bool(est.success),
+    )
     return row, overlay
 
 
@@ -222,12 +278,23 @@ def _aruco(config, method, uav, viewpoint, image, K, gt, prior, truth, markers):
     # "Association" of markers is decoding their ids: a marker counts as visible when all its
     # corners are, and a detection is correct when its id is one of the visible markers.
     visible = np.asarray(truth["visible"], dtype=bool).reshape(-1, 4).all(axis=1)
-    visible_ids = {int(m.id) for m, v in zip(markers, visible) if v}
+    visible_ids = {int(m.id) for m, v in zip(markers, visible, strict=True) if v}
     correct = sum(1 for i in found.tolist() if i in visible_ids)
     return _row(
-        method, uav, viewpoint, est, gt, prior, truth, K, max(config.pixel_sigma, 1e-3),
-        n_detections=len(found), n_true_detections=len(visible_ids),
-        n_assigned=len(found), n_correct=correct, latency_s=latency,
+        method,
+        uav,
+        viewpoint,
+        est,
+        gt,
+        prior,
+        truth,
+        K,
+        max(config.pixel_sigma, 1e-3),
+        n_detections=len(found),
+        n_true_detections=len(visible_ids),
+        n_assigned=len(found),
+        n_correct=correct,
+        latency_s=latency,
     )
 
 

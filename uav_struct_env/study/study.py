@@ -93,6 +93,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--miss-rate", type=float, default=0.0, help="projection detector miss rate")
     p.add_argument("--false-positives", type=float, default=0.0, help="mean false detections per image")
     p.add_argument("--renderer", default="auto", choices=("auto", "tiny", "egl"))
+    p.add_argument(
+        "--imaging",
+        default="ideal",
+        choices=("ideal", "camera"),
+        help="camera effects on the rendered images: ideal (none) or camera (blur, noise, JPEG)",
+    )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
@@ -113,6 +119,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             miss_rate=args.miss_rate,
             false_positives=args.false_positives,
             renderer=args.renderer,
+            imaging=args.imaging,
             workers=args.workers,
         )
     except ValueError as err:
@@ -122,7 +129,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = Path(args.out)
     print(
         f"\nTable II — camera-pose accuracy ({config.association} association, {config.noise} prior, "
-        f"{config.detector} detector at {config.pixel_sigma} px, seed {config.seed}):\n"
+        f"{config.detector} detector at {config.pixel_sigma} px, {config.imaging} imaging, "
+        f"seed {config.seed}):\n"
     )
     print((out / "table2.md").read_text())
     print("Table I — detection and association:\n")
