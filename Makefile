@@ -25,8 +25,9 @@ test-slow: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check uav_struct_env localization tests benchmarks examples
 
-bench: $(STAMP)
-	$(BIN)/python benchmarks/render.py
+bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in the README
+	for b in render env_step localization wrapper_throughput detector; do \
+		[ -f benchmarks/$$b.py ] && $(BIN)/python benchmarks/$$b.py || exit 1; done
 
 clean:
 	rm -rf $(VENV) renders results
