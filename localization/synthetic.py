@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
+from localization.attitude import attitude_from_world_from_cam, world_from_cam_from_attitude
 from localization.geometry import as_points, check_transform, invert, look_at, project
 
 __all__ = [
@@ -29,29 +29,18 @@ __all__ = [
 PAPER_K = np.array([[1108.5, 0.0, 640.0], [0.0, 1108.5, 360.0], [0.0, 0.0, 1.0]])
 PAPER_IMAGE_SIZE = (1280, 720)
 
-# FLU body axes from OpenCV camera axes; the same convention as uav_struct_env/sim/attitude.py
-# (kept here because localization must not import the environment; a test checks they agree).
-_BODY_FROM_CAM = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-
-
 def perturb_attitude(
     cam_from_world: ArrayLike, position_offset_m: ArrayLike, attitude_offset_rad: ArrayLike
 ) -> NDArray[np.float64]:
     """Add offsets to a camera's position and (roll, pitch, yaw); return the new ``cam_from_world``.
 
-    Attitude convention as ``uav_struct_env.sim.attitude``: ``world_from_body = Rz(yaw) Ry(pitch)
-    Rx(roll)`` with FLU body axes (x along the optical axis), positive pitch tilting the view down.
+    Attitude convention: :mod:`localization.attitude`.
     """
     T = check_transform("cam_from_world", cam_from_world)
-    world_from_cam = invert(T)
-    world_from_body = world_from_cam[:3, :3] @ _BODY_FROM_CAM.T
-    yaw, pitch, roll = Rotation.from_matrix(world_from_body).as_euler("ZYX")
-    d_roll, d_pitch, d_yaw = np.asarray(attitude_offset_rad, dtype=np.float64).reshape(3)
-    R = Rotation.from_euler("ZYX", [yaw + d_yaw, pitch + d_pitch, roll + d_roll]).as_matrix()
-    out = np.eye(4)
-    out[:3, :3] = R @ _BODY_FROM_CAM
-    out[:3, 3] = world_from_cam[:3, 3] + np.asarray(position_offset_m, dtype=np.float64).reshape(3)
-    return invert(out)
+    position, attitude = attitude_from_world_from_cam(invert(T))
+    position = position + np.asarray(position_offset_m, dtype=np.float64).reshape(3)
+    attitude = attitude + np.asarray(attitude_offset_rad, dtype=np.float64).reshape(3)
+    return invert(world_from_cam_from_attitude(position, attitude))
 
 
 def paper_prior(cam_from_world: ArrayLike, index: int) -> NDArray[np.float64]:

@@ -1,53 +1,9 @@
-"""The attitude convention: camera position + (roll, pitch, yaw) <-> ``world_from_cam``.
+"""The attitude convention, re-exported where the simulator's users look for it.
 
-Documented once here and in the README, tested in ``tests/sim/test_attitude.py``.
-
-* The camera *body* frame is FLU: x forward along the optical axis, y left, z up in the image.
-* ``world_from_body = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (intrinsic Z-Y'-X'', scipy ``"ZYX"``).
-  Yaw is measured in the project frame from +x towards +y (counter-clockwise seen from above).
-  With y pointing left, **positive pitch tilts the optical axis down**: a camera looking 30 deg
-  below the horizon has ``pitch = +0.5236``. Positive roll turns the image clockwise as seen by
-  the camera (left side up).
-* The OpenCV camera frame is fixed to the body: ``x_cam = -y_body`` (right), ``y_cam = -z_body``
-  (down), ``z_cam = x_body`` (forward).
+The definitions live in :mod:`localization.attitude` (the bottom layer, so that the pure
+localization package and its synthetic-data helpers share the one convention).
 """
 
-from __future__ import annotations
-
-import numpy as np
-from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
+from localization.attitude import BODY_FROM_CAM, attitude_from_world_from_cam, world_from_cam_from_attitude
 
 __all__ = ["BODY_FROM_CAM", "attitude_from_world_from_cam", "world_from_cam_from_attitude"]
-
-#: Rotation taking OpenCV camera axes to FLU body axes (columns: camera x, y, z in the body frame).
-BODY_FROM_CAM = np.array(
-    [
-        [0.0, 0.0, 1.0],
-        [-1.0, 0.0, 0.0],
-        [0.0, -1.0, 0.0],
-    ]
-)
-
-
-def world_from_cam_from_attitude(position: ArrayLike, attitude: ArrayLike) -> NDArray[np.float64]:
-    """4x4 ``world_from_cam`` of a camera at ``position`` (3,) with ``attitude`` (roll, pitch, yaw)."""
-    roll, pitch, yaw = np.asarray(attitude, dtype=np.float64).reshape(3)
-    world_from_body = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
-    out = np.eye(4)
-    out[:3, :3] = world_from_body @ BODY_FROM_CAM
-    out[:3, 3] = np.asarray(position, dtype=np.float64).reshape(3)
-    return out
-
-
-def attitude_from_world_from_cam(
-    world_from_cam: ArrayLike,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Inverse of :func:`world_from_cam_from_attitude`: ``(position (3,), (roll, pitch, yaw) (3,))``.
-
-    Yaw is in (-pi, pi], pitch in [-pi/2, pi/2]; at pitch = +-pi/2 (gimbal lock) roll is set to 0.
-    """
-    T = np.asarray(world_from_cam, dtype=np.float64)
-    world_from_body = T[:3, :3] @ BODY_FROM_CAM.T
-    yaw, pitch, roll = Rotation.from_matrix(world_from_body).as_euler("ZYX")
-    return T[:3, 3].copy(), np.array([roll, pitch, yaw])

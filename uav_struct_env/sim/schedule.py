@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.geometry import invert, look_at, project
+from localization.synthetic import PAPER_IMAGE_SIZE, PAPER_K
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.attitude import attitude_from_world_from_cam
 from uav_struct_env.sim.uav import UavState
@@ -47,9 +48,6 @@ __all__ = [
     "side_name",
 ]
 
-#: The paper's camera intrinsics (1280 x 720), used to check that landmarks are in view.
-PAPER_K = np.array([[1108.5, 0.0, 640.0], [0.0, 1108.5, 360.0], [0.0, 0.0, 1.0]])
-PAPER_IMAGE_SIZE = (1280, 720)
 _SIDE_NAMES_4 = ("south", "east", "north", "west")
 
 
