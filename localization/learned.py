@@ -16,7 +16,11 @@ Pipeline for an ``(H, W, 3)`` uint8 RGB image:
    ``score_threshold``, refined to sub-pixel with the regressed offsets (or, for a heatmap-only
    output, a per-axis parabola through the log-scores), then non-maximum suppression by distance
    (``nms_px``) per type;
-4. pixel coordinates mapped back to the full image (``u + 0.5 = (u' + 0.5) / scale``).
+4. pixel coordinates mapped back to the full image (``u + 0.5 = (u' + 0.5) / scale``);
+5. optionally (``corner_window``), slab and opening corners -- image corners of the slab outline --
+   are refined on the full-resolution grey image with ``cv2.cornerSubPix``; a refinement that moves
+   a point by more than ``corner_max_shift`` px is discarded. Column tops (blobs, not corners)
+   keep the network's position.
 
 **Ground truth is used for scoring only.** When the context carries the ground truth of the
 requested landmark set (as the environment and the study provide), :meth:`LearnedDetector.detect`
@@ -189,6 +193,9 @@ class LearnedDetector:
         scale: downscale factor applied before the network (the model is trained at 0.5).
         match_px: radius of the ground-truth matching used only to fill ``true_ids``.
         max_per_type: cap on the detections per type.
+        corner_window: half-size (px) of the ``cv2.cornerSubPix`` window for slab and opening
+            corners at full resolution; 0 disables the refinement.
+        corner_max_shift: largest accepted refinement shift, px.
 
     Raises:
         ValueError: for an unknown landmark type or bad numbers; FileNotFoundError for a
@@ -199,11 +206,13 @@ class LearnedDetector:
         self,
         landmarks: str | Sequence[str] = "column_tops",
         model: str | Path | None = None,
-        score_threshold: float = 0.3,
+        score_threshold: float = 0.45,
         nms_px: float = 8.0,
         scale: float = 0.5,
         match_px: float = 3.0,
         max_per_type: int = 64,
+        corner_window: int = 3,
+        corner_max_shift: float = 3.0,
     ) -> None:
         if isinstance(landmarks, str):
             names = LANDMARK_TYPES if landmarks == "all" else (landmarks,)
@@ -233,6 +242,10 @@ class LearnedDetector:
         self.scale = float(scale)
         self.match_px = float(match_px)
         self.max_per_type = int(max_per_type)
+        if isinstance(corner_window, bool) or not isinstance(corner_window, int) or corner_window < 0:
+            raise ValueError(f"corner_window must be an int >= 0 (px), got {corner_window!r}")
+        self.corner_window = corner_window
+        self.corner_max_shift = float(corner_max_shift)
         self._net = cv2.dnn.readNetFromONNX(str(path))
 
     # --------------------------------------------------------------------------------- core
@@ -274,7 +287,27 @@ class LearnedDetector:
         full = np.empty_like(uv)
         full[:, 0] = (uv[:, 0] + 0.5) / sx - 0.5
         full[:, 1] = (uv[:, 1] + 0.5) / sy - 0.5
+        corners = kinds != LANDMARK_TYPES.index("column_tops")
+        if self.corner_window and np.any(corners):
+            full[corners] = self._refine_corners(np.asarray(image), full[corners])
         return full, scores, kinds
+
+    def _refine_corners(self, image: NDArray[np.uint8], uv: NDArray[np.float64]) -> NDArray:
+        gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+        h, w = gray.shape
+        win = self.corner_window
+        inside = ((uv[:, 0] >= win + 1) & (uv[:, 0] < w - win - 2)
+                  & (uv[:, 1] >= win + 1) & (uv[:, 1] < h - win - 2))
+        out = uv.copy()
+        if not np.any(inside):
+            return out
+        pts = uv[inside].astype(np.float32).reshape(-1, 1, 2)
+        crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.01)
+        ref = cv2.cornerSubPix(gray, pts, (win, win), (-1, -1), crit).reshape(-1, 2)
+        ok = np.hypot(*(ref - uv[inside]).T) <= self.corner_max_shift
+        sel = np.flatnonzero(inside)[ok]
+        out[sel] = ref[ok]
+        return out
 
     def detect(self, image: Any, context: Mapping[str, Any] | None = None) -> Detections:
         """Detections of this detector's landmark types in ``image`` ((H, W, 3) uint8 RGB).

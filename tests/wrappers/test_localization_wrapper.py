@@ -141,8 +141,8 @@ def test_clear_errors():
     with pytest.raises(ConfigError, match="landmark_sets=\\('column_tops',\\)"):
         LocalizationWrapper(env)
     env2 = uav_struct_env.parallel_env("train", landmark_sets=("column_tops",), **SMALL)
-    with pytest.raises(ConfigError, match="'learned' is not available yet"):
-        LocalizationWrapper(env2, detector="learned")
+    with pytest.raises(ConfigError, match="detector='learned' detects structural landmarks"):
+        LocalizationWrapper(env2, landmarks="aruco", detector="learned")
     with pytest.raises(ConfigError, match="landmarks must be one of"):
         LocalizationWrapper(env2, landmarks="roof")
     with pytest.raises(ConfigError, match="mode must be one of"):

@@ -95,7 +95,10 @@ class LocalizationWrapper(BaseParallelWrapper):
             ``aruco`` or ``all``.
         detector: ``"projection"`` (simulated: true projections + noise, misses, clutter),
             ``"aruco"`` (OpenCV markers; only with ``landmarks="aruco"`` and when
-            :mod:`localization.aruco` is installed) or ``"learned"`` (not available yet).
+            :mod:`localization.aruco` is installed) or ``"learned"`` (the trained keypoint
+            network of :mod:`localization.learned` on the image, for the structural sets and
+            ``all``; when the env provides the set's truth, its ``true_ids`` -- used for the
+            association scores only -- come from matching to it within 3 px).
         mode: association, ``"robust"`` or ``"paper"``.
         reward: ``"error"`` or ``"uncertainty"`` (module docstring).
         pixel_sigma: detector noise, px of the env's images; default 1 px at the paper's
@@ -141,11 +144,8 @@ class LocalizationWrapper(BaseParallelWrapper):
             raise ConfigError(f"landmarks must be one of {LANDMARK_SETS}, got {landmarks!r}")
         if detector not in DETECTORS:
             raise ConfigError(f"detector must be one of {DETECTORS}, got {detector!r}")
-        if detector == "learned":
-            raise ConfigError(
-                "detector='learned' is not available yet (no trained landmark detector ships "
-                "with this version); use detector='projection'"
-            )
+        if detector == "learned" and landmarks == "aruco":
+            raise ConfigError("detector='learned' detects structural landmarks, not 'aruco'")
         if mode not in MODES:
             raise ConfigError(f"mode must be one of {MODES}, got {mode!r}")
         if reward not in REWARDS:
@@ -221,9 +221,15 @@ class LocalizationWrapper(BaseParallelWrapper):
             else np.concatenate([np.full(3, 3.0), np.radians([2.0, 2.0, 5.0])])
         )
         self._rng = np.random.default_rng()
-        self._detector = ProjectionDetector(
-            landmarks, self.pixel_sigma, self.miss_rate, self.false_positives, rng=self._rng
-        )
+        if detector == "learned":
+            from localization.learned import LearnedDetector
+
+            # The network was trained on images 640 px wide (the paper's camera at half size).
+            self._detector = LearnedDetector(landmarks, scale=min(1.0, 640.0 / w))
+        else:
+            self._detector = ProjectionDetector(
+                landmarks, self.pixel_sigma, self.miss_rate, self.false_positives, rng=self._rng
+            )
         inner = env.observation_space(env.possible_agents[0])
         keys = {k: v for k, v in inner.spaces.items() if not (self.drop_image and k == "image")}
         keys["pose"] = spaces.Box(-POSE_BOUND, POSE_BOUND, (7,), np.float32)
@@ -248,7 +254,8 @@ class LocalizationWrapper(BaseParallelWrapper):
         """Reset the env and localize every agent; ``seed`` also seeds the detector."""
         if seed is not None:
             self._rng = np.random.default_rng([int(seed), 0x10CA1])
-            self._detector.rng = self._rng
+            if isinstance(self._detector, ProjectionDetector):
+                self._detector.rng = self._rng
         obs, infos = self.env.reset(seed=seed, options=options)
         self.last_frames = {}
         for agent in obs:
