@@ -110,9 +110,7 @@ def test_reward_terms_sum_to_the_reward_including_crashes(reward):
 def test_seeded_resets_repeat_with_a_noisy_detector():
     def rollout():
         env = make_train_env("state", **SMALL)
-        env = LocalizationWrapper(
-            env.env, mode="paper", drop_image=True, miss_rate=0.2, false_positives=1.0
-        )
+        env = LocalizationWrapper(env.env, mode="paper", drop_image=True, miss_rate=0.2, false_positives=1.0)
         out = []
         obs, _ = env.reset(seed=5)
         out.append(obs["uav_1"]["pose"].copy())

@@ -86,9 +86,7 @@ def make_localization_env(
     return LocalizationWrapper(env, landmarks=landmarks, **wrapper_kwargs)
 
 
-def make_train_env(
-    config: str | TrainConfig = "state", **env_overrides: Any
-) -> LocalizationWrapper:
+def make_train_env(config: str | TrainConfig = "state", **env_overrides: Any) -> LocalizationWrapper:
     """The wrapped env of a named :data:`TRAIN_CONFIGS` entry (env fields may be overridden)."""
     if isinstance(config, str):
         if config not in TRAIN_CONFIGS:

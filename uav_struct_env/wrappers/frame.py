@@ -86,7 +86,5 @@ def localize_frame(
         t_err = r_err = p_err = nan
     else:
         p_err = pose_errors(prior_cam_from_world, gt_cam_from_world)[0]
-        t_err, r_err = (
-            pose_errors(est.cam_from_world, gt_cam_from_world) if est.success else (nan, nan)
-        )
+        t_err, r_err = pose_errors(est.cam_from_world, gt_cam_from_world) if est.success else (nan, nan)
     return FrameLocalization(est, det, scores, float(t_err), float(r_err), float(p_err), latency)

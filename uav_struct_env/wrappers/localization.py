@@ -172,9 +172,7 @@ class LocalizationWrapper(BaseParallelWrapper):
         self.rotation_weight = _number("rotation_weight", rotation_weight)
         self.failure_penalty = _number("failure_penalty", failure_penalty)
         self.error_cap = _number("error_cap", failure_penalty if error_cap is None else error_cap)
-        self.alive_bonus = _number(
-            "alive_bonus", failure_penalty if alive_bonus is None else alive_bonus
-        )
+        self.alive_bonus = _number("alive_bonus", failure_penalty if alive_bonus is None else alive_bonus)
         self.crash_penalty = _number("crash_penalty", crash_penalty)
 
         w, h = config.image_size
@@ -196,9 +194,7 @@ class LocalizationWrapper(BaseParallelWrapper):
             except ImportError as e:
                 raise ConfigError(f"detector='aruco' is not available: {e}") from None
             if not base.site.markers:
-                raise ConfigError(
-                    "detector='aruco' needs markers: build the env with marker_size set"
-                )
+                raise ConfigError("detector='aruco' needs markers: build the env with marker_size set")
             self._aruco = ArucoLocalizer(base.site.markers, self.K)
             self.localizer = None
         else:
@@ -283,14 +279,10 @@ class LocalizationWrapper(BaseParallelWrapper):
             frame = self._localize_aruco(image, prior, gt, truth)
         else:
             context = {"landmarks": info["landmarks"], "image_size": self.image_size}
-            frame = localize_frame(
-                self._detector, self.localizer, image, context, prior, gt, self.model_ids
-            )
+            frame = localize_frame(self._detector, self.localizer, image, context, prior, gt, self.model_ids)
         est = frame.estimate
         world_from_cam = invert(est.cam_from_world)
-        pose = np.concatenate(
-            [world_from_cam[:3, 3], quat_wxyz_from_matrix(world_from_cam[:3, :3])]
-        )
+        pose = np.concatenate([world_from_cam[:3, 3], quat_wxyz_from_matrix(world_from_cam[:3, :3])])
         std = est.pose_std if est.success else self._prior_std
         std = np.where(np.isfinite(std), std, STD_BOUND)
         obs["pose"] = np.clip(pose, -POSE_BOUND, POSE_BOUND).astype(np.float32)
@@ -299,9 +291,7 @@ class LocalizationWrapper(BaseParallelWrapper):
         obs["layout"] = self._layout(frame, truth)
         if self.drop_image:
             del obs["image"]
-        position_std = (
-            float(np.sqrt(np.trace(est.covariance[:3, :3]))) if est.success else float("inf")
-        )
+        position_std = float(np.sqrt(np.trace(est.covariance[:3, :3]))) if est.success else float("inf")
         s = frame.scores
         info["localization"] = {
             "success": bool(est.success),
@@ -370,9 +360,7 @@ class LocalizationWrapper(BaseParallelWrapper):
             terms["failure"] = -self.failure_penalty
         elif self.reward_name == "error":
             terms["translation"] = -min(frame.translation_error_m, self.error_cap)
-            terms["rotation"] = -min(
-                self.rotation_weight * frame.rotation_error_deg, self.error_cap
-            )
+            terms["rotation"] = -min(self.rotation_weight * frame.rotation_error_deg, self.error_cap)
         else:
             std = float(np.sqrt(max(np.trace(est.covariance[:3, :3]), 0.0)))
             terms["uncertainty"] = -min(std if np.isfinite(std) else self.error_cap, self.error_cap)
