@@ -24,8 +24,8 @@ from typing import Any
 import numpy as np
 
 from uav_struct_env.errors import ConfigError
-from uav_struct_env.sim.schedule import ScheduleSpec
 from uav_struct_env.sim.imaging import ImagingModel, make_imaging
+from uav_struct_env.sim.schedule import ScheduleSpec
 from uav_struct_env.sim.sensors import SensorModel, make_noise
 from uav_struct_env.sim.uav import FlightLimits, Geofence
 from uav_struct_env.site import LANDMARK_SETS, STAGES, Site
