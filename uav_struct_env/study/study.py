@@ -135,8 +135,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     print((out / "table2.md").read_text())
     print("Table I — detection and association:\n")
     print((out / "table1.md").read_text())
-    print(
-        f"Wrote {out.resolve()}/ (results.json, table1.md, table2.md, per_image.csv, figures) "
-        f"in {results['config']['elapsed_s']} s"
-    )
+    written = "results.json, table1.md, table2.md, per_image.csv" + ("" if args.no_figures else ", figures")
+    print(f"Wrote {out.resolve()}/ ({written}) in {results['config']['elapsed_s']} s")
     return 0
