@@ -122,3 +122,22 @@ def test_bad_study_options_are_rejected_with_the_value():
 def test_cli_reports_bad_options_without_a_traceback(capsys):
     assert main(["--detector", "magic", "--out", "unused"]) == 2
     assert "detector must be one of ('projection', 'learned'), got 'magic'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_full_study_meets_the_issue_targets(tmp_path):
+    """Issue 6's targets on the paper's protocol (projection detector 1 px, robust association)."""
+    from uav_struct_env.study import run_study
+
+    results = run_study(StudyConfig(workers=2), tmp_path, progress=False, figures=False)["methods"]
+    paper_median = {"slab_corners": 0.185, "opening_corners": 1.192, "column_tops": 0.163}
+    for key, median in paper_median.items():
+        r = results[key]
+        assert r["successful"] == r["total"] == 40, key
+        assert r["translation_error_m"]["median"] <= median, key
+        assert r["median_error_over_bound"] <= 1.3, key
+    assert results["column_tops"]["translation_error_m"]["p90"] < 0.4
+    assert results["opening_corners"]["translation_error_m"]["p90"] < 1.5
+    small, large = results["aruco_0.5m"], results["aruco_1.0m"]
+    assert small["successful"] < large["successful"]
+    assert small["translation_error_m"]["p90"] > 2 * large["translation_error_m"]["p90"]
