@@ -177,3 +177,17 @@ def test_composes_with_supersuit_vector_envs():
     assert rew.shape == (4,) and np.all(rew >= -env.crash_penalty - 1e-9)
     assert "localization" in info[0]
     vec.close()
+
+
+def test_aruco_detector_localizes_from_the_rendered_markers():
+    import uav_struct_env
+    from uav_struct_env.wrappers import LocalizationWrapper
+
+    wenv = LocalizationWrapper(uav_struct_env.parallel_env(stage="slab"), landmarks="aruco", detector="aruco")
+    try:
+        _, infos = wenv.reset(seed=0, options={"viewpoint": 0})
+        loc = infos["uav_0"]["localization"]
+        assert loc["success"] and loc["n_correspondences"] >= 4
+        assert loc["translation_error_m"] < 0.5 < loc["prior_translation_error_m"]
+    finally:
+        wenv.close()

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from localization import AssociationScores, Detections, Localizer, PoseEstimate
 from localization.metrics import association_scores, pose_errors
 
-__all__ = ["FrameLocalization", "localize_frame"]
+__all__ = ["FrameLocalization", "localize_aruco_frame", "localize_frame"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,10 +81,32 @@ def localize_frame(
         if det.true_ids is not None
         else _NO_SCORES
     )
+    return _scored(est, det, scores, prior_cam_from_world, gt_cam_from_world, latency)
+
+
+def localize_aruco_frame(
+    aruco: Any,
+    image: Any,
+    prior_cam_from_world: NDArray[np.float64],
+    gt_cam_from_world: NDArray[np.float64] | None = None,
+) -> FrameLocalization:
+    """Localize one frame from its ArUco markers and score it like :func:`localize_frame`.
+
+    ``aruco`` is a :class:`localization.aruco.ArucoLocalizer`. Markers carry their ids, so there
+    are no anonymous detections and no association scores.
+    """
+    t0 = time.perf_counter()
+    est = aruco.localize(image, prior_cam_from_world)
+    latency = time.perf_counter() - t0
+    det = Detections(np.zeros((0, 2)))
+    return _scored(est, det, _NO_SCORES, prior_cam_from_world, gt_cam_from_world, latency)
+
+
+def _scored(est, det, scores, prior, gt, latency) -> FrameLocalization:
     nan = float("nan")
-    if gt_cam_from_world is None:
+    if gt is None:
         t_err = r_err = p_err = nan
     else:
-        p_err = pose_errors(prior_cam_from_world, gt_cam_from_world)[0]
-        t_err, r_err = pose_errors(est.cam_from_world, gt_cam_from_world) if est.success else (nan, nan)
+        p_err = pose_errors(prior, gt)[0]
+        t_err, r_err = pose_errors(est.cam_from_world, gt) if est.success else (nan, nan)
     return FrameLocalization(est, det, scores, float(t_err), float(r_err), float(p_err), latency)

@@ -51,7 +51,7 @@ from localization import Localizer, ProjectionDetector
 from localization.geometry import camera_center, invert, quat_wxyz_from_matrix
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.site import LANDMARK_SETS
-from uav_struct_env.wrappers.frame import FrameLocalization, localize_frame
+from uav_struct_env.wrappers.frame import FrameLocalization, localize_aruco_frame, localize_frame
 
 __all__ = ["DETECTORS", "REWARDS", "LocalizationWrapper"]
 
@@ -276,7 +276,7 @@ class LocalizationWrapper(BaseParallelWrapper):
         truth = info.get("landmarks", {}).get(self.landmarks)
         image = obs["image"]
         if self._aruco is not None:
-            frame = self._localize_aruco(image, prior, gt, truth)
+            frame = localize_aruco_frame(self._aruco, image, prior, gt)
         else:
             context = {"landmarks": info["landmarks"], "image_size": self.image_size}
             frame = localize_frame(self._detector, self.localizer, image, context, prior, gt, self.model_ids)
@@ -311,28 +311,6 @@ class LocalizationWrapper(BaseParallelWrapper):
         }
         self.last_frames[agent] = frame
         return frame
-
-    def _localize_aruco(self, image, prior, gt, truth) -> FrameLocalization:
-        import time
-
-        from localization import Detections
-        from localization.metrics import pose_errors
-        from uav_struct_env.wrappers.frame import _NO_SCORES
-
-        t0 = time.perf_counter()
-        est = self._aruco.localize(image, prior)
-        latency = time.perf_counter() - t0
-        nan = float("nan")
-        t_err, r_err = pose_errors(est.cam_from_world, gt) if est.success else (nan, nan)
-        return FrameLocalization(
-            est,
-            Detections(np.zeros((0, 2))),
-            _NO_SCORES,
-            float(t_err),
-            float(r_err),
-            float(pose_errors(prior, gt)[0]),
-            latency,
-        )
 
     def _layout(self, frame: FrameLocalization, truth: dict | None) -> np.ndarray:
         m = max(len(self.model_ids), 1)
