@@ -65,30 +65,25 @@ def test_reset_without_seed_continues_the_stream():
     env.close()
 
 
-def test_fresh_process_reproduces_the_rollout():
-    here = Path(__file__).parent
-    code = (
-        f"import sys; sys.path.insert(0, {str(here)!r}); "
-        "from test_determinism import rollout_digest, CONFIG; "
-        "print(rollout_digest(0, **CONFIG))"
-    )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True
-    )
-    assert out.stdout.strip().splitlines()[-1] == rollout_digest(0, **CONFIG)
-
-
-@pytest.mark.slow
-def test_default_config_50_steps_fresh_process():
+def _digest_in_fresh_process(timeout: float, **config) -> str:
+    """``rollout_digest(0, **config)`` computed in a new Python process."""
     here = Path(__file__).parent
     code = (
         f"import sys; sys.path.insert(0, {str(here)!r}); "
         "from test_determinism import rollout_digest; "
-        "print(rollout_digest(0, preset='paper', noise='gnss_ins'))"
+        f"print(rollout_digest(0, **{config!r}))"
     )
     out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, timeout=900, check=True
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout, check=True
     )
-    assert out.stdout.strip().splitlines()[-1] == rollout_digest(
-        0, preset="paper", noise="gnss_ins"
-    )
+    return out.stdout.strip().splitlines()[-1]
+
+
+def test_fresh_process_reproduces_the_rollout():
+    assert _digest_in_fresh_process(300, **CONFIG) == rollout_digest(0, **CONFIG)
+
+
+@pytest.mark.slow
+def test_default_config_50_steps_fresh_process():
+    config = {"preset": "paper", "noise": "gnss_ins"}
+    assert _digest_in_fresh_process(900, **config) == rollout_digest(0, **config)
