@@ -138,23 +138,18 @@ def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoin
         for method in methods:
             truth = info["landmarks"][method.landmarks]
             if method.structural:
-                res, ov = _structural(
-                    config,
-                    method,
-                    uav,
-                    viewpoint,
-                    image,
-                    K,
-                    gt,
-                    prior,
-                    truth,
-                    site.landmarks(method.landmarks).xyz,
+                model_xyz = site.landmarks(method.landmarks).xyz
+                est, counts, det = _structural(
+                    config, method, uav, viewpoint, image, K, prior, truth, model_xyz
                 )
-                if ov is not None and viewpoint == overlay_viewpoint and uav == 0:
-                    overlays.append(ov)
+                if viewpoint == overlay_viewpoint and uav == 0:
+                    overlays.append(
+                        _overlay(method, uav, viewpoint, image, K, prior, est, det, truth, model_xyz)
+                    )
             else:
-                res = _aruco(config, method, uav, viewpoint, image, K, gt, prior, truth, site.markers)
-            results.append(res)
+                est, counts = _aruco(method, image, K, prior, truth, site.markers, config.pixel_sigma)
+            sigma = max(config.pixel_sigma, 1e-3)
+            results.append(_row(method, uav, viewpoint, est, gt, prior, truth, K, sigma, **counts))
     return results, overlays
 
 
@@ -221,7 +216,8 @@ def _detector(config, method, uav, viewpoint):
     )
 
 
-def _structural(config, method, uav, viewpoint, image, K, gt, prior, truth, model_xyz):
+def _structural(config, method, uav, viewpoint, image, K, prior, truth, model_xyz):
+    """Detect, associate and solve one image: ``(estimate, counts for _row, detections)``."""
     w, h = config.image_size
     detector = _detector(config, method, uav, viewpoint)
     loc = Localizer(
@@ -232,29 +228,24 @@ def _structural(config, method, uav, viewpoint, image, K, gt, prior, truth, mode
         image_size=(w, h),
     )
     context = {"landmarks": {method.landmarks: truth}, "image_size": (w, h)}
-    frame = localize_frame(detector, loc, image, context, prior, gt, np.asarray(truth["ids"]))
-    est, det, scores = frame.estimate, frame.detections, frame.scores
-    row = _row(
-        method,
-        uav,
-        viewpoint,
-        est,
-        gt,
-        prior,
-        truth,
-        K,
-        max(config.pixel_sigma, 1e-3),
-        n_detections=len(det),
-        n_true_detections=scores.true_detections,
-        n_assigned=scores.assigned,
-        n_correct=scores.correct,
-        latency_s=frame.latency_s,
-    )
+    frame = localize_frame(detector, loc, image, context, prior, None, np.asarray(truth["ids"]))
+    scores = frame.scores
+    counts = {
+        "n_detections": len(frame.detections),
+        "n_true_detections": scores.true_detections,
+        "n_assigned": scores.assigned,
+        "n_correct": scores.correct,
+        "latency_s": frame.latency_s,
+    }
+    return frame.estimate, counts, frame.detections
+
+
+def _overlay(method, uav, viewpoint, image, K, prior, est, det, truth, model_xyz) -> Overlay:
     ids = np.asarray(truth["ids"])
     correct = (est.assignment >= 0) & (ids[np.maximum(est.assignment, 0)] == det.true_ids)
     uv_prior, _ = project(K, prior, model_xyz)
     uv_final, _ = project(K, est.cam_from_world, model_xyz)
-    overlay = Overlay(
+    return Overlay(
         method.key,
         uav,
         viewpoint,
@@ -266,11 +257,11 @@ def _structural(config, method, uav, viewpoint, image, K, gt, prior, truth, mode
         uv_final,
         bool(est.success),
     )
-    return row, overlay
 
 
-def _aruco(config, method, uav, viewpoint, image, K, gt, prior, truth, markers):
-    loc = ArucoLocalizer(markers, K, mode=method.aruco_mode, pixel_sigma=max(config.pixel_sigma, 0.5))
+def _aruco(method, image, K, prior, truth, markers, pixel_sigma):
+    """Localize one image from its markers: ``(estimate, counts)``."""
+    loc = ArucoLocalizer(markers, K, mode=method.aruco_mode, pixel_sigma=max(pixel_sigma, 0.5))
     t0 = time.perf_counter()
     found, corners = loc.detect(image)
     est = loc.localize_corners(found, corners, prior if method.aruco_prior else None)
@@ -280,22 +271,13 @@ def _aruco(config, method, uav, viewpoint, image, K, gt, prior, truth, markers):
     visible = np.asarray(truth["visible"], dtype=bool).reshape(-1, 4).all(axis=1)
     visible_ids = {int(m.id) for m, v in zip(markers, visible, strict=True) if v}
     correct = sum(1 for i in found.tolist() if i in visible_ids)
-    return _row(
-        method,
-        uav,
-        viewpoint,
-        est,
-        gt,
-        prior,
-        truth,
-        K,
-        max(config.pixel_sigma, 1e-3),
-        n_detections=len(found),
-        n_true_detections=len(visible_ids),
-        n_assigned=len(found),
-        n_correct=correct,
-        latency_s=latency,
-    )
+    return est, {
+        "n_detections": len(found),
+        "n_true_detections": len(visible_ids),
+        "n_assigned": len(found),
+        "n_correct": correct,
+        "latency_s": latency,
+    }
 
 
 # ------------------------------------------------------------------------------- scheduling
