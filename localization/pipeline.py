@@ -356,6 +356,16 @@ class Localizer:
         timings["covariance"] = time.perf_counter() - t3
         if not np.all(np.isfinite(T)):
             return fail("PnP returned a non-finite pose", a, assoc.n_hypotheses)
+        spread = _minor_spread_px(det[m])
+        if spread < max(2.0 * self.pixel_sigma, 1.0):
+            # Landmarks whose images lie on one line (a plane seen edge-on) admit several poses
+            # that fit equally well; the covariance at any one of them does not show it.
+            return fail(
+                f"degenerate geometry: the inlier detections lie on a line (spread across it "
+                f"{spread:.2g} px), the landmarks are seen edge-on",
+                a,
+                assoc.n_hypotheses,
+            )
         if self.max_position_std_m is not None:
             std = float(np.sqrt(np.max(np.diag(cov)[:3]))) if np.all(np.isfinite(cov)) else np.inf
             if std > self.max_position_std_m:
@@ -378,3 +388,11 @@ class Localizer:
             prior_mahalanobis_sq=prior_mahalanobis_sq(T, prior, self.prior_sigmas),
             n_hypotheses=assoc.n_hypotheses,
         )
+
+
+def _minor_spread_px(uv: NDArray[np.float64]) -> float:
+    """RMS distance of image points from their best-fit line, px (0 for fewer than 3 points)."""
+    if uv.shape[0] < 3:
+        return 0.0
+    centred = uv - uv.mean(axis=0)
+    return float(np.linalg.svd(centred, compute_uv=False)[-1] / np.sqrt(uv.shape[0]))

@@ -134,3 +134,34 @@ def test_paper_mode_with_ransac_drops_a_gross_outlier(building, center):
     est = Localizer(X, PAPER_K, association="paper", ransac=True).localize(uv, T)
     assert est.success and est.assignment[3] == -1
     assert pose_errors(est.cam_from_world, T)[0] < 0.05
+
+
+def test_landmarks_seen_edge_on_fail_instead_of_a_wrong_success():
+    # Found by hypothesis: four coplanar landmarks at z = 5 seen from a camera at z = 5 image onto
+    # one row; robust association returned a pose 5.5 m off with a 5 cm covariance.
+    X = np.array(
+        [
+            [-0.17086746, -3.00316969, 5.0],
+            [1.61536808, 5.1908609, 5.0],
+            [4.02108388, -0.04083542, 5.0],
+            [-0.18497395, -4.37990883, 5.0],
+        ]
+    )
+    uv = np.array(
+        [[442.45867234, 360.0], [597.61757494, 360.0], [533.95985707, 360.0], [1218.83693991, 360.0]]
+    )
+    R = np.array(
+        [
+            [-6.93647169e-01, 7.20052859e-01, -1.94289595e-02],
+            [2.09305570e-03, -2.49579215e-02, -9.99686311e-01],
+            [-7.20311894e-01, -6.93470246e-01, 1.58048808e-02],
+        ]
+    )
+    u, _, vt = np.linalg.svd(R)  # re-orthonormalize the printed digits
+    prior = np.eye(4)
+    prior[:3, :3] = u @ vt
+    prior[:3, 3] = [2.11405835, 3.84686499, 12.1012296]
+    est = Localizer(X, PAPER_K, association="robust").localize(uv, prior)
+    assert not est.success
+    assert "seen edge-on" in est.failure_reason
+    np.testing.assert_array_equal(est.cam_from_world, prior)

@@ -6,6 +6,9 @@
    ``robust`` success is never farther from the truth than ``1 m + 10 x`` the position RMS from
    its own covariance. (``paper`` association makes no such promise: with a prior that is off by
    metres it silently picks wrong identities, which is why ``robust`` exists.)
+
+``derandomize=True`` makes every run (CI included) draw the same examples, so a failure is
+reproducible rather than a rare flake; to explore new examples, drop it locally.
 """
 
 import numpy as np
@@ -50,7 +53,7 @@ def scenes(draw, clean=False):
     return X, T, det, prior, mode
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(scenes())
 def test_never_crashes_and_always_returns_a_valid_pose(scene):
     X, T, det, prior, mode = scene
@@ -67,7 +70,7 @@ def test_never_crashes_and_always_returns_a_valid_pose(scene):
         np.testing.assert_array_equal(est.cam_from_world, prior)
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(scenes(clean=True))
 def test_robust_success_with_correct_detections_is_near_the_truth(scene):
     X, T, det, prior, _ = scene
