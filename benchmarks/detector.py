@@ -8,6 +8,7 @@ landmark type, precision and recall at 3 px, the median pixel error of true posi
 detection latency per 1280 x 720 image on one core (``cv2.setNumThreads(1)``).
 
     python benchmarks/detector.py --seed 2 --layouts 20 --views 5
+    python benchmarks/detector.py --refiner none     # the keypoint network alone
 """
 
 from __future__ import annotations
@@ -30,11 +31,10 @@ from uav_struct_env.datasets import DatasetConfig, render_layout  # noqa: E402
 
 
 def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0,
-         threshold: float | None = None, model: str | None = None, threads: int = 1,
-         json_out: str | None = None) -> dict:
+         threads: int = 1, json_out: str | None = None, **detector_kwargs) -> dict:
+    """Run the benchmark; ``detector_kwargs`` go to :class:`LearnedDetector` (None: default)."""
     cv2.setNumThreads(threads)
-    kwargs = {} if threshold is None else {"score_threshold": threshold}
-    det = LearnedDetector("all", model=model, **kwargs)
+    det = LearnedDetector("all", **{k: v for k, v in detector_kwargs.items() if v is not None})
     config = DatasetConfig(n_layouts=layouts, views_per_layout=views, seed=seed, scale=1.0)
     counts = {t: {"tp": 0, "fp": 0, "fn": 0, "err": []} for t in LANDMARK_TYPES}
     latencies = []
@@ -57,12 +57,12 @@ def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0
                 c["err"] += d[m >= 0].tolist()
     lat = np.array(latencies) * 1e3
     report = {"seed": seed, "layouts": layouts, "views": views, "images": n_images,
-              "match_px": match_px, "threads": threads, "score_threshold": det.score_threshold,
+              "match_px": match_px, "threads": threads, "detector": repr(det),
               "latency_ms": {"median": float(np.median(lat)), "p90": float(np.percentile(lat, 90)),
                              "mean": float(lat.mean())},
               "types": {}}
     print(f"held-out renders: dataset seed {seed}, {layouts} layouts x {views} views = "
-          f"{n_images} images at 1280x720; match radius {match_px} px")
+          f"{n_images} images at 1280x720; match radius {match_px} px\n{det!r}")
     print(f"{'landmark type':<16} {'GT':>5} {'det':>5} {'precision':>9} {'recall':>7} "
           f"{'median err px':>13}")
     tot = {"tp": 0, "fp": 0, "fn": 0, "err": []}
@@ -78,7 +78,7 @@ def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0
         print(f"{name:<16} {c['tp'] + c['fn']:>5} {c['tp'] + c['fp']:>5} {100 * p:>8.1f}% "
               f"{100 * r:>6.1f}% {e:>13.2f}")
     print(f"latency per 1280x720 image, {threads} thread(s): median {np.median(lat):.1f} ms, "
-          f"p90 {np.percentile(lat, 90):.1f} ms (resize + network + decoding)")
+          f"p90 {np.percentile(lat, 90):.1f} ms (resize + network + decoding + refinement)")
     if json_out:
         Path(json_out).write_text(json.dumps(report, indent=2))
     return report
@@ -90,9 +90,16 @@ if __name__ == "__main__":
     ap.add_argument("--layouts", type=int, default=20)
     ap.add_argument("--views", type=int, default=5)
     ap.add_argument("--match-px", type=float, default=3.0)
-    ap.add_argument("--threshold", type=float, default=None)
-    ap.add_argument("--model", default=None)
+    ap.add_argument("--threshold", type=float, default=None, help="keypoint-network score")
+    ap.add_argument("--model", default=None, help="keypoint-network ONNX (default: committed)")
+    ap.add_argument("--refiner", default=None,
+                    help="refiner ONNX, or 'none' for the network alone (default: committed)")
+    ap.add_argument("--iterations", type=int, default=None, help="refinement passes")
+    ap.add_argument("--refine-threshold", type=float, default=None)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--json", dest="json_out", default=None)
     a = ap.parse_args()
-    main(a.seed, a.layouts, a.views, a.match_px, a.threshold, a.model, a.threads, a.json_out)
+    refiner = {None: None, "none": False}.get(a.refiner, a.refiner)
+    main(a.seed, a.layouts, a.views, a.match_px, a.threads, a.json_out, model=a.model,
+         score_threshold=a.threshold, refiner=refiner, refine_iterations=a.iterations,
+         refine_threshold=a.refine_threshold)

@@ -17,10 +17,12 @@ Pipeline for an ``(H, W, 3)`` uint8 RGB image:
    output, a per-axis parabola through the log-scores), then non-maximum suppression by distance
    (``nms_px``) per type;
 4. pixel coordinates mapped back to the full image (``u + 0.5 = (u' + 0.5) / scale``);
-5. optionally (``corner_window``), slab and opening corners -- image corners of the slab outline --
-   are refined on the full-resolution grey image with ``cv2.cornerSubPix``; a refinement that moves
-   a point by more than ``corner_max_shift`` px is discarded. Column tops (blobs, not corners)
-   keep the network's position.
+5. by default every candidate is refined at full resolution by the patch refiner
+   (:class:`localization.refine.PatchRefiner`: a second small network on a 33 x 33 patch around
+   it, iterated), which also re-scores it: candidates scoring below ``refine_threshold`` are
+   dropped and the rest suppressed again by distance per type. Without the refiner
+   (``refiner=False``), slab and opening corners can instead be refined on the grey image with
+   ``cv2.cornerSubPix`` (``corner_window``; a shift above ``corner_max_shift`` px is discarded).
 
 **Ground truth is used for scoring only.** When the context carries the ground truth of the
 requested landmark set (as the environment and the study provide), :meth:`LearnedDetector.detect`
@@ -43,6 +45,7 @@ from scipy.optimize import linear_sum_assignment
 
 from localization.detect import Detections
 from localization.geometry import as_points
+from localization.refine import PatchRefiner
 
 __all__ = [
     "DEFAULT_MODEL",
@@ -50,6 +53,7 @@ __all__ = [
     "LearnedDetector",
     "decode",
     "match_detections",
+    "nms",
     "subpixel_parabola",
 ]
 
@@ -139,13 +143,7 @@ def decode(
             inside = ((uv[:, 0] >= -0.5) & (uv[:, 0] < w - 0.5)
                       & (uv[:, 1] >= -0.5) & (uv[:, 1] < h - 0.5))
             uv, scores = uv[inside], scores[inside]
-        keep: list[int] = []
-        for i in range(len(uv)):
-            if len(keep) >= max_per_type:
-                break
-            if keep and np.min(np.hypot(*(uv[keep] - uv[i]).T)) < nms_px:
-                continue
-            keep.append(i)
+        keep = nms(uv, nms_px, max_per_type)
         all_uv.append(uv[keep])
         all_s.append(scores[keep])
         all_t.append(np.full(len(keep), int(t), dtype=np.int64))
@@ -154,6 +152,22 @@ def decode(
     kinds = np.concatenate(all_t) if all_t else np.zeros(0, np.int64)
     order = np.argsort(-scores, kind="stable")
     return uv[order], scores[order], kinds[order]
+
+
+def nms(uv: NDArray[np.float64], radius: float, max_keep: int | None = None) -> list[int]:
+    """Greedy non-maximum suppression of points ``uv (N, 2)`` sorted best first.
+
+    Returns the indices kept: a point closer than ``radius`` to a kept one is dropped; at most
+    ``max_keep`` are kept.
+    """
+    keep: list[int] = []
+    for i in range(len(uv)):
+        if max_keep is not None and len(keep) >= max_keep:
+            break
+        if keep and np.min(np.hypot(*(uv[keep] - uv[i]).T)) < radius:
+            continue
+        keep.append(i)
+    return keep
 
 
 def match_detections(
@@ -196,6 +210,11 @@ class LearnedDetector:
         corner_window: half-size (px) of the ``cv2.cornerSubPix`` window for slab and opening
             corners at full resolution; 0 disables the refinement.
         corner_max_shift: largest accepted refinement shift, px.
+        refiner: full-resolution patch refinement of every candidate
+            (:class:`localization.refine.PatchRefiner`): True for the committed refiner, a path
+            for another ONNX refiner, False for none (then ``corner_window`` applies).
+        refine_iterations: refinement passes.
+        refine_threshold: candidates whose refiner score is below this are dropped.
 
     Raises:
         ValueError: for an unknown landmark type or bad numbers; FileNotFoundError for a
@@ -206,13 +225,16 @@ class LearnedDetector:
         self,
         landmarks: str | Sequence[str] = "column_tops",
         model: str | Path | None = None,
-        score_threshold: float = 0.45,
+        score_threshold: float = 0.3,
         nms_px: float = 8.0,
         scale: float = 0.5,
         match_px: float = 3.0,
         max_per_type: int = 64,
         corner_window: int = 3,
         corner_max_shift: float = 3.0,
+        refiner: bool | str | Path = True,
+        refine_iterations: int = 2,
+        refine_threshold: float = 0.5,
     ) -> None:
         if isinstance(landmarks, str):
             names = LANDMARK_TYPES if landmarks == "all" else (landmarks,)
@@ -246,7 +268,14 @@ class LearnedDetector:
             raise ValueError(f"corner_window must be an int >= 0 (px), got {corner_window!r}")
         self.corner_window = corner_window
         self.corner_max_shift = float(corner_max_shift)
+        if not isinstance(refine_threshold, (int, float)) or not 0.0 <= refine_threshold < 1.0:
+            raise ValueError(f"refine_threshold must be a number in [0, 1), got {refine_threshold!r}")
         self._net = cv2.dnn.readNetFromONNX(str(path))
+        if refiner is False:
+            self.refiner = None
+        else:
+            self.refiner = PatchRefiner(None if refiner is True else refiner, refine_iterations)
+        self.refine_threshold = float(refine_threshold)
 
     # --------------------------------------------------------------------------------- core
     def infer(self, image: ArrayLike) -> tuple[NDArray[np.float32], tuple[float, float]]:
@@ -287,10 +316,25 @@ class LearnedDetector:
         full = np.empty_like(uv)
         full[:, 0] = (uv[:, 0] + 0.5) / sx - 0.5
         full[:, 1] = (uv[:, 1] + 0.5) / sy - 0.5
+        if self.refiner is not None:
+            return self._refine(np.asarray(image), full, kinds)
         corners = kinds != LANDMARK_TYPES.index("column_tops")
         if self.corner_window and np.any(corners):
             full[corners] = self._refine_corners(np.asarray(image), full[corners])
         return full, scores, kinds
+
+    def _refine(self, image: NDArray[np.uint8], uv: NDArray, kinds: NDArray) -> tuple:
+        """Patch refinement: refined positions, the refiner's scores, a second NMS per type."""
+        uv, scores = self.refiner.refine(image, uv, kinds)
+        ok = scores >= self.refine_threshold
+        uv, scores, kinds = uv[ok], scores[ok], kinds[ok]
+        order = np.argsort(-scores, kind="stable")
+        uv, scores, kinds = uv[order], scores[order], kinds[order]
+        keep = np.zeros(len(uv), bool)
+        for t in np.unique(kinds):
+            idx = np.flatnonzero(kinds == t)
+            keep[idx[nms(uv[idx], self.nms_px, self.max_per_type)]] = True
+        return uv[keep], scores[keep], kinds[keep]
 
     def _refine_corners(self, image: NDArray[np.uint8], uv: NDArray[np.float64]) -> NDArray:
         gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
@@ -330,4 +374,4 @@ class LearnedDetector:
 
     def __repr__(self) -> str:
         return (f"LearnedDetector(landmarks={self.landmarks!r}, model={self.model_path.name!r}, "
-                f"score_threshold={self.score_threshold})")
+                f"score_threshold={self.score_threshold}, refiner={self.refiner!r})")

@@ -39,13 +39,13 @@ from torch.nn import functional as F
 
 from uav_struct_env.datasets.landmarks import LANDMARK_TYPES, load_labels
 
-__all__ = ["KeypointNet", "export_onnx", "main", "train"]
+__all__ = ["KeypointNet", "conv_bn_relu", "export_checked", "export_onnx", "main", "train"]
 
 STRIDE = 4
 N_TYPES = len(LANDMARK_TYPES)
 
 
-def _cbr(cin: int, cout: int, stride: int = 1) -> nn.Sequential:
+def conv_bn_relu(cin: int, cout: int, stride: int = 1) -> nn.Sequential:
     return nn.Sequential(nn.Conv2d(cin, cout, 3, stride, 1, bias=False), nn.BatchNorm2d(cout),
                          nn.ReLU(inplace=True))
 
@@ -56,13 +56,13 @@ class KeypointNet(nn.Module):
     def __init__(self, width: int = 16) -> None:
         super().__init__()
         c1, c2, c3, c4 = width, int(1.5 * width), 3 * width, 4 * width
-        self.s4 = nn.Sequential(_cbr(3, c1, 2), _cbr(c1, c2, 2), _cbr(c2, c2))
-        self.s8 = nn.Sequential(_cbr(c2, c3, 2), _cbr(c3, c3))
-        self.s16 = nn.Sequential(_cbr(c3, c4, 2), _cbr(c4, c4), _cbr(c4, c4))
+        self.s4 = nn.Sequential(conv_bn_relu(3, c1, 2), conv_bn_relu(c1, c2, 2), conv_bn_relu(c2, c2))
+        self.s8 = nn.Sequential(conv_bn_relu(c2, c3, 2), conv_bn_relu(c3, c3))
+        self.s16 = nn.Sequential(conv_bn_relu(c3, c4, 2), conv_bn_relu(c4, c4), conv_bn_relu(c4, c4))
         self.lat16 = nn.Conv2d(c4, c3, 1)
-        self.fuse8 = _cbr(c3, c3)
+        self.fuse8 = conv_bn_relu(c3, c3)
         self.lat8 = nn.Conv2d(c3, c2, 1)
-        self.fuse4 = _cbr(c2, c2)
+        self.fuse4 = conv_bn_relu(c2, c2)
         self.head = nn.Conv2d(c2, N_TYPES + 2, 1)
         nn.init.constant_(self.head.bias[:N_TYPES], -4.0)  # start near "no keypoint"
         nn.init.zeros_(self.head.bias[N_TYPES:])
@@ -151,13 +151,13 @@ class LandmarkCrops(torch.utils.data.Dataset):
         keep = (uv[:, 0] > -0.5) & (uv[:, 0] < cw - 0.5) & (uv[:, 1] > -0.5) & (uv[:, 1] < ch - 0.5)
         kps = np.column_stack([uv, kps[:, 2]])[keep]
         if self.augment:
-            crop = self._photometric(crop, rng)
+            crop = self.photometric(crop, rng)
         heat, off, mask = _targets(kps, ch // STRIDE, cw // STRIDE, self.sigma)
         x = torch.from_numpy(np.ascontiguousarray(crop.transpose(2, 0, 1))).float()
         return x, torch.from_numpy(heat), torch.from_numpy(off), torch.from_numpy(mask)
 
     @staticmethod
-    def _photometric(img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    def photometric(img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         x = img.astype(np.float32)
         x = x * rng.uniform(0.7, 1.3) + rng.uniform(-25, 25)  # contrast, brightness
         x = x * rng.uniform(0.9, 1.1, 3)  # colour balance
@@ -190,31 +190,35 @@ def loss_fn(out, heat, off, mask):
 
 
 # ------------------------------------------------------------------------------------ export
-def export_onnx(model: KeypointNet, path: str | Path, size: tuple[int, int] = (640, 368)) -> Path:
-    """Export ``model`` to ONNX and check that cv2.dnn reproduces it.
-
-    Eval mode (batch norm folded); traced at ``size = (W, H)`` with H and W as dynamic axes.
-    """
+def export_checked(model: nn.Module, example: torch.Tensor, path: str | Path, input_name: str,
+                   output_name: str, dynamic_axes: dict) -> Path:
+    """Export ``model`` (eval mode, batch norm folded) to ONNX at ``path`` and check that
+    cv2.dnn reproduces torch on ``example`` (max |difference| <= 1e-3, else RuntimeError)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     model = model.eval()
-    x = torch.rand(1, 3, size[1], size[0]) * 255
     with warnings.catch_warnings():  # the TorchScript exporter's deprecation notice
         warnings.simplefilter("ignore", DeprecationWarning)
-        torch.onnx.export(model, x, str(path), opset_version=13, dynamo=False,
-                          input_names=["image"], output_names=["heatmaps_offsets"],
-                          do_constant_folding=True,
-                          dynamic_axes={"image": {2: "height", 3: "width"},
-                                        "heatmaps_offsets": {2: "h4", 3: "w4"}})
+        torch.onnx.export(model, example, str(path), opset_version=13, dynamo=False,
+                          input_names=[input_name], output_names=[output_name],
+                          do_constant_folding=True, dynamic_axes=dynamic_axes)
     net = cv2.dnn.readNetFromONNX(str(path))
-    net.setInput(x.numpy())
+    net.setInput(example.numpy())
     got = net.forward()
     with torch.no_grad():
-        want = model(x).numpy()
+        want = model(example).numpy()
     err = float(np.abs(got - want).max())
     if err > 1e-3:
         raise RuntimeError(f"cv2.dnn output differs from torch by {err:.2e} (> 1e-3)")
     return path
+
+
+def export_onnx(model: KeypointNet, path: str | Path, size: tuple[int, int] = (640, 368)) -> Path:
+    """Export the keypoint net, traced at ``size = (W, H)`` with H and W as dynamic axes."""
+    x = torch.rand(1, 3, size[1], size[0]) * 255
+    return export_checked(model, x, path, "image", "heatmaps_offsets",
+                          {"image": {2: "height", 3: "width"},
+                           "heatmaps_offsets": {2: "h4", 3: "w4"}})
 
 
 # ------------------------------------------------------------------------------------ training
