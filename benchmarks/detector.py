@@ -5,7 +5,8 @@ generator's domain randomization, from a dataset seed never used for training or
 (the committed model: training seed 0, validation seed 1; default here: 2), runs
 :class:`localization.learned.LearnedDetector` on every full-resolution image and prints, per
 landmark type, precision and recall at 3 px, the median pixel error of true positives, and the
-detection latency per 1280 x 720 image on one core (``cv2.setNumThreads(1)``).
+detection latency per 1280 x 720 image on one core (``cv2.setNumThreads(1)``; all images
+are rendered before the timed detection).
 
     python benchmarks/detector.py --seed 2 --layouts 20 --views 5
     python benchmarks/detector.py --refiner none     # the keypoint network alone
@@ -25,6 +26,7 @@ sys.path[:] = [p for p in sys.path if str(Path(p or ".").resolve()) != _HERE]
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
+from tqdm import tqdm  # noqa: E402
 
 from localization.learned import LANDMARK_TYPES, LearnedDetector, match_detections  # noqa: E402
 from uav_struct_env.datasets import DatasetConfig, render_layout  # noqa: E402
@@ -39,22 +41,24 @@ def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0
     counts = {t: {"tp": 0, "fp": 0, "fn": 0, "err": []} for t in LANDMARK_TYPES}
     latencies = []
     n_images = 0
+    # Render everything first: the renderer's own threads must not run during the timing.
+    frames = [f for layout in tqdm(range(layouts), desc="render", unit="layout")
+              for f in render_layout(config, layout)]
     det.detect_all(np.zeros((720, 1280, 3), np.uint8))  # warm-up
-    for layout in range(layouts):
-        for rgb, rec in render_layout(config, layout):
-            t0 = time.perf_counter()
-            uv, _, kinds = det.detect_all(rgb)
-            latencies.append(time.perf_counter() - t0)
-            n_images += 1
-            kps = np.array(rec["keypoints"], np.float64).reshape(-1, 4)
-            for t, name in enumerate(LANDMARK_TYPES):
-                gt = kps[kps[:, 2] == t, :2]
-                m, d = match_detections(uv[kinds == t], gt, match_px)
-                c = counts[name]
-                c["tp"] += int((m >= 0).sum())
-                c["fp"] += int((m < 0).sum())
-                c["fn"] += len(gt) - int((m >= 0).sum())
-                c["err"] += d[m >= 0].tolist()
+    for rgb, rec in frames:
+        t0 = time.perf_counter()
+        uv, _, kinds = det.detect_all(rgb)
+        latencies.append(time.perf_counter() - t0)
+        n_images += 1
+        kps = np.array(rec["keypoints"], np.float64).reshape(-1, 4)
+        for t, name in enumerate(LANDMARK_TYPES):
+            gt = kps[kps[:, 2] == t, :2]
+            m, d = match_detections(uv[kinds == t], gt, match_px)
+            c = counts[name]
+            c["tp"] += int((m >= 0).sum())
+            c["fp"] += int((m < 0).sum())
+            c["fn"] += len(gt) - int((m >= 0).sum())
+            c["err"] += d[m >= 0].tolist()
     lat = np.array(latencies) * 1e3
     report = {"seed": seed, "layouts": layouts, "views": views, "images": n_images,
               "match_px": match_px, "threads": threads, "detector": repr(det),

@@ -75,13 +75,16 @@ class PatchRefiner:
             ``(N, 3, PATCH, PATCH)`` float RGB 0-255; output ``(N, 3 * 3)``: per landmark type
             (channel order of :data:`localization.learned.LANDMARK_TYPES`) the probability of a
             landmark within :data:`POSITIVE_RADIUS` px, then its offset ``(du, dv)`` in px.
-        iterations: refinement passes (each re-centres the patch on the previous estimate).
+        iterations: most refinement passes; each re-centres the patch on the previous estimate.
+        recentre_px: a candidate whose estimate lies within this distance of its patch centre
+            is final (a further pass would see nearly the same patch).
 
     Raises:
         FileNotFoundError: the model file does not exist. ValueError: ``iterations < 1``.
     """
 
-    def __init__(self, model: str | Path | None = None, iterations: int = 2) -> None:
+    def __init__(self, model: str | Path | None = None, iterations: int = 2,
+                 recentre_px: float = 0.5) -> None:
         path = Path(DEFAULT_REFINER if model is None else model)
         if not path.is_file():
             raise FileNotFoundError(f"refiner model not found: {path}")
@@ -89,6 +92,9 @@ class PatchRefiner:
             raise ValueError(f"iterations must be an int >= 1, got {iterations!r}")
         self.model_path = path
         self.iterations = iterations
+        if not isinstance(recentre_px, (int, float)) or recentre_px < 0:
+            raise ValueError(f"recentre_px must be a number >= 0, got {recentre_px!r}")
+        self.recentre_px = float(recentre_px)
         self._net = cv2.dnn.readNetFromONNX(str(path))
 
     def predict(self, image: NDArray[np.uint8], uv: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:
@@ -113,14 +119,18 @@ class PatchRefiner:
         if len(kinds) != len(pts):
             raise ValueError(f"types has {len(kinds)} entries for {len(pts)} candidates")
         scores = np.zeros(len(pts))
-        idx = np.arange(len(pts))
+        active = np.arange(len(pts))
         for _ in range(self.iterations):
-            anchors, prob, off = self.predict(image, pts)
-            if len(anchors) == 0:
+            if len(active) == 0:
                 break
-            pts = anchors + off[idx, kinds]
-            scores = prob[idx, kinds]
+            anchors, prob, off = self.predict(image, pts[active])
+            rows = np.arange(len(active))
+            shift = off[rows, kinds[active]]
+            pts[active] = anchors + shift
+            scores[active] = prob[rows, kinds[active]]
+            active = active[np.hypot(shift[:, 0], shift[:, 1]) > self.recentre_px]
         return pts, scores
 
     def __repr__(self) -> str:
-        return f"PatchRefiner(model={self.model_path.name!r}, iterations={self.iterations})"
+        return (f"PatchRefiner(model={self.model_path.name!r}, iterations={self.iterations}, "
+                f"recentre_px={self.recentre_px})")

@@ -46,6 +46,7 @@ N_TYPES = len(LANDMARK_TYPES)
 
 
 def conv_bn_relu(cin: int, cout: int, stride: int = 1) -> nn.Sequential:
+    """3 x 3 convolution (padding 1, no bias), batch norm, ReLU."""
     return nn.Sequential(nn.Conv2d(cin, cout, 3, stride, 1, bias=False), nn.BatchNorm2d(cout),
                          nn.ReLU(inplace=True))
 
@@ -192,8 +193,11 @@ def loss_fn(out, heat, off, mask):
 # ------------------------------------------------------------------------------------ export
 def export_checked(model: nn.Module, example: torch.Tensor, path: str | Path, input_name: str,
                    output_name: str, dynamic_axes: dict) -> Path:
-    """Export ``model`` (eval mode, batch norm folded) to ONNX at ``path`` and check that
-    cv2.dnn reproduces torch on ``example`` (max |difference| <= 1e-3, else RuntimeError)."""
+    """Export ``model`` to ONNX at ``path`` and check it in cv2.dnn.
+
+    Eval mode (batch norm folded); cv2.dnn must reproduce torch on ``example`` within 1e-3
+    (else RuntimeError).
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     model = model.eval()

@@ -1,4 +1,4 @@
-"""Train the learned detector's full-resolution patch refiner (PyTorch, CPU); export to ONNX.
+r"""Train the learned detector's full-resolution patch refiner (PyTorch, CPU); export to ONNX.
 
 The refiner (:class:`localization.refine.PatchRefiner` at inference, OpenCV DNN) takes a
 ``PATCH x PATCH`` full-resolution patch around a keypoint candidate of the half-resolution
@@ -33,6 +33,7 @@ import argparse
 import json
 import math
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import cv2
@@ -86,8 +87,10 @@ class PatchNet(nn.Module):
 
 # ------------------------------------------------------------------------------------ mining
 def _nearest_offsets(anchors: np.ndarray, kps: np.ndarray) -> np.ndarray:
-    """``(N, 3, 2)``: offset from each anchor to the nearest keypoint of each type (NaN: none
-    within the window)."""
+    """Offsets ``(N, 3, 2)`` from each anchor to the nearest keypoint of each type.
+
+    NaN where no keypoint of that type lies within the window.
+    """
     out = np.full((len(anchors), N_TYPES, 2), np.nan, np.float32)
     for t in range(N_TYPES):
         gt = kps[kps[:, 2] == t, :2]
@@ -101,31 +104,34 @@ def _nearest_offsets(anchors: np.ndarray, kps: np.ndarray) -> np.ndarray:
     return out
 
 
-def mine(data: str, out: str, model: str | None = None, negatives: int = 12, seed: int = 0,
-         progress: bool = True) -> Path:
+def mine(data: str | Sequence[str], out: str, model: str | None = None, negatives: int = 12,
+         seed: int = 0, progress: bool = True) -> Path:
     """Windows around ground truth, keypoint-network candidates and hard negatives -> NPZ.
 
     Args:
-        data: a full-resolution landmark dataset (``scale`` 1.0).
+        data: one or several full-resolution landmark datasets (``scale`` 1.0).
         out: path of the ``.npz`` written (``windows`` uint8 (N, WINDOW, WINDOW, 3), ``offsets``
             float32 (N, 3, 2), ``kind`` int8 (N,), ``image`` int32 (N,)).
         model: keypoint-network ONNX (default: the committed one).
         negatives: hard negatives per image (strong corners > 2 x the positive radius from
             every landmark).
         seed: seed of the negative sampling.
+        progress: show a progress bar.
     """
     from tqdm import tqdm
 
-    labels = load_labels(data)
-    if labels.get("scale") != 1.0:
-        raise ValueError(f"{data}: the refiner trains on full-resolution renders (dataset scale "
-                         f"1.0), got scale {labels.get('scale')!r}")
+    images = []
+    for path in [data] if isinstance(data, (str, Path)) else data:
+        labels = load_labels(path)
+        if labels.get("scale") != 1.0:
+            raise ValueError(f"{path}: the refiner trains on full-resolution renders (dataset "
+                             f"scale 1.0), got scale {labels.get('scale')!r}")
+        images += [(Path(labels["root"]) / rec["file"], rec) for rec in labels["images"]]
     det = LearnedDetector("all", model=model, refiner=False, corner_window=0, score_threshold=0.2)
     rng = np.random.default_rng(seed)
-    root = Path(labels["root"])
     parts: dict[str, list] = {"windows": [], "offsets": [], "kind": [], "image": []}
-    for k, rec in enumerate(tqdm(labels["images"], unit="img", disable=not progress)):
-        img = cv2.cvtColor(cv2.imread(str(root / rec["file"])), cv2.COLOR_BGR2RGB)
+    for k, (file, rec) in enumerate(tqdm(images, unit="img", disable=not progress)):
+        img = cv2.cvtColor(cv2.imread(str(file)), cv2.COLOR_BGR2RGB)
         kps = np.array([kp[:3] for kp in rec["keypoints"]], np.float64).reshape(-1, 3)
         cand, _, _ = det.detect_all(img)
         gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
@@ -242,8 +248,11 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
           max_steps: int | None = None, batch: int = 128, lr: float = 2e-3, width: int = 16,
           seed: int = 0, threads: int = 2, eval_every: int = 500, workers: int = 1,
           log=print) -> dict:
-    """Train from scratch on mined windows; writes ``out/{last,best}.pt``, ``out/log.jsonl``,
-    ``out/refiner.onnx`` and ``out/summary.json``. Returns the summary."""
+    """Train from scratch on mined windows; returns the summary.
+
+    Writes ``out/{last,best}.pt``, ``out/log.jsonl``, ``out/refiner.onnx`` and
+    ``out/summary.json``. Stops after ``minutes`` of wall time or ``max_steps`` steps.
+    """
     torch.manual_seed(seed)
     torch.set_num_threads(threads)
     cv2.setNumThreads(1)
@@ -323,7 +332,8 @@ def main(argv: list[str] | None = None) -> dict:
     """Command line: ``python -m uav_struct_env.train_refiner --data DIR --out DIR``."""
     ap = argparse.ArgumentParser(prog="python -m uav_struct_env.train_refiner",
                                  description="Train the learned detector's patch refiner.")
-    ap.add_argument("--data", required=True, help="full-resolution training dataset")
+    ap.add_argument("--data", required=True, nargs="+",
+                    help="full-resolution training dataset(s)")
     ap.add_argument("--val", default=None, help="full-resolution validation dataset")
     ap.add_argument("--out", required=True)
     ap.add_argument("--windows", default=None,

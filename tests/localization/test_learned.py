@@ -85,6 +85,10 @@ def test_bad_arguments():
         LearnedDetector("column_tops", score_threshold=2.0)
     with pytest.raises(FileNotFoundError, match="not found"):
         LearnedDetector("column_tops", model="/nonexistent.onnx")
+    with pytest.raises(ValueError, match="refine_threshold"):
+        LearnedDetector("column_tops", refine_threshold=1.5)
+    with pytest.raises(FileNotFoundError, match="refiner model not found"):
+        LearnedDetector("column_tops", refiner="/nonexistent/refiner.onnx")
 
 
 needs_model = pytest.mark.skipif(not DEFAULT_MODEL.is_file(), reason="no committed model")
@@ -97,8 +101,10 @@ def test_bad_image():
 
 
 @needs_model
-def test_real_render_column_tops():
-    """On a paper-site render the detector finds the visible column tops within 3 px."""
+@pytest.mark.parametrize("refiner", [True, False], ids=["refined", "network-only"])
+def test_real_render_column_tops(refiner):
+    """On a paper-site render the detector finds the visible column tops within 3 px, with or
+    without the full-resolution refiner."""
     pytest.importorskip("pybullet")
     from localization.geometry import look_at
     from uav_struct_env.sim.world import SiteWorld
@@ -110,7 +116,7 @@ def test_real_render_column_tops():
         cam_from_world = look_at(centre + np.array([-6.0, -30.0, 16.0]), centre)
         res = world.render(cam_from_world, depth=True)
         truth = world.landmark_truth("column_tops", cam_from_world, None, res)
-    det = LearnedDetector("column_tops").detect(
+    det = LearnedDetector("column_tops", refiner=refiner).detect(
         res.rgb, {"landmarks": {"column_tops": truth}, "image_size": (1280, 720)}
     )
     n_visible = int(np.sum(truth["visible"]))
