@@ -9,7 +9,8 @@ detection latency per 1280 x 720 image on one core (``cv2.setNumThreads(1)``; al
 are rendered before the timed detection).
 
     python benchmarks/detector.py --seed 2 --layouts 20 --views 5
-    python benchmarks/detector.py --refiner none     # the keypoint network alone
+    python benchmarks/detector.py --operating-point recall   # as the robust localizer uses it
+    python benchmarks/detector.py --refiner none --threshold 0.45   # the keypoint network alone
 """
 
 from __future__ import annotations
@@ -100,10 +101,13 @@ if __name__ == "__main__":
                     help="refiner ONNX, or 'none' for the network alone (default: committed)")
     ap.add_argument("--iterations", type=int, default=None, help="refinement passes")
     ap.add_argument("--refine-threshold", type=float, default=None)
+    ap.add_argument("--operating-point", default=None, choices=["balanced", "recall"],
+                    help="default thresholds (default: balanced; the study with robust "
+                         "association uses recall)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--json", dest="json_out", default=None)
     a = ap.parse_args()
     refiner = {None: None, "none": False}.get(a.refiner, a.refiner)
     main(a.seed, a.layouts, a.views, a.match_px, a.threads, a.json_out, model=a.model,
          score_threshold=a.threshold, refiner=refiner, refine_iterations=a.iterations,
-         refine_threshold=a.refine_threshold)
+         refine_threshold=a.refine_threshold, operating_point=a.operating_point)

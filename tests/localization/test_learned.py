@@ -7,9 +7,11 @@ import pytest
 
 from localization.learned import (
     DEFAULT_MODEL,
+    OPERATING_POINTS,
     LearnedDetector,
     decode,
     match_detections,
+    operating_point_for,
     subpixel_parabola,
 )
 
@@ -87,11 +89,26 @@ def test_bad_arguments():
         LearnedDetector("column_tops", model="/nonexistent.onnx")
     with pytest.raises(ValueError, match="refine_threshold"):
         LearnedDetector("column_tops", refine_threshold=1.5)
+    with pytest.raises(ValueError, match="operating_point must be one of"):
+        LearnedDetector("column_tops", operating_point="fast")
+    with pytest.raises(ValueError, match="association must be one of"):
+        operating_point_for("hungarian")
     with pytest.raises(FileNotFoundError, match="refiner model not found"):
         LearnedDetector("column_tops", refiner="/nonexistent/refiner.onnx")
 
 
 needs_model = pytest.mark.skipif(not DEFAULT_MODEL.is_file(), reason="no committed model")
+
+
+@needs_model
+def test_operating_points():
+    assert operating_point_for("robust") == "recall" and operating_point_for("paper") == "balanced"
+    recall = LearnedDetector("all", operating_point="recall")
+    assert (recall.score_threshold, recall.refine_threshold) == OPERATING_POINTS["recall"]
+    mixed = LearnedDetector("all", operating_point="recall", refine_threshold=0.6)
+    assert (mixed.score_threshold, mixed.refine_threshold) == (OPERATING_POINTS["recall"][0], 0.6)
+    balanced = LearnedDetector("all")
+    assert (balanced.score_threshold, balanced.refine_threshold) == OPERATING_POINTS["balanced"]
 
 
 @needs_model

@@ -95,10 +95,11 @@ class LocalizationWrapper(BaseParallelWrapper):
             ``aruco`` or ``all``.
         detector: ``"projection"`` (simulated: true projections + noise, misses, clutter),
             ``"aruco"`` (OpenCV markers; only with ``landmarks="aruco"`` and when
-            :mod:`localization.aruco` is installed) or ``"learned"`` (the trained keypoint
-            network of :mod:`localization.learned` on the image, for the structural sets and
-            ``all``; when the env provides the set's truth, its ``true_ids`` -- used for the
-            association scores only -- come from matching to it within 3 px).
+            :mod:`localization.aruco` is installed) or ``"learned"`` (the trained detector of
+            :mod:`localization.learned` -- keypoint network + patch refiner -- on the image, for
+            the structural sets and ``all``, at the operating point that suits ``mode``; when
+            the env provides the set's truth, its ``true_ids`` -- used for the association
+            scores only -- come from matching to it within 3 px).
         mode: association, ``"robust"`` or ``"paper"``.
         reward: ``"error"`` or ``"uncertainty"`` (module docstring).
         pixel_sigma: detector noise, px of the env's images; default 1 px at the paper's
@@ -218,10 +219,12 @@ class LocalizationWrapper(BaseParallelWrapper):
         )
         self._rng = np.random.default_rng()
         if detector == "learned":
-            from localization.learned import LearnedDetector
+            from localization.learned import LearnedDetector, operating_point_for
 
             # The network was trained on images 640 px wide (the paper's camera at half size).
-            self._detector = LearnedDetector(landmarks, scale=min(1.0, 640.0 / w))
+            self._detector = LearnedDetector(
+                landmarks, scale=min(1.0, 640.0 / w), operating_point=operating_point_for(mode)
+            )
         else:
             self._detector = ProjectionDetector(
                 landmarks, self.pixel_sigma, self.miss_rate, self.false_positives, rng=self._rng
