@@ -26,8 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
-import time
 import warnings
 from pathlib import Path
 
@@ -38,6 +36,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from uav_struct_env.datasets.landmarks import LANDMARK_TYPES, load_labels
+from uav_struct_env.train_loop import fit, make_loader
 
 __all__ = ["KeypointNet", "conv_bn_relu", "export_checked", "export_onnx", "main", "train"]
 
@@ -226,7 +225,7 @@ def export_onnx(model: KeypointNet, path: str | Path, size: tuple[int, int] = (6
 
 
 # ------------------------------------------------------------------------------------ training
-def _evaluate(model: KeypointNet, labels: dict, tmp_onnx: Path) -> dict:
+def _evaluate(model: KeypointNet, labels: dict) -> dict:
     """P/R at 1.5 px (3 px full resolution) on a validation set, with the numpy decoder."""
     from localization.learned import decode, match_detections
 
@@ -273,69 +272,21 @@ def train(data: str, out: str, val: str | None = None, minutes: float = 45.0,
     out_dir.mkdir(parents=True, exist_ok=True)
     labels = load_labels(data)
     val_labels = load_labels(val) if val else None
-    ds = LandmarkCrops(labels, crop, seed, epoch_size=10**7)
-    loader = torch.utils.data.DataLoader(
-        ds, batch_size=batch, shuffle=True, num_workers=workers, drop_last=True,
-        generator=torch.Generator().manual_seed(seed), persistent_workers=workers > 0)
+    loader = make_loader(LandmarkCrops(labels, crop, seed, epoch_size=10**7), batch, workers, seed)
     model = KeypointNet(width)
-    n_params = sum(p.numel() for p in model.parameters())
-    opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
-    budget = minutes * 60.0
-    t0 = time.perf_counter()
-    step, best, summary = 0, -1.0, {}
-    logf = open(out_dir / "log.jsonl", "a")
-    ema = None
-    for x, heat, off, mask in loader:
-        elapsed = time.perf_counter() - t0
-        frac = elapsed / budget
-        if max_steps is not None:
-            frac = max(frac, step / max_steps)
-        if frac >= 1.0:
-            break
-        warm = min(1.0, (step + 1) / 200)
-        for g in opt.param_groups:
-            g["lr"] = lr * warm * 0.5 * (1 + math.cos(math.pi * frac))
+
+    def step_loss(batch):
+        x, heat, off, mask = batch
         loss, hm, l1 = loss_fn(model.logits(x), heat, off, mask)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        step += 1
-        ema = loss.item() if ema is None else 0.98 * ema + 0.02 * loss.item()
-        if step % 50 == 0:
-            rec = {"step": step, "time_s": round(elapsed, 1), "loss": round(ema, 4),
-                   "heat": round(hm.item(), 4), "offset": round(l1.item(), 4),
-                   "lr": opt.param_groups[0]["lr"]}
-            logf.write(json.dumps(rec) + "\n")
-            logf.flush()
-            log(rec)
-        if val_labels is not None and step % eval_every == 0:
-            metrics = _evaluate(model, val_labels, out_dir / "tmp.onnx")
-            metrics.update(step=step, time_s=round(time.perf_counter() - t0, 1))
-            logf.write(json.dumps({"val": metrics}) + "\n")
-            logf.flush()
-            log({"val": metrics})
-            if metrics["f1"] > best:
-                best = metrics["f1"]
-                torch.save(model.state_dict(), out_dir / "best.pt")
-                summary["best_val"] = metrics
-        if step % 200 == 0:
-            torch.save(model.state_dict(), out_dir / "last.pt")
-    torch.save(model.state_dict(), out_dir / "last.pt")
-    if val_labels is not None:
-        metrics = _evaluate(model, val_labels, out_dir / "tmp.onnx")
-        metrics.update(step=step, time_s=round(time.perf_counter() - t0, 1))
-        logf.write(json.dumps({"val": metrics}) + "\n")
-        log({"val": metrics})
-        if metrics["f1"] >= best:
-            torch.save(model.state_dict(), out_dir / "best.pt")
-            summary["best_val"] = metrics
-    logf.close()
-    chosen = out_dir / ("best.pt" if (out_dir / "best.pt").exists() else "last.pt")
-    model.load_state_dict(torch.load(chosen))
+        return loss, {"heat": hm, "offset": l1}
+
+    summary = fit(model, loader, step_loss, out_dir, minutes=minutes, max_steps=max_steps, lr=lr,
+                  warmup_steps=200, eval_every=eval_every, log=log,
+                  validate=None if val_labels is None else lambda: _evaluate(model, val_labels))
     onnx_path = export_onnx(model, out_dir / "model.onnx")
-    summary.update(steps=step, params=n_params, train_images=len(labels["images"]),
-                   wall_s=round(time.perf_counter() - t0, 1), checkpoint=chosen.name,
-                   onnx=str(onnx_path), seed=seed, batch=batch, crop=list(crop), width=width)
+    summary.update(params=sum(p.numel() for p in model.parameters()),
+                   train_images=len(labels["images"]), onnx=str(onnx_path), seed=seed,
+                   batch=batch, crop=list(crop), width=width)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
 

@@ -32,7 +32,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -46,6 +45,7 @@ from localization.learned import LANDMARK_TYPES, LearnedDetector, match_detectio
 from localization.refine import HALF, PATCH, POSITIVE_RADIUS, extract_patches
 from uav_struct_env.datasets.landmarks import load_labels
 from uav_struct_env.train_detector import LandmarkCrops, conv_bn_relu, export_checked
+from uav_struct_env.train_loop import fit, make_loader
 
 __all__ = ["MAX_SHIFT", "PatchNet", "PatchSamples", "export_refiner", "main", "mine", "train"]
 
@@ -258,71 +258,25 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
     cv2.setNumThreads(1)
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
-    arrays = dict(np.load(windows))
+    ds = PatchSamples(dict(np.load(windows)), seed)
     val_labels = load_labels(val) if val else None
-    ds = PatchSamples(arrays, seed)
-    loader = torch.utils.data.DataLoader(
-        ds, batch_size=batch, shuffle=True, num_workers=workers, drop_last=True,
-        generator=torch.Generator().manual_seed(seed), persistent_workers=workers > 0)
     model = PatchNet(width)
-    n_params = sum(p.numel() for p in model.parameters())
-    opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
-    budget = minutes * 60.0
-    t0 = time.perf_counter()
-    step, best, summary, ema = 0, -1.0, {}, None
-    logf = open(out_dir / "log.jsonl", "a")
 
-    def validate() -> None:
-        nonlocal best
-        onnx = export_refiner(model, out_dir / "candidate.onnx")
-        metrics = evaluate(onnx, val_labels)
-        metrics.update(step=step, time_s=round(time.perf_counter() - t0, 1))
-        logf.write(json.dumps({"val": metrics}) + "\n")
-        logf.flush()
-        log({"val": metrics})
-        if metrics["f1"] > best:
-            best = metrics["f1"]
-            torch.save(model.state_dict(), out_dir / "best.pt")
-            summary["best_val"] = metrics
-        model.train()
+    def step_loss(batch):
+        x, present, off = batch
+        loss, bce, l1 = loss_fn(model.logits(x), present, off)
+        return loss, {"bce": bce, "offset_px": l1}
 
-    done = False
-    while not done:
-        for x, present, off in loader:
-            frac = (time.perf_counter() - t0) / budget
-            if max_steps is not None:
-                frac = max(frac, step / max_steps)
-            if frac >= 1.0:
-                done = True
-                break
-            warm = min(1.0, (step + 1) / 100)
-            for g in opt.param_groups:
-                g["lr"] = lr * warm * 0.5 * (1 + math.cos(math.pi * frac))
-            loss, bce, l1 = loss_fn(model.logits(x), present, off)
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            step += 1
-            ema = loss.item() if ema is None else 0.98 * ema + 0.02 * loss.item()
-            if step % 50 == 0:
-                rec = {"step": step, "time_s": round(time.perf_counter() - t0, 1),
-                       "loss": round(ema, 4), "bce": round(bce.item(), 4),
-                       "offset_px": round(l1.item(), 4), "lr": opt.param_groups[0]["lr"]}
-                logf.write(json.dumps(rec) + "\n")
-                logf.flush()
-                log(rec)
-            if val_labels is not None and step % eval_every == 0:
-                validate()
-    torch.save(model.state_dict(), out_dir / "last.pt")
-    if val_labels is not None:
-        validate()
-    logf.close()
-    chosen = out_dir / ("best.pt" if (out_dir / "best.pt").exists() else "last.pt")
-    model.load_state_dict(torch.load(chosen))
+    def validate() -> dict:
+        return evaluate(export_refiner(model, out_dir / "candidate.onnx"), val_labels)
+
+    summary = fit(model, make_loader(ds, batch, workers, seed), step_loss, out_dir,
+                  minutes=minutes, max_steps=max_steps, lr=lr, warmup_steps=100,
+                  validate=None if val_labels is None else validate, eval_every=eval_every,
+                  log=log)
     onnx_path = export_refiner(model, out_dir / "refiner.onnx")
     (out_dir / "candidate.onnx").unlink(missing_ok=True)
-    summary.update(steps=step, params=n_params, train_windows=len(ds),
-                   wall_s=round(time.perf_counter() - t0, 1), checkpoint=chosen.name,
+    summary.update(params=sum(p.numel() for p in model.parameters()), train_windows=len(ds),
                    onnx=str(onnx_path), seed=seed, batch=batch, width=width)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary

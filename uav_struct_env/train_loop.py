@@ -1,0 +1,108 @@
+"""The time-budgeted training loop shared by the detector's two networks (PyTorch, CPU).
+
+:func:`fit` runs AdamW with a linear warm-up and a cosine learning-rate schedule over a
+wall-time budget (or a step budget, whichever ends first), logs every 50 steps to
+``out/log.jsonl``, validates every ``eval_every`` steps and at the end, keeps the checkpoint with
+the best validation F1 as ``best.pt`` (``last.pt`` is the latest) and leaves the chosen one loaded
+in the model. Used by :mod:`uav_struct_env.train_detector` and :mod:`uav_struct_env.train_refiner`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+import torch
+from torch import nn
+
+__all__ = ["fit", "make_loader"]
+
+
+def make_loader(dataset: torch.utils.data.Dataset, batch: int, workers: int,
+                seed: int) -> torch.utils.data.DataLoader:
+    """A shuffled, seeded loader of full batches."""
+    return torch.utils.data.DataLoader(
+        dataset, batch_size=batch, shuffle=True, num_workers=workers, drop_last=True,
+        generator=torch.Generator().manual_seed(seed), persistent_workers=workers > 0)
+
+
+def fit(model: nn.Module, loader: Iterable, step_loss: Callable, out_dir: Path, *,
+        minutes: float, max_steps: int | None, lr: float, warmup_steps: int,
+        validate: Callable[[], dict] | None, eval_every: int, log=print) -> dict:
+    """Train ``model`` in place; returns ``{"steps", "wall_s", "checkpoint"[, "best_val"]}``.
+
+    Args:
+        model: the network (its parameters are optimized; ``train()`` mode is restored after
+            every validation).
+        loader: batches, iterated again whenever it is exhausted.
+        step_loss: ``batch -> (loss, {name: tensor})``; the named terms are logged.
+        out_dir: where ``log.jsonl``, ``last.pt`` and ``best.pt`` go.
+        minutes: wall-time budget; the cosine schedule runs over it.
+        max_steps: optional step budget (the schedule then runs over whichever ends first).
+        lr: peak learning rate (AdamW, weight decay 1e-4).
+        warmup_steps: steps of the linear warm-up.
+        validate: ``() -> metrics`` with an ``"f1"`` entry, or None for no validation.
+        eval_every: validation period, steps.
+        log: called with every logged record.
+    """
+    out_dir = Path(out_dir)
+    opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
+    budget = minutes * 60.0
+    t0 = time.perf_counter()
+    step, best, summary, ema = 0, -1.0, {}, None
+    logf = open(out_dir / "log.jsonl", "a")
+
+    def write(rec: dict) -> None:
+        logf.write(json.dumps(rec) + "\n")
+        logf.flush()
+        log(rec)
+
+    def run_validation(final: bool) -> None:
+        nonlocal best
+        metrics = validate()
+        metrics.update(step=step, time_s=round(time.perf_counter() - t0, 1))
+        write({"val": metrics})
+        if metrics["f1"] > best or (final and metrics["f1"] >= best):
+            best = metrics["f1"]
+            torch.save(model.state_dict(), out_dir / "best.pt")
+            summary["best_val"] = metrics
+        model.train()
+
+    done = False
+    while not done:
+        for batch in loader:
+            elapsed = time.perf_counter() - t0
+            frac = elapsed / budget
+            if max_steps is not None:
+                frac = max(frac, step / max_steps)
+            if frac >= 1.0:
+                done = True
+                break
+            warm = min(1.0, (step + 1) / warmup_steps)
+            for g in opt.param_groups:
+                g["lr"] = lr * warm * 0.5 * (1 + math.cos(math.pi * frac))
+            loss, terms = step_loss(batch)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            step += 1
+            ema = loss.item() if ema is None else 0.98 * ema + 0.02 * loss.item()
+            if step % 50 == 0:
+                write({"step": step, "time_s": round(elapsed, 1), "loss": round(ema, 4),
+                       **{k: round(v.item(), 4) for k, v in terms.items()},
+                       "lr": opt.param_groups[0]["lr"]})
+            if validate is not None and step % eval_every == 0:
+                run_validation(final=False)
+            if step % 200 == 0:
+                torch.save(model.state_dict(), out_dir / "last.pt")
+    torch.save(model.state_dict(), out_dir / "last.pt")
+    if validate is not None:
+        run_validation(final=True)
+    logf.close()
+    chosen = out_dir / ("best.pt" if (out_dir / "best.pt").exists() else "last.pt")
+    model.load_state_dict(torch.load(chosen))
+    summary.update(steps=step, wall_s=round(time.perf_counter() - t0, 1), checkpoint=chosen.name)
+    return summary
