@@ -36,7 +36,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from uav_struct_env.datasets.landmarks import LANDMARK_TYPES, load_labels
-from uav_struct_env.train_loop import fit, make_loader
+from uav_struct_env.train_loop import add_training_arguments, fit, make_loader
 
 __all__ = ["KeypointNet", "conv_bn_relu", "export_checked", "export_onnx", "main", "train"]
 
@@ -298,16 +298,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--data", required=True, help="training dataset (labels.json or its folder)")
     ap.add_argument("--val", default=None, help="validation dataset (checkpoint selection)")
     ap.add_argument("--out", required=True)
-    ap.add_argument("--minutes", type=float, default=45.0)
-    ap.add_argument("--max-steps", type=int, default=None)
-    ap.add_argument("--batch", type=int, default=16)
     ap.add_argument("--crop", type=int, nargs=2, default=(256, 192), metavar=("W", "H"))
-    ap.add_argument("--lr", type=float, default=3e-3)
-    ap.add_argument("--width", type=int, default=16)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--workers", type=int, default=1, help="data-loading processes")
-    ap.add_argument("--eval-every", type=int, default=500)
+    add_training_arguments(ap, minutes=45.0, batch=16, lr=3e-3)
     a = ap.parse_args(argv)
     if a.crop[0] % 16 or a.crop[1] % 16:
         raise SystemExit(f"--crop must be multiples of 16, got {a.crop}")

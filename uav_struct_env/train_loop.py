@@ -9,6 +9,7 @@ in the model. Used by :mod:`uav_struct_env.train_detector` and :mod:`uav_struct_
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import time
@@ -18,7 +19,24 @@ from pathlib import Path
 import torch
 from torch import nn
 
-__all__ = ["fit", "make_loader"]
+__all__ = ["add_training_arguments", "fit", "make_loader"]
+
+
+def add_training_arguments(ap: argparse.ArgumentParser, *, minutes: float, batch: int,
+                           lr: float) -> None:
+    """Add the command-line options both trainers share, with per-network defaults.
+
+    ``--minutes --max-steps --batch --lr --width --seed --threads --workers --eval-every``.
+    """
+    ap.add_argument("--minutes", type=float, default=minutes)
+    ap.add_argument("--max-steps", type=int, default=None)
+    ap.add_argument("--batch", type=int, default=batch)
+    ap.add_argument("--lr", type=float, default=lr)
+    ap.add_argument("--width", type=int, default=16)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--workers", type=int, default=1, help="data-loading processes")
+    ap.add_argument("--eval-every", type=int, default=500)
 
 
 def make_loader(dataset: torch.utils.data.Dataset, batch: int, workers: int,

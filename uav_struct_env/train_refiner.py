@@ -45,7 +45,7 @@ from localization.learned import LANDMARK_TYPES, LearnedDetector, match_detectio
 from localization.refine import HALF, PATCH, POSITIVE_RADIUS, extract_patches
 from uav_struct_env.datasets.landmarks import load_labels
 from uav_struct_env.train_detector import LandmarkCrops, conv_bn_relu, export_checked
-from uav_struct_env.train_loop import fit, make_loader
+from uav_struct_env.train_loop import add_training_arguments, fit, make_loader
 
 __all__ = ["MAX_SHIFT", "PatchNet", "PatchSamples", "export_refiner", "main", "mine", "train"]
 
@@ -292,15 +292,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--out", required=True)
     ap.add_argument("--windows", default=None,
                     help="mined windows .npz (default OUT/windows.npz, mined when missing)")
-    ap.add_argument("--minutes", type=float, default=15.0)
-    ap.add_argument("--max-steps", type=int, default=None)
-    ap.add_argument("--batch", type=int, default=128)
-    ap.add_argument("--lr", type=float, default=2e-3)
-    ap.add_argument("--width", type=int, default=16)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--workers", type=int, default=1, help="data-loading processes")
-    ap.add_argument("--eval-every", type=int, default=500)
+    add_training_arguments(ap, minutes=15.0, batch=128, lr=2e-3)
     a = ap.parse_args(argv)
     windows = Path(a.windows or Path(a.out) / "windows.npz")
     if not windows.exists():
