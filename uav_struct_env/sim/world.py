@@ -1,9 +1,11 @@
 """SiteWorld: one pybullet client with one site loaded, rendered through calibrated cameras.
 
 The site is built and loaded once, when the world is made (the environment keeps one world and
-only moves its UAVs on reset). Each world owns its own DIRECT client and a temporary directory
-for the meshes and textures, both released by :meth:`SiteWorld.close` (also on garbage
-collection, and at interpreter exit).
+only moves its UAVs on reset). Each world owns its own DIRECT client, released by
+:meth:`SiteWorld.close` (also on garbage collection, and at interpreter exit). The meshes and
+textures are written to a temporary directory that lives only while pybullet loads them (pybullet
+keeps what it read; renders are identical without the files), so no file outlives the load --
+not even when a pool worker holding a world is terminated, which skips every exit handler.
 
 **Depth precision.** The EGL plugin's depth buffer has 16 bits (measured: steps of exactly
 2**-16). With the camera's near plane at 0.1 m one step is ``z**2 / (0.1 * 65536)``, 0.38 m at
@@ -17,7 +19,6 @@ actually used is returned as ``RenderResult.camera``.
 
 from __future__ import annotations
 
-import shutil
 import tempfile
 import time
 import warnings
@@ -74,11 +75,6 @@ class RenderResult:
     depth_bits: int = 24
 
 
-def _release(client: RenderClient, directory: str) -> None:
-    client.close()
-    shutil.rmtree(directory, ignore_errors=True)
-
-
 class SiteWorld:
     """A pybullet client with ``site`` loaded, rendering RGB, depth and segmentation.
 
@@ -126,8 +122,7 @@ class SiteWorld:
             )
             client = RenderClient("tiny")
         self._client = client
-        self._directory = tempfile.mkdtemp(prefix="uav_struct_env_site_")
-        self._finalizer = weakref.finalize(self, _release, client, self._directory)
+        self._finalizer = weakref.finalize(self, client.close)
         self.site = site
         self.camera = Camera().scaled(*(int(x) for x in image_size))
         self.light = dict(DEFAULT_LIGHT)
@@ -136,7 +131,8 @@ class SiteWorld:
                 site, np.random.default_rng(0) if rng is None else rng, texture_size=texture_size
             )
             client.activate()
-            self.scene: LoadedScene = load_elements(client.client_id, elements, self._directory)
+            with tempfile.TemporaryDirectory(prefix="uav_struct_env_site_") as directory:
+                self.scene: LoadedScene = load_elements(client.client_id, elements, directory)
         except BaseException:
             self.close()
             raise
@@ -360,7 +356,7 @@ class SiteWorld:
 
     # ------------------------------------------------------------------------------ lifetime
     def close(self) -> None:
-        """Disconnect the client and delete the temporary files (idempotent)."""
+        """Disconnect the client (idempotent)."""
         self._finalizer()
 
     def __enter__(self) -> SiteWorld:
