@@ -17,20 +17,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
-# benchmarks/localization.py would shadow the localization package: keep this folder off sys.path.
-_HERE = str(Path(__file__).resolve().parent)
-sys.path[:] = [p for p in sys.path if str(Path(p or ".").resolve()) != _HERE]
+import cv2
+import numpy as np
+from tqdm import tqdm
 
-import cv2  # noqa: E402
-import numpy as np  # noqa: E402
-from tqdm import tqdm  # noqa: E402
-
-from localization.learned import LANDMARK_TYPES, LearnedDetector, match_detections  # noqa: E402
-from uav_struct_env.datasets import DatasetConfig, render_layout  # noqa: E402
+from localization.learned import LANDMARK_TYPES, LearnedDetector, match_detections
+from uav_struct_env.datasets import DatasetConfig, render_layout
 
 
 def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0,

@@ -15,18 +15,11 @@ projections, dict building).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
-# Run as a script, this directory comes first on sys.path, and benchmarks/localization.py would
-# shadow the localization package: drop it.
-_HERE = Path(__file__).resolve().parent
-sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-import uav_struct_env  # noqa: E402
+import uav_struct_env
 
 CONFIGS = {
     "paper 1280x720": ("paper", {}),

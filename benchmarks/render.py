@@ -12,23 +12,16 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import time
 import warnings
-from pathlib import Path
 
-# Run as a script, this folder comes first on sys.path, and benchmarks/localization.py would
-# shadow the `localization` package.
-_HERE = Path(__file__).resolve().parent
-sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from localization.geometry import look_at  # noqa: E402
-from uav_struct_env.errors import RendererUnavailableError  # noqa: E402
-from uav_struct_env.sim.camera import Camera  # noqa: E402
-from uav_struct_env.sim.world import SiteWorld  # noqa: E402
-from uav_struct_env.site import paper_site  # noqa: E402
+from localization.geometry import look_at
+from uav_struct_env.errors import RendererUnavailableError
+from uav_struct_env.sim.camera import Camera
+from uav_struct_env.sim.world import SiteWorld
+from uav_struct_env.site import paper_site
 
 SIZES = ((1280, 720), (640, 360), (128, 72))
 

@@ -13,16 +13,10 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
-
-# benchmarks/localization.py would shadow the localization package when run from this folder
-_HERE = Path(__file__).resolve().parent
-sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 
 
 def measure(env, steps: int, policy: str, seed: int) -> tuple[float, int]:

@@ -22,7 +22,7 @@ The RMS reproduces opening corners and column tops to 2 %; the quoted slab / all
 15-18 % below it (they match the median of the error norm instead, which in turn undershoots the
 other two by 13-15 %). No single per-image scalar reproduces all four under this viewpoint law,
 so the quoted table most likely used a somewhat different law for the slab views; DESIGN.md does
-not say. ``benchmarks/localization.py`` prints all three scalars (RMS, median |e|, largest-axis
+not say. ``benchmarks/localizer.py`` prints all three scalars (RMS, median |e|, largest-axis
 std) beside the quoted numbers.
 """
 

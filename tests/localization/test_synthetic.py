@@ -40,7 +40,7 @@ def test_landmark_context_layout():
 def test_benchmark_smoke(capsys):
     pytest.importorskip("uav_struct_env.site")
     spec = importlib.util.spec_from_file_location(
-        "bench_loc", ROOT / "benchmarks" / "localization.py"
+        "bench_loc", ROOT / "benchmarks" / "localizer.py"
     )
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

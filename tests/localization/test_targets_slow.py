@@ -13,7 +13,7 @@ DESIGN_CRB_POSITION = {"slab_corners": 0.14, "opening_corners": 0.55, "column_to
 def results():
     pytest.importorskip("uav_struct_env.site")
     spec = importlib.util.spec_from_file_location(
-        "bench_loc", ROOT / "benchmarks" / "localization.py"
+        "bench_loc", ROOT / "benchmarks" / "localizer.py"
     )
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

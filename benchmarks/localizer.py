@@ -17,29 +17,24 @@ axis, 2 deg roll and pitch, 5 deg yaw with alternating signs (attitude conventio
 ``uav_struct_env.sim.attitude``). Latency is the CPU time of ``Localizer.localize`` (association +
 PnP + covariance) on this thread, i.e. one core.
 
-    .venv/bin/python benchmarks/localization.py --images 200 --seed 0
+    .venv/bin/python benchmarks/localizer.py --images 200 --seed 0
 """
 
 from __future__ import annotations
 
 import os
-import sys
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-# Run as a script, this file's directory comes first on sys.path and its name would shadow the
-# `localization` package: drop that entry (the package is installed / importable from the root).
-_HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path[:] = [p for p in sys.path if os.path.abspath(p or os.curdir) != _HERE]
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import time  # noqa: E402
+import argparse
+import json
+import time
 
-import cv2  # noqa: E402
-import numpy as np  # noqa: E402
+import cv2
+import numpy as np
 
-from localization import (  # noqa: E402
+from localization import (
     ArucoLocalizer,
     Localizer,
     ProjectionDetector,
@@ -48,19 +43,19 @@ from localization import (  # noqa: E402
     recall_at,
     summarize_errors,
 )
-from localization.geometry import invert  # noqa: E402
-from localization.synthetic import (  # noqa: E402
+from localization.geometry import invert
+from localization.synthetic import (
     PAPER_IMAGE_SIZE,
     PAPER_K,
     landmark_context,
     render_aruco_image,
     sample_viewpoints,
 )
-from uav_struct_env.sim.attitude import (  # noqa: E402
+from uav_struct_env.sim.attitude import (
     attitude_from_world_from_cam,
     world_from_cam_from_attitude,
 )
-from uav_struct_env.site import paper_site  # noqa: E402
+from uav_struct_env.site import paper_site
 
 SETS = ("slab_corners", "opening_corners", "column_tops", "all")
 #: DESIGN.md, "Facts measured": median Cramér-Rao bound, position m / rotation deg.
