@@ -99,10 +99,15 @@ if __name__ == "__main__":
     ap.add_argument("--operating-point", default=None, choices=["balanced", "recall"],
                     help="default thresholds (default: balanced; the study with robust "
                          "association uses recall)")
+    ap.add_argument("--vote-threshold", type=float, default=None,
+                    help="minimum score of a non-peak heatmap cell that proposes a candidate")
+    ap.add_argument("--no-votes", action="store_true",
+                    help="candidates from heatmap peaks only (the decoding before votes)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--json", dest="json_out", default=None)
     a = ap.parse_args()
     refiner = {None: None, "none": False}.get(a.refiner, a.refiner)
     main(a.seed, a.layouts, a.views, a.match_px, a.threads, a.json_out, model=a.model,
          score_threshold=a.threshold, refiner=refiner, refine_iterations=a.iterations,
-         refine_threshold=a.refine_threshold, operating_point=a.operating_point)
+         refine_threshold=a.refine_threshold, operating_point=a.operating_point,
+         votes=None if not a.no_votes else False, vote_threshold=a.vote_threshold)

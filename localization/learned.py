@@ -14,8 +14,11 @@ Pipeline for an ``(H, W, 3)`` uint8 RGB image:
    sigmoid scores) and two sub-cell offset channels;
 3. :func:`decode`: local maxima of each requested heatmap (3 x 3 max filter) above
    ``score_threshold``, refined to sub-pixel with the regressed offsets (or, for a heatmap-only
-   output, a per-axis parabola through the log-scores), then non-maximum suppression by distance
-   (``nms_px``) per type;
+   output, a per-axis parabola through the log-scores); with ``votes`` (the default) also every
+   other cell scoring at least ``vote_threshold``, placed where its offsets point -- two corners
+   of a thin opening one cell apart merge into one peak, but the cells nearer the weaker corner
+   still point at it; then non-maximum suppression by distance (``nms_px``) per type, peaks
+   first;
 4. pixel coordinates mapped back to the full image (``u + 0.5 = (u' + 0.5) / scale``);
 5. by default every candidate is refined at full resolution by the patch refiner
    (:class:`localization.refine.PatchRefiner`: a second small network on a 33 x 33 patch around
@@ -65,14 +68,15 @@ LANDMARK_TYPES = ("column_tops", "slab_corners", "opening_corners")
 DEFAULT_MODEL = Path(__file__).with_name("models") / "landmarks_v1.onnx"
 STRIDE = 4
 _PAD = 16
-#: Operating points ``(keypoint-network score threshold, refiner score threshold)``, chosen on
-#: validation data never used for the reported figures. ``"balanced"`` maximizes the detector's
-#: own F1 at 3 px (validation renders, dataset seed 1). ``"recall"`` keeps weaker candidates for
-#: a localizer that rejects false positives itself (``robust`` association): it maximized the
-#: association F1 and the successful poses of studies on random sites (seeds 11, 12, 14) --
-#: lower thresholds gained nothing more there. For the ``paper`` association, which assigns every
-#: detection, use ``"balanced"``.
-OPERATING_POINTS = {"balanced": (0.3, 0.5), "recall": (0.15, 0.05)}
+#: Operating points ``(keypoint-network score threshold, refiner score threshold, vote
+#: threshold)``, chosen on validation data never used for the reported figures. ``"balanced"``
+#: maximizes the detector's own F1 at 3 px (validation renders, dataset seed 1). ``"recall"``
+#: keeps weaker candidates for a localizer that rejects false positives itself (``robust``
+#: association): it maximized the association F1 and the successful poses of studies on random
+#: sites (seeds 11, 12, 14) -- lower thresholds gained nothing more there, and 0.2 is the highest
+#: vote threshold that kept all of the votes' gain. For the ``paper`` association, which assigns
+#: every detection, use ``"balanced"``.
+OPERATING_POINTS = {"balanced": (0.3, 0.5, 0.3), "recall": (0.15, 0.05, 0.2)}
 
 
 def operating_point_for(association: str) -> str:
@@ -120,6 +124,7 @@ def decode(
     nms_px: float = 4.0,
     max_per_type: int = 64,
     use_offsets: bool = True,
+    vote_threshold: float | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """Detections from one network output.
 
@@ -133,6 +138,11 @@ def decode(
         nms_px: detections of one type closer than this (input pixels) keep only the best.
         max_per_type: at most this many detections per type, best first.
         use_offsets: refine with the offset channels; False uses :func:`subpixel_parabola`.
+        vote_threshold: also propose, from every cell scoring at least this much that is not a
+            3 x 3 peak, the position its offsets point at (offsets are trained on the 3 x 3 cells
+            around each keypoint). Two landmarks of a type one cell apart (a thin stair opening
+            seen at a grazing angle) give one merged peak; the cells nearer the weaker one still
+            point at it. None: peaks only. Needs the offset channels.
 
     Returns:
         ``uv (N, 2)`` in network-input pixels, ``scores (N,)``, ``types (N,)``; sorted by score.
@@ -150,6 +160,10 @@ def decode(
             raise ValueError(f"type channel {t} out of range [0, {n_heat})")
         heat = out[int(t)]
         peaks = (heat >= cv2.dilate(heat, kernel)) & (heat >= score_threshold)
+        if vote_threshold is not None:
+            if not use_offsets:
+                raise ValueError("vote_threshold needs the offset channels (use_offsets=True)")
+            peaks |= heat >= vote_threshold
         rows, cols = np.nonzero(peaks)
         scores = heat[rows, cols].astype(np.float64)
         order = np.argsort(-scores, kind="stable")[: 4 * max_per_type]
@@ -239,6 +253,9 @@ class LearnedDetector:
         refine_threshold: candidates whose refiner score is below this are dropped (None: from
             ``operating_point``).
         operating_point: a key of :data:`OPERATING_POINTS`: the default thresholds.
+        votes: also take candidates from the heatmap cells that are not peaks (see
+            :func:`decode`); False: peaks only.
+        vote_threshold: minimum heatmap score of such a cell (None: from ``operating_point``).
 
     Raises:
         ValueError: for an unknown landmark type or bad numbers; FileNotFoundError for a
@@ -260,6 +277,8 @@ class LearnedDetector:
         refine_iterations: int = 2,
         refine_threshold: float | None = None,
         operating_point: str = "balanced",
+        votes: bool = True,
+        vote_threshold: float | None = None,
     ) -> None:
         if operating_point not in OPERATING_POINTS:
             raise ValueError(
@@ -268,6 +287,7 @@ class LearnedDetector:
         point = OPERATING_POINTS[operating_point]
         score_threshold = point[0] if score_threshold is None else score_threshold
         refine_threshold = point[1] if refine_threshold is None else refine_threshold
+        vote_threshold = point[2] if vote_threshold is None else vote_threshold
         if isinstance(landmarks, str):
             names = LANDMARK_TYPES if landmarks == "all" else (landmarks,)
         else:
@@ -308,6 +328,12 @@ class LearnedDetector:
         else:
             self.refiner = PatchRefiner(None if refiner is True else refiner, refine_iterations)
         self.refine_threshold = float(refine_threshold)
+        if not isinstance(votes, bool):
+            raise ValueError(f"votes must be True or False, got {votes!r}")
+        if not isinstance(vote_threshold, (int, float)) or not 0.0 < vote_threshold <= 1.0:
+            raise ValueError(f"vote_threshold must be a number in (0, 1], got {vote_threshold!r}")
+        self.votes = votes
+        self.vote_threshold = float(vote_threshold)
 
     # --------------------------------------------------------------------------------- core
     def infer(self, image: ArrayLike) -> tuple[NDArray[np.float32], tuple[float, float]]:
@@ -343,7 +369,7 @@ class LearnedDetector:
         size = (max(1, round(w * self.scale)), max(1, round(h * self.scale)))
         uv, scores, kinds = decode(
             out, self.types, size, self.score_threshold, self.nms_px * min(sx, sy),
-            self.max_per_type,
+            self.max_per_type, vote_threshold=self.vote_threshold if self.votes else None,
         )
         full = np.empty_like(uv)
         full[:, 0] = (uv[:, 0] + 0.5) / sx - 0.5
@@ -407,4 +433,5 @@ class LearnedDetector:
     def __repr__(self) -> str:
         return (f"LearnedDetector(landmarks={self.landmarks!r}, model={self.model_path.name!r}, "
                 f"score_threshold={self.score_threshold}, refiner={self.refiner!r}, "
-                f"refine_threshold={self.refine_threshold})")
+                f"refine_threshold={self.refine_threshold}, "
+                f"vote_threshold={self.vote_threshold if self.votes else None})")

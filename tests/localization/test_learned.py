@@ -70,6 +70,30 @@ def test_decode_nms_keeps_best_of_close_peaks():
         decode(out, (1,))
 
 
+def test_decode_votes_recover_a_landmark_merged_into_its_neighbours_peak():
+    # Two corners 1.5 cells apart, as a thin opening seen at a grazing angle gives: one heatmap
+    # peak (the weaker corner's cell is its neighbour), but the cells around each corner carry
+    # offsets pointing at that corner, as the network is trained to.
+    h, w = 20, 30
+    corners = np.array([[10.2, 8.3], [10.4, 9.8]])  # (u, v) in cells
+    heat = np.zeros((1, h, w), np.float32)
+    off = np.zeros((2, h, w), np.float32)
+    for r, c, score, k in [(8, 10, 0.6, 0), (9, 10, 0.8, 1), (10, 10, 0.7, 1), (7, 10, 0.3, 0)]:
+        heat[0, r, c] = score
+        off[:, r, c] = corners[k] - (c, r)
+    out = np.concatenate([heat, off])
+    want = (corners + 0.5) * 4 - 0.5
+    uv, scores, _ = decode(out, (0,), score_threshold=0.3, nms_px=4.0)
+    assert len(uv) == 1 and np.allclose(uv[0], want[1])  # peaks only: the upper corner is lost
+    uv, scores, _ = decode(out, (0,), score_threshold=0.3, nms_px=4.0, vote_threshold=0.5)
+    assert np.allclose(uv, want[[1, 0]]) and np.allclose(scores, [0.8, 0.6])
+    # A vote below its threshold proposes nothing; votes need the offset channels.
+    uv, _, _ = decode(out, (0,), score_threshold=0.3, nms_px=4.0, vote_threshold=0.65)
+    assert len(uv) == 1
+    with pytest.raises(ValueError, match="vote_threshold needs the offset channels"):
+        decode(heat, (0,), use_offsets=False, vote_threshold=0.5)
+
+
 def test_match_detections_one_to_one_within_radius():
     gt = np.array([[10.0, 10.0], [50.0, 50.0]])
     uv = np.array([[11.0, 10.0], [10.5, 10.0], [60.0, 50.0]])
@@ -95,6 +119,10 @@ def test_bad_arguments():
         operating_point_for("hungarian")
     with pytest.raises(FileNotFoundError, match="refiner model not found"):
         LearnedDetector("column_tops", refiner="/nonexistent/refiner.onnx")
+    with pytest.raises(ValueError, match=r"vote_threshold must be a number in \(0, 1\], got 0"):
+        LearnedDetector("column_tops", vote_threshold=0)
+    with pytest.raises(ValueError, match="votes must be True or False, got 'yes'"):
+        LearnedDetector("column_tops", votes="yes")
 
 
 needs_model = pytest.mark.skipif(not DEFAULT_MODEL.is_file(), reason="no committed model")
@@ -103,12 +131,14 @@ needs_model = pytest.mark.skipif(not DEFAULT_MODEL.is_file(), reason="no committ
 @needs_model
 def test_operating_points():
     assert operating_point_for("robust") == "recall" and operating_point_for("paper") == "balanced"
-    recall = LearnedDetector("all", operating_point="recall")
-    assert (recall.score_threshold, recall.refine_threshold) == OPERATING_POINTS["recall"]
+    def point(d):
+        return d.score_threshold, d.refine_threshold, d.vote_threshold
+
+    assert point(LearnedDetector("all", operating_point="recall")) == OPERATING_POINTS["recall"]
     mixed = LearnedDetector("all", operating_point="recall", refine_threshold=0.6)
-    assert (mixed.score_threshold, mixed.refine_threshold) == (OPERATING_POINTS["recall"][0], 0.6)
-    balanced = LearnedDetector("all")
-    assert (balanced.score_threshold, balanced.refine_threshold) == OPERATING_POINTS["balanced"]
+    assert point(mixed) == (OPERATING_POINTS["recall"][0], 0.6, OPERATING_POINTS["recall"][2])
+    assert point(LearnedDetector("all")) == OPERATING_POINTS["balanced"]
+    assert "vote_threshold=None" in repr(LearnedDetector("all", votes=False))
 
 
 @needs_model
