@@ -94,6 +94,21 @@ def test_decode_votes_recover_a_landmark_merged_into_its_neighbours_peak():
         decode(heat, (0,), use_offsets=False, vote_threshold=0.5)
 
 
+def test_decode_votes_never_displace_a_peak():
+    # A strong non-peak cell (0.7, next to the 0.8 peak) whose offsets point onto a weak but
+    # separate peak (0.35): in plain score order it would suppress that peak; peaks go first.
+    h, w = 20, 30
+    heat = np.zeros((1, h, w), np.float32)
+    off = np.zeros((2, h, w), np.float32)
+    heat[0, 9, 10], heat[0, 9, 11], heat[0, 9, 13] = 0.8, 0.7, 0.35
+    off[:, 9, 11] = (1.9, 0.0)  # points at cell (9, 12.9), 0.4 px from the weak peak
+    out = np.concatenate([heat, off])
+    peaks_only = decode(out, (0,), score_threshold=0.3, nms_px=4.0)
+    with_votes = decode(out, (0,), score_threshold=0.3, nms_px=4.0, vote_threshold=0.5)
+    assert np.allclose(peaks_only[1], [0.8, 0.35])
+    assert np.allclose(with_votes[0], peaks_only[0]) and np.allclose(with_votes[1], [0.8, 0.35])
+
+
 def test_match_detections_one_to_one_within_radius():
     gt = np.array([[10.0, 10.0], [50.0, 50.0]])
     uv = np.array([[11.0, 10.0], [10.5, 10.0], [60.0, 50.0]])
@@ -135,8 +150,9 @@ def test_operating_points():
         return d.score_threshold, d.refine_threshold, d.vote_threshold
 
     assert point(LearnedDetector("all", operating_point="recall")) == OPERATING_POINTS["recall"]
-    mixed = LearnedDetector("all", operating_point="recall", refine_threshold=0.6)
-    assert point(mixed) == (OPERATING_POINTS["recall"][0], 0.6, OPERATING_POINTS["recall"][2])
+    mixed = LearnedDetector("all", operating_point="recall", refine_threshold=0.6,
+                            vote_threshold=0.4)
+    assert point(mixed) == (OPERATING_POINTS["recall"][0], 0.6, 0.4)
     assert point(LearnedDetector("all")) == OPERATING_POINTS["balanced"]
     assert "vote_threshold=None" in repr(LearnedDetector("all", votes=False))
 
