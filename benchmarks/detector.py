@@ -110,4 +110,4 @@ if __name__ == "__main__":
     main(a.seed, a.layouts, a.views, a.match_px, a.threads, a.json_out, model=a.model,
          score_threshold=a.threshold, refiner=refiner, refine_iterations=a.iterations,
          refine_threshold=a.refine_threshold, operating_point=a.operating_point,
-         votes=None if not a.no_votes else False, vote_threshold=a.vote_threshold)
+         votes=not a.no_votes, vote_threshold=a.vote_threshold)
