@@ -273,10 +273,13 @@ def train(data: str, out: str, val: str | None = None, minutes: float = 45.0,
     labels = load_labels(data)
     val_labels = load_labels(val) if val else None
     loader = make_loader(LandmarkCrops(labels, crop, seed, epoch_size=10**7), batch, workers, seed)
-    model = KeypointNet(width)
+    # Channels-last (NHWC) convolutions: 108-118 instead of 140-167 ms per batch-16 step on this
+    # project's 2-core CPU (the refiner trainer does the same).
+    model = KeypointNet(width).to(memory_format=torch.channels_last)
 
     def step_loss(batch):
         x, heat, off, mask = batch
+        x = x.contiguous(memory_format=torch.channels_last)
         loss, hm, l1 = loss_fn(model.logits(x), heat, off, mask)
         return loss, {"heat": hm, "offset": l1}
 
