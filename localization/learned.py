@@ -2,9 +2,10 @@
 
 :class:`LearnedDetector` runs a small fully-convolutional keypoint network (trained on simulator
 renders by :mod:`uav_struct_env.train_detector`; weights and their figures in
-``localization/models/``) with OpenCV's DNN module -- no PyTorch at inference -- and decodes its
-output into anonymous sub-pixel detections with scores, following the :class:`Detector` protocol
-of :mod:`localization.detect`, so the localizer takes it in place of the projection detector.
+``localization/models/``) with ONNX Runtime (:mod:`localization.inference`) -- no PyTorch at
+inference -- and decodes its output into anonymous sub-pixel detections with scores, following
+the :class:`Detector` protocol of :mod:`localization.detect`, so the localizer takes it in place
+of the projection detector.
 
 Pipeline for an ``(H, W, 3)`` uint8 RGB image:
 
@@ -48,6 +49,7 @@ from scipy.optimize import linear_sum_assignment
 
 from localization.detect import Detections
 from localization.geometry import as_points
+from localization.inference import OnnxNet
 from localization.refine import PatchRefiner
 
 __all__ = [
@@ -330,7 +332,7 @@ class LearnedDetector:
         self.corner_max_shift = float(corner_max_shift)
         if not isinstance(refine_threshold, (int, float)) or not 0.0 <= refine_threshold < 1.0:
             raise ValueError(f"refine_threshold must be a number in [0, 1), got {refine_threshold!r}")
-        self._net = cv2.dnn.readNetFromONNX(str(path))
+        self._net = OnnxNet(path)
         if refiner is False:
             self.refiner = None
         else:
@@ -359,8 +361,7 @@ class LearnedDetector:
         ph, pw = -(-sh // _PAD) * _PAD, -(-sw // _PAD) * _PAD
         if (ph, pw) != (sh, sw):
             small = cv2.copyMakeBorder(small, 0, ph - sh, 0, pw - sw, cv2.BORDER_REPLICATE)
-        self._net.setInput(cv2.dnn.blobFromImage(small))
-        out = np.asarray(self._net.forward())[0]
+        out = self._net(small.transpose(2, 0, 1)[None])[0]
         return out, (sw / w, sh / h)
 
     def detect_all(

@@ -21,11 +21,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.geometry import as_points
+from localization.inference import OnnxNet
 
 __all__ = ["DEFAULT_REFINER", "HALF", "PATCH", "POSITIVE_RADIUS", "PatchRefiner", "extract_patches"]
 
@@ -95,15 +95,14 @@ class PatchRefiner:
         if not isinstance(recentre_px, (int, float)) or recentre_px < 0:
             raise ValueError(f"recentre_px must be a number >= 0, got {recentre_px!r}")
         self.recentre_px = float(recentre_px)
-        self._net = cv2.dnn.readNetFromONNX(str(path))
+        self._net = OnnxNet(path)
 
     def predict(self, image: NDArray[np.uint8], uv: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:
         """One pass: ``(anchors (N, 2), probabilities (N, 3), offsets (N, 3, 2))``."""
         patches, anchors = extract_patches(image, uv)
         if len(anchors) == 0:
             return anchors, np.zeros((0, 3)), np.zeros((0, 3, 2))
-        self._net.setInput(np.ascontiguousarray(patches.transpose(0, 3, 1, 2), dtype=np.float32))
-        out = np.asarray(self._net.forward(), dtype=np.float64).reshape(len(anchors), 9)
+        out = self._net(patches.transpose(0, 3, 1, 2)).astype(np.float64).reshape(len(anchors), 9)
         return anchors, out[:, :3], out[:, 3:].reshape(-1, 3, 2)
 
     def refine(

@@ -1,7 +1,7 @@
 """Train the learned landmark detector (PyTorch, CPU) and export it to ONNX.
 
 Only this module imports torch (the ``train`` extra). The exported model runs without it, in
-:class:`localization.learned.LearnedDetector` (OpenCV DNN).
+:class:`localization.learned.LearnedDetector` (ONNX Runtime).
 
 The network is a small fully-convolutional CenterNet-style keypoint net: an encoder to stride 16,
 a two-step top-down path back to stride 4, and a head with one heatmap per landmark type
@@ -35,6 +35,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+from localization.inference import OnnxNet
 from uav_struct_env.datasets.landmarks import LANDMARK_TYPES, load_labels
 from uav_struct_env.train_loop import add_training_arguments, fit, make_loader
 
@@ -192,9 +193,9 @@ def loss_fn(out, heat, off, mask):
 # ------------------------------------------------------------------------------------ export
 def export_checked(model: nn.Module, example: torch.Tensor, path: str | Path, input_name: str,
                    output_name: str, dynamic_axes: dict) -> Path:
-    """Export ``model`` to ONNX at ``path`` and check it in cv2.dnn.
+    """Export ``model`` to ONNX at ``path`` and check it in ONNX Runtime (as inference runs it).
 
-    Eval mode (batch norm folded); cv2.dnn must reproduce torch on ``example`` within 1e-3
+    Eval mode (batch norm folded); ONNX Runtime must reproduce torch on ``example`` within 1e-3
     (else RuntimeError).
     """
     path = Path(path)
@@ -205,14 +206,12 @@ def export_checked(model: nn.Module, example: torch.Tensor, path: str | Path, in
         torch.onnx.export(model, example, str(path), opset_version=13, dynamo=False,
                           input_names=[input_name], output_names=[output_name],
                           do_constant_folding=True, dynamic_axes=dynamic_axes)
-    net = cv2.dnn.readNetFromONNX(str(path))
-    net.setInput(example.numpy())
-    got = net.forward()
+    got = OnnxNet(path)(example.numpy())
     with torch.no_grad():
         want = model(example).numpy()
     err = float(np.abs(got - want).max())
     if err > 1e-3:
-        raise RuntimeError(f"cv2.dnn output differs from torch by {err:.2e} (> 1e-3)")
+        raise RuntimeError(f"ONNX Runtime output differs from torch by {err:.2e} (> 1e-3)")
     return path
 
 

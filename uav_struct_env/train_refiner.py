@@ -1,6 +1,6 @@
 r"""Train the learned detector's full-resolution patch refiner (PyTorch, CPU); export to ONNX.
 
-The refiner (:class:`localization.refine.PatchRefiner` at inference, OpenCV DNN) takes a
+The refiner (:class:`localization.refine.PatchRefiner` at inference, ONNX Runtime) takes a
 ``PATCH x PATCH`` full-resolution patch around a keypoint candidate of the half-resolution
 keypoint network and returns, per landmark type, the probability that a landmark of that type
 lies within :data:`~localization.refine.POSITIVE_RADIUS` px of the patch centre and its offset.
@@ -211,7 +211,7 @@ def loss_fn(out: torch.Tensor, present: torch.Tensor, off: torch.Tensor):
 
 
 def export_refiner(model: PatchNet, path: str | Path) -> Path:
-    """Export the refiner with a dynamic batch axis (checked against cv2.dnn)."""
+    """Export the refiner with a dynamic batch axis (checked in ONNX Runtime)."""
     x = torch.rand(5, 3, PATCH, PATCH) * 255
     return export_checked(model, x, path, "patches", "scores_offsets",
                           {"patches": {0: "n"}, "scores_offsets": {0: "n"}})

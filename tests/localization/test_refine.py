@@ -79,3 +79,12 @@ def test_refiner_pulls_displaced_candidates_back_on_a_render():
     ground = np.array([[60.0, 680.0], [1220.0, 690.0], [640.0, 700.0]])
     _, s_ground = PatchRefiner().refine(res.rgb, ground, np.ones(3, int))
     assert np.all(s_ground < 0.5)
+
+
+def test_onnx_net_errors_name_the_bad_value(tmp_path):
+    from localization.inference import OnnxNet
+
+    with pytest.raises(FileNotFoundError, match="ONNX model not found: .*missing.onnx"):
+        OnnxNet(tmp_path / "missing.onnx")
+    with pytest.raises(ValueError, match="threads must be an int >= 1, got 0"):
+        OnnxNet(DEFAULT_REFINER, threads=0)

@@ -1,0 +1,52 @@
+"""ONNX inference for the learned detector's networks, with ONNX Runtime on the CPU.
+
+:class:`OnnxNet` runs one exported network (no PyTorch needed). ONNX Runtime runs both committed
+networks faster than OpenCV's DNN module on this project's 2-core machine, one thread each:
+the keypoint network at 640 x 368 in 15.0 instead of 22.6 ms, the refiner on 24 patches in 4.6
+instead of 12.9 ms. One thread by default: the detector's latency is quoted per core, and study
+workers and parallel environments each hold their own detector.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["OnnxNet"]
+
+
+class OnnxNet:
+    """One ONNX model with a single input and a first output, run on the CPU.
+
+    Args:
+        path: the ``.onnx`` file.
+        threads: intra-op threads (>= 1).
+
+    Raises:
+        FileNotFoundError: if ``path`` is not a file; ValueError for a bad ``threads``.
+    """
+
+    def __init__(self, path: str | Path, threads: int = 1) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise FileNotFoundError(f"ONNX model not found: {self.path}")
+        if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+            raise ValueError(f"threads must be an int >= 1, got {threads!r}")
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = threads
+        options.inter_op_num_threads = 1
+        options.log_severity_level = 3  # errors only
+        self._session = ort.InferenceSession(
+            str(self.path), sess_options=options, providers=["CPUExecutionProvider"]
+        )
+        self._input = self._session.get_inputs()[0].name
+
+    def __call__(self, x: ArrayLike) -> NDArray[np.float32]:
+        """The first output for input ``x`` (cast to contiguous float32)."""
+        return self._session.run(None, {self._input: np.ascontiguousarray(x, dtype=np.float32)})[0]
+
+    def __repr__(self) -> str:
+        return f"OnnxNet({self.path.name!r})"
