@@ -5,12 +5,12 @@ generator's domain randomization, from a dataset seed never used for training or
 (the committed model: training seed 0, validation seed 1; default here: 2), runs
 :class:`localization.learned.LearnedDetector` on every full-resolution image and prints, per
 landmark type, precision and recall at 3 px, the median pixel error of true positives, and the
-detection latency per 1280 x 720 image on one core (``cv2.setNumThreads(1)``; all images
-are rendered before the timed detection).
+detection latency per 1280 x 720 image on one core (``--threads 1``: one ONNX Runtime thread per
+network, ``cv2.setNumThreads(1)``; all images are rendered before the timed detection).
 
     python benchmarks/detector.py --seed 2 --layouts 20 --views 5
     python benchmarks/detector.py --operating-point recall   # as the robust localizer uses it
-    python benchmarks/detector.py --refiner none --threshold 0.45   # the keypoint network alone
+    python benchmarks/detector.py --refiner none --threshold 0.45 --no-votes   # network alone
 """
 
 from __future__ import annotations
@@ -32,7 +32,8 @@ def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0
          threads: int = 1, json_out: str | None = None, **detector_kwargs) -> dict:
     """Run the benchmark; ``detector_kwargs`` go to :class:`LearnedDetector` (None: default)."""
     cv2.setNumThreads(threads)
-    det = LearnedDetector("all", **{k: v for k, v in detector_kwargs.items() if v is not None})
+    det = LearnedDetector("all", threads=threads,
+                          **{k: v for k, v in detector_kwargs.items() if v is not None})
     config = DatasetConfig(n_layouts=layouts, views_per_layout=views, seed=seed, scale=1.0)
     counts = {t: {"tp": 0, "fp": 0, "fn": 0, "err": []} for t in LANDMARK_TYPES}
     latencies = []

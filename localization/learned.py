@@ -266,6 +266,8 @@ class LearnedDetector:
         votes: also take candidates from the heatmap cells that are not peaks (see
             :func:`decode`); False: peaks only.
         vote_threshold: minimum heatmap score of such a cell (None: from ``operating_point``).
+        threads: ONNX Runtime threads of each network (:class:`localization.inference.OnnxNet`;
+            1: the latency figures are per core).
 
     Raises:
         ValueError: for an unknown landmark type or bad numbers; FileNotFoundError for a
@@ -289,6 +291,7 @@ class LearnedDetector:
         operating_point: str = "balanced",
         votes: bool = True,
         vote_threshold: float | None = None,
+        threads: int = 1,
     ) -> None:
         if operating_point not in OPERATING_POINTS:
             raise ValueError(
@@ -332,11 +335,12 @@ class LearnedDetector:
         self.corner_max_shift = float(corner_max_shift)
         if not isinstance(refine_threshold, (int, float)) or not 0.0 <= refine_threshold < 1.0:
             raise ValueError(f"refine_threshold must be a number in [0, 1), got {refine_threshold!r}")
-        self._net = OnnxNet(path)
+        self._net = OnnxNet(path, threads)
         if refiner is False:
             self.refiner = None
         else:
-            self.refiner = PatchRefiner(None if refiner is True else refiner, refine_iterations)
+            self.refiner = PatchRefiner(None if refiner is True else refiner, refine_iterations,
+                                        threads=threads)
         self.refine_threshold = float(refine_threshold)
         if not isinstance(votes, bool):
             raise ValueError(f"votes must be True or False, got {votes!r}")

@@ -78,13 +78,14 @@ class PatchRefiner:
         iterations: most refinement passes; each re-centres the patch on the previous estimate.
         recentre_px: a candidate whose estimate lies within this distance of its patch centre
             is final (a further pass would see nearly the same patch).
+        threads: ONNX Runtime threads (:class:`localization.inference.OnnxNet`).
 
     Raises:
         FileNotFoundError: the model file does not exist. ValueError: ``iterations < 1``.
     """
 
     def __init__(self, model: str | Path | None = None, iterations: int = 2,
-                 recentre_px: float = 0.5) -> None:
+                 recentre_px: float = 0.5, threads: int = 1) -> None:
         path = Path(DEFAULT_REFINER if model is None else model)
         if not path.is_file():
             raise FileNotFoundError(f"refiner model not found: {path}")
@@ -95,7 +96,7 @@ class PatchRefiner:
         if not isinstance(recentre_px, (int, float)) or recentre_px < 0:
             raise ValueError(f"recentre_px must be a number >= 0, got {recentre_px!r}")
         self.recentre_px = float(recentre_px)
-        self._net = OnnxNet(path)
+        self._net = OnnxNet(path, threads)
 
     def predict(self, image: NDArray[np.uint8], uv: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:
         """One pass: ``(anchors (N, 2), probabilities (N, 3), offsets (N, 3, 2))``."""
