@@ -70,16 +70,15 @@ LANDMARK_TYPES = ("column_tops", "slab_corners", "opening_corners")
 DEFAULT_MODEL = Path(__file__).with_name("models") / "landmarks_v1.onnx"
 STRIDE = 4
 _PAD = 16
-#: Operating points ``(keypoint-network score threshold, refiner score threshold, vote
-#: threshold)``, chosen on validation data never used for the reported figures. ``"balanced"``
-#: maximizes the detector's own F1 at 3 px (validation renders, dataset seed 1). ``"recall"``
-#: keeps weaker candidates for a localizer that rejects false positives itself (``robust``
-#: association): it maximized the association F1 and the successful poses of studies on random
-#: sites (seeds 11, 12, 14) -- lower thresholds gained nothing more there. Its vote threshold 0.2
-#: keeps the votes' gain there but one pose (0.15) at half their cost in time (+4 instead of
-#: +8 ms per image). For the ``paper`` association, which assigns every detection, use
-#: ``"balanced"``.
-OPERATING_POINTS = {"balanced": (0.3, 0.5, 0.3), "recall": (0.15, 0.05, 0.2)}
+#: Operating points ``(keypoint-network score threshold, refiner score threshold)``, chosen on
+#: validation data never used for the reported figures. ``"balanced"`` maximizes the detector's
+#: own F1 at 3 px (validation renders, dataset seed 1). ``"recall"`` keeps weaker candidates for
+#: a localizer that rejects false positives itself (``robust`` association): it maximized the
+#: association F1 and the successful poses of studies on random sites (seeds 11, 12, 14) --
+#: lower thresholds gained nothing more there. For the ``paper`` association, which assigns every
+#: detection, use ``"balanced"``. Votes use the keypoint threshold: higher vote thresholds (0.5 at
+#: ``"balanced"``; 0.2, 0.3 at ``"recall"``) did worse on the same data.
+OPERATING_POINTS = {"balanced": (0.3, 0.5), "recall": (0.15, 0.05)}
 
 
 def operating_point_for(association: str) -> str:
@@ -265,7 +264,7 @@ class LearnedDetector:
         operating_point: a key of :data:`OPERATING_POINTS`: the default thresholds.
         votes: also take candidates from the heatmap cells that are not peaks (see
             :func:`decode`); False: peaks only.
-        vote_threshold: minimum heatmap score of such a cell (None: from ``operating_point``).
+        vote_threshold: minimum heatmap score of such a cell (None: ``score_threshold``).
         threads: ONNX Runtime threads of each network (:class:`localization.inference.OnnxNet`;
             1: the latency figures are per core).
 
@@ -300,7 +299,6 @@ class LearnedDetector:
         point = OPERATING_POINTS[operating_point]
         score_threshold = point[0] if score_threshold is None else score_threshold
         refine_threshold = point[1] if refine_threshold is None else refine_threshold
-        vote_threshold = point[2] if vote_threshold is None else vote_threshold
         if isinstance(landmarks, str):
             names = LANDMARK_TYPES if landmarks == "all" else (landmarks,)
         else:
@@ -344,6 +342,8 @@ class LearnedDetector:
         self.refine_threshold = float(refine_threshold)
         if not isinstance(votes, bool):
             raise ValueError(f"votes must be True or False, got {votes!r}")
+        if vote_threshold is None:
+            vote_threshold = score_threshold
         if not isinstance(vote_threshold, (int, float)) or not 0.0 < vote_threshold <= 1.0:
             raise ValueError(f"vote_threshold must be a number in (0, 1], got {vote_threshold!r}")
         self.votes = votes

@@ -147,12 +147,14 @@ needs_model = pytest.mark.skipif(not DEFAULT_MODEL.is_file(), reason="no committ
 def test_operating_points():
     assert operating_point_for("robust") == "recall" and operating_point_for("paper") == "balanced"
     def point(d):
-        return d.score_threshold, d.refine_threshold, d.vote_threshold
+        return d.score_threshold, d.refine_threshold
 
-    assert point(LearnedDetector("all", operating_point="recall")) == OPERATING_POINTS["recall"]
+    recall = LearnedDetector("all", operating_point="recall")
+    assert point(recall) == OPERATING_POINTS["recall"]
+    assert recall.vote_threshold == recall.score_threshold  # votes: the keypoint threshold
     mixed = LearnedDetector("all", operating_point="recall", refine_threshold=0.6,
                             vote_threshold=0.4)
-    assert point(mixed) == (OPERATING_POINTS["recall"][0], 0.6, 0.4)
+    assert point(mixed) == (OPERATING_POINTS["recall"][0], 0.6) and mixed.vote_threshold == 0.4
     assert point(LearnedDetector("all")) == OPERATING_POINTS["balanced"]
     assert "vote_threshold=None" in repr(LearnedDetector("all", votes=False))
 
