@@ -57,6 +57,7 @@ __all__ = [
     "LANDMARK_TYPES",
     "LearnedDetector",
     "OPERATING_POINTS",
+    "TRAINED_WIDTH",
     "decode",
     "match_detections",
     "nms",
@@ -70,6 +71,8 @@ LANDMARK_TYPES = ("column_tops", "slab_corners", "opening_corners")
 DEFAULT_MODEL = Path(__file__).with_name("models") / "landmarks_v1.onnx"
 STRIDE = 4
 _PAD = 16
+#: Width (px) of the images the keypoint network was trained on: the paper's camera at half size.
+TRAINED_WIDTH = 640
 #: Operating points ``(keypoint-network score threshold, refiner score threshold)``, chosen on
 #: validation data never used for the reported figures. ``"balanced"`` maximizes the detector's
 #: own F1 at 3 px (validation renders, dataset seed 1). ``"recall"`` keeps weaker candidates for
@@ -169,13 +172,13 @@ def decode(
             groups.append((heat >= vote_threshold) & ~peaks)
         # Peaks first, each group best first, into the suppression: votes only add candidates,
         # never displace a peak.
-        rows_cols = []
+        rows_list, cols_list = [], []
         for mask in groups:
             r, c = np.nonzero(mask)
             best = np.argsort(-heat[r, c], kind="stable")[: 4 * max_per_type]
-            rows_cols.append((r[best], c[best]))
-        rows = np.concatenate([r for r, _ in rows_cols])
-        cols = np.concatenate([c for _, c in rows_cols])
+            rows_list.append(r[best])
+            cols_list.append(c[best])
+        rows, cols = np.concatenate(rows_list), np.concatenate(cols_list)
         scores = heat[rows, cols].astype(np.float64)
         if use_offsets:
             off = np.stack([out[n_heat, rows, cols], out[n_heat + 1, rows, cols]], axis=1)
@@ -333,21 +336,33 @@ class LearnedDetector:
         self.corner_max_shift = float(corner_max_shift)
         if not isinstance(refine_threshold, (int, float)) or not 0.0 <= refine_threshold < 1.0:
             raise ValueError(f"refine_threshold must be a number in [0, 1), got {refine_threshold!r}")
-        self._net = OnnxNet(path, threads)
-        if refiner is False:
-            self.refiner = None
-        else:
-            self.refiner = PatchRefiner(None if refiner is True else refiner, refine_iterations,
-                                        threads=threads)
-        self.refine_threshold = float(refine_threshold)
         if not isinstance(votes, bool):
             raise ValueError(f"votes must be True or False, got {votes!r}")
         if vote_threshold is None:
             vote_threshold = score_threshold
         if not isinstance(vote_threshold, (int, float)) or not 0.0 < vote_threshold <= 1.0:
             raise ValueError(f"vote_threshold must be a number in (0, 1], got {vote_threshold!r}")
+        self.refine_threshold = float(refine_threshold)
         self.votes = votes
         self.vote_threshold = float(vote_threshold)
+        self._net = OnnxNet(path, threads)
+        if refiner is False:
+            self.refiner = None
+        else:
+            self.refiner = PatchRefiner(None if refiner is True else refiner, refine_iterations,
+                                        threads=threads)
+
+    @classmethod
+    def for_localizer(cls, landmarks: str | Sequence[str], image_width: int,
+                      association: str) -> LearnedDetector:
+        """The detector for images ``image_width`` px wide and a localizer of ``association``.
+
+        Downscales to the training width (:data:`TRAINED_WIDTH`, never up) and takes the
+        operating point of :func:`operating_point_for`; the study and the LocalizationWrapper
+        build theirs this way.
+        """
+        return cls(landmarks, scale=min(1.0, TRAINED_WIDTH / image_width),
+                   operating_point=operating_point_for(association))
 
     # --------------------------------------------------------------------------------- core
     def infer(self, image: ArrayLike) -> tuple[NDArray[np.float32], tuple[float, float]]:

@@ -157,6 +157,10 @@ def test_operating_points():
     assert point(mixed) == (OPERATING_POINTS["recall"][0], 0.6) and mixed.vote_threshold == 0.4
     assert point(LearnedDetector("all")) == OPERATING_POINTS["balanced"]
     assert "vote_threshold=None" in repr(LearnedDetector("all", votes=False))
+    study = LearnedDetector.for_localizer("slab_corners", 1280, "robust")
+    assert study.scale == 0.5 and point(study) == OPERATING_POINTS["recall"]
+    small = LearnedDetector.for_localizer("all", 320, "paper")
+    assert small.scale == 1.0 and point(small) == OPERATING_POINTS["balanced"]
 
 
 @needs_model

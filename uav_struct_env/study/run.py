@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from localization import Localizer, ProjectionDetector, cramer_rao_bound
 from localization.aruco import ArucoLocalizer
 from localization.geometry import camera_center, invert, project
-from localization.learned import LearnedDetector, operating_point_for
+from localization.learned import LearnedDetector
 from localization.metrics import pose_errors
 from uav_struct_env.site.io import load_site
 from uav_struct_env.study.protocol import METHODS, Method, Scene, StudyConfig
@@ -194,20 +194,16 @@ def _row(method, uav, viewpoint, est, gt, prior, truth, K, pixel_sigma, **counts
     )
 
 
-_LEARNED: dict[tuple[str, float, str], LearnedDetector] = {}
+_LEARNED: dict[tuple[str, int, str], LearnedDetector] = {}
 
 
 def _detector(config, method, uav, viewpoint):
     if config.detector == "learned":
-        # One detector per process and landmark set; the network runs on the image downscaled to
-        # 640 px wide, as trained. Its true_ids come from matching to the visible ground truth
-        # within 3 px: scoring only (see localization.learned).
-        scale = min(1.0, 640.0 / config.image_size[0])
-        key = (method.landmarks, scale, config.association)
+        # One detector per process and landmark set. Its true_ids come from matching to the
+        # visible ground truth within 3 px: scoring only (see localization.learned).
+        key = (method.landmarks, config.image_size[0], config.association)
         if key not in _LEARNED:
-            _LEARNED[key] = LearnedDetector(
-                method.landmarks, scale=scale, operating_point=operating_point_for(config.association)
-            )
+            _LEARNED[key] = LearnedDetector.for_localizer(*key)
         return _LEARNED[key]
     return ProjectionDetector(
         method.landmarks,

@@ -219,12 +219,9 @@ class LocalizationWrapper(BaseParallelWrapper):
         )
         self._rng = np.random.default_rng()
         if detector == "learned":
-            from localization.learned import LearnedDetector, operating_point_for
+            from localization.learned import LearnedDetector
 
-            # The network was trained on images 640 px wide (the paper's camera at half size).
-            self._detector = LearnedDetector(
-                landmarks, scale=min(1.0, 640.0 / w), operating_point=operating_point_for(mode)
-            )
+            self._detector = LearnedDetector.for_localizer(landmarks, w, mode)
         else:
             self._detector = ProjectionDetector(
                 landmarks, self.pixel_sigma, self.miss_rate, self.false_positives, rng=self._rng
