@@ -6,6 +6,8 @@ import pytest
 sb3 = pytest.importorskip("stable_baselines3")
 ss = pytest.importorskip("supersuit")
 
+from stable_baselines3.common.logger import configure  # noqa: E402
+
 import uav_struct_env  # noqa: E402
 
 SMALL_RL = {"image_size": (64, 36), "render_mode": "rgb_array", "max_cycles": 32}
@@ -22,12 +24,17 @@ def make_vec_env(num_vec_envs=1, num_cpus=0):
 
 
 @pytest.mark.filterwarnings("ignore:The `render_mode` attribute is not defined")
-def test_ppo_multi_input_policy_trains_a_few_hundred_steps():
+def test_ppo_multi_input_policy_trains_a_few_hundred_steps(tmp_path):
     vec = make_vec_env()
     assert vec.num_envs == 4  # one per UAV
     # no PPO(seed=...): SB3 would call vec.seed(), which SuperSuit 3.11's ConcatVecEnv lacks
     model = sb3.PPO("MultiInputPolicy", vec, n_steps=64, batch_size=64, n_epochs=1, device="cpu")
+    # an explicit logger: SB3's default one makes an empty SB3-<date> directory in /tmp per run
+    model.set_logger(configure(str(tmp_path), ["csv"]))
     model.learn(total_timesteps=256)
+    header, *rows = (tmp_path / "progress.csv").read_text().splitlines()
+    assert len(rows) == 256 // (64 * vec.num_envs)  # one row per rollout of 64 steps x 4 envs
+    assert rows[-1].split(",")[header.split(",").index("time/total_timesteps")] == "256"
     obs = vec.reset()
     action, _ = model.predict(obs, deterministic=True)
     assert action.shape == (4, 5) and np.all(np.abs(action) <= 1)
