@@ -353,15 +353,20 @@ class LearnedDetector:
                                         threads=threads)
 
     @classmethod
-    def for_localizer(cls, landmarks: str | Sequence[str], image_width: int,
-                      association: str) -> LearnedDetector:
+    def for_localizer(cls, landmarks: str | Sequence[str], image_width: int, association: str,
+                      model: str | Path | None = None,
+                      refiner: bool | str | Path = True) -> LearnedDetector:
         """The detector for images ``image_width`` px wide and a localizer of ``association``.
 
         Downscales to the training width (:data:`TRAINED_WIDTH`, never up) and takes the
         operating point of :func:`operating_point_for`; the study and the LocalizationWrapper
-        build theirs this way.
+        build theirs this way. ``model`` and ``refiner`` select other weights (for example
+        networks retrained with :mod:`uav_struct_env.train_detector` and
+        :mod:`uav_struct_env.train_refiner`), as in the constructor; the operating point's
+        thresholds were chosen for the committed weights.
         """
-        return cls(landmarks, scale=min(1.0, TRAINED_WIDTH / image_width),
+        return cls(landmarks, model=model, refiner=refiner,
+                   scale=min(1.0, TRAINED_WIDTH / image_width),
                    operating_point=operating_point_for(association))
 
     # --------------------------------------------------------------------------------- core

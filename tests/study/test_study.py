@@ -119,9 +119,32 @@ def test_bad_study_options_are_rejected_with_the_value():
         StudyConfig(methods=("doors",))
 
 
+def test_learned_detector_weights_by_path(tmp_path, monkeypatch):
+    from localization.learned import DEFAULT_MODEL
+    from localization.refine import DEFAULT_REFINER
+    from uav_struct_env.study.run import _detector
+
+    with pytest.raises(ConfigError, match=r"detector_model applies to detector='learned' only, "
+                                          r"got detector='projection'"):
+        StudyConfig(detector_model=str(DEFAULT_MODEL))
+    with pytest.raises(ConfigError, match=r"refiner_model must be an existing ONNX file, got 'no.onnx'"):
+        StudyConfig(detector="learned", refiner_model="no.onnx")
+    model, refiner = tmp_path / "kp.onnx", tmp_path / "ref.onnx"
+    model.write_bytes(DEFAULT_MODEL.read_bytes())
+    refiner.write_bytes(DEFAULT_REFINER.read_bytes())
+    monkeypatch.chdir(tmp_path)
+    config = StudyConfig(detector="learned", detector_model="kp.onnx", refiner_model="ref.onnx")
+    assert config.detector_model == str(model.resolve())  # recorded absolute in results.json
+    det = _detector(config, next(m for m in METHODS if m.key == "slab_corners"), 0, 0)
+    assert det.model_path == model.resolve() and det.refiner.model_path == refiner.resolve()
+    assert det.landmarks == "slab_corners" and det.scale == 0.5
+
+
 def test_cli_reports_bad_options_without_a_traceback(capsys):
     assert main(["--detector", "magic", "--out", "unused"]) == 2
     assert "detector must be one of ('projection', 'learned'), got 'magic'" in capsys.readouterr().err
+    assert main(["--detector-model", "kp.onnx", "--out", "unused"]) == 2
+    assert "detector_model applies to detector='learned' only" in capsys.readouterr().err
 
 
 @pytest.mark.slow

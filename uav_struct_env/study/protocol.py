@@ -161,6 +161,11 @@ class StudyConfig:
         imaging: camera effects on the rendered images (``"ideal"`` or ``"camera"``, see
             :mod:`uav_struct_env.sim.imaging`); they matter to pixel-reading detectors (ArUco,
             learned), not to the projection detector.
+        detector_model: with ``detector="learned"``, the keypoint network's ONNX file (None:
+            the committed ``localization/models/landmarks_v1.onnx``), e.g. one retrained with
+            ``python -m uav_struct_env.train_detector``; stored resolved to an absolute path.
+        refiner_model: with ``detector="learned"``, the patch refiner's ONNX file (None: the
+            committed one), e.g. from ``python -m uav_struct_env.train_refiner``.
         workers: processes rendering and localizing in parallel.
         methods: keys of :data:`METHODS` to run (default all).
     """
@@ -178,6 +183,8 @@ class StudyConfig:
     false_positives: float = 0.0
     renderer: str = "auto"
     imaging: str = "ideal"
+    detector_model: str | None = None
+    refiner_model: str | None = None
     workers: int = 1
     methods: tuple[str, ...] = field(default_factory=lambda: tuple(m.key for m in METHODS))
 
@@ -212,6 +219,17 @@ class StudyConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi) or math.isnan(v):
                 raise ConfigError(f"{name} must be a number in [{lo}, {hi}], got {v!r}")
+        for name in ("detector_model", "refiner_model"):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if self.detector != "learned":
+                raise ConfigError(
+                    f"{name} applies to detector='learned' only, got detector={self.detector!r}"
+                )
+            if not isinstance(v, (str, Path)) or not Path(v).is_file():
+                raise ConfigError(f"{name} must be an existing ONNX file, got {v!r}")
+            object.__setattr__(self, name, str(Path(v).resolve()))
         keys = [m.key for m in METHODS]
         unknown = [k for k in self.methods if k not in keys]
         if unknown or not self.methods:

@@ -194,14 +194,15 @@ def _row(method, uav, viewpoint, est, gt, prior, truth, K, pixel_sigma, **counts
     )
 
 
-_LEARNED: dict[tuple[str, int, str], LearnedDetector] = {}
+_LEARNED: dict[tuple, LearnedDetector] = {}
 
 
 def _detector(config, method, uav, viewpoint):
     if config.detector == "learned":
         # One detector per process and landmark set. Its true_ids come from matching to the
         # visible ground truth within 3 px: scoring only (see localization.learned).
-        key = (method.landmarks, config.image_size[0], config.association)
+        key = (method.landmarks, config.image_size[0], config.association,
+               config.detector_model, config.refiner_model or True)
         if key not in _LEARNED:
             _LEARNED[key] = LearnedDetector.for_localizer(*key)
         return _LEARNED[key]

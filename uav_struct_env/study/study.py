@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from localization.learned import DEFAULT_MODEL
+from localization.refine import DEFAULT_REFINER
 from uav_struct_env.site import make_site
 from uav_struct_env.study.figures import plot_error_cdfs, plot_fig2, plot_viewpoint_map
 from uav_struct_env.study.protocol import ASSOCIATIONS, DETECTORS, NOISES, StudyConfig
@@ -99,9 +101,29 @@ def _parser() -> argparse.ArgumentParser:
         choices=("ideal", "camera"),
         help="camera effects on the rendered images: ideal (none) or camera (blur, noise, JPEG)",
     )
+    p.add_argument(
+        "--detector-model",
+        default=None,
+        metavar="ONNX",
+        help="with --detector learned: keypoint-network weights (default: the committed model)",
+    )
+    p.add_argument(
+        "--refiner-model",
+        default=None,
+        metavar="ONNX",
+        help="with --detector learned: patch-refiner weights (default: the committed refiner)",
+    )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
+
+
+def _detector_label(config: StudyConfig) -> str:
+    if config.detector != "learned":
+        return f"{config.detector} detector at {config.pixel_sigma} px"
+    names = [Path(p).name if p else default.name for p, default in
+             ((config.detector_model, DEFAULT_MODEL), (config.refiner_model, DEFAULT_REFINER))]
+    return f"learned detector ({' + '.join(names)})"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -120,6 +142,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             false_positives=args.false_positives,
             renderer=args.renderer,
             imaging=args.imaging,
+            detector_model=args.detector_model,
+            refiner_model=args.refiner_model,
             workers=args.workers,
         )
     except ValueError as err:
@@ -129,7 +153,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = Path(args.out)
     print(
         f"\nTable II — camera-pose accuracy ({config.association} association, {config.noise} prior, "
-        f"{config.detector} detector at {config.pixel_sigma} px, {config.imaging} imaging, "
+        f"{_detector_label(config)}, {config.imaging} imaging, "
         f"seed {config.seed}):\n"
     )
     print((out / "table2.md").read_text())

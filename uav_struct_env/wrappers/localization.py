@@ -41,6 +41,7 @@ ends everyone's episode). Set ``alive_bonus=0`` for the bare "minus error" rewar
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -116,6 +117,10 @@ class LocalizationWrapper(BaseParallelWrapper):
         crash_penalty: subtracted when an agent is terminated (geofence/collision).
         localizer_kwargs: extra :class:`~localization.Localizer` arguments. By default the
             robust gates given in px at the paper's resolution are scaled to the env's width.
+        detector_model: with ``detector="learned"``, another keypoint network (ONNX file; None:
+            the committed one), e.g. retrained with ``python -m uav_struct_env.train_detector``.
+        refiner_model: with ``detector="learned"``, another patch refiner (ONNX file; None: the
+            committed one).
 
     Raises:
         ConfigError: for an unknown option or when the env does not provide the landmark truth.
@@ -139,8 +144,17 @@ class LocalizationWrapper(BaseParallelWrapper):
         alive_bonus: float | None = None,
         crash_penalty: float = 1.0,
         localizer_kwargs: dict[str, Any] | None = None,
+        detector_model: str | Path | None = None,
+        refiner_model: str | Path | None = None,
     ) -> None:
         super().__init__(env)
+        for name, path in (("detector_model", detector_model), ("refiner_model", refiner_model)):
+            if path is None:
+                continue
+            if detector != "learned":
+                raise ConfigError(f"{name} applies to detector='learned' only, got detector={detector!r}")
+            if not isinstance(path, (str, Path)) or not Path(path).is_file():
+                raise ConfigError(f"{name} must be an existing ONNX file, got {path!r}")
         if landmarks not in LANDMARK_SETS:
             raise ConfigError(f"landmarks must be one of {LANDMARK_SETS}, got {landmarks!r}")
         if detector not in DETECTORS:
@@ -221,7 +235,9 @@ class LocalizationWrapper(BaseParallelWrapper):
         if detector == "learned":
             from localization.learned import LearnedDetector
 
-            self._detector = LearnedDetector.for_localizer(landmarks, w, mode)
+            self._detector = LearnedDetector.for_localizer(
+                landmarks, w, mode, model=detector_model, refiner=refiner_model or True
+            )
         else:
             self._detector = ProjectionDetector(
                 landmarks, self.pixel_sigma, self.miss_rate, self.false_positives, rng=self._rng
