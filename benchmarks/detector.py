@@ -11,6 +11,12 @@ network, ``cv2.setNumThreads(1)``; all images are rendered before the timed dete
     python benchmarks/detector.py --seed 2 --layouts 20 --views 5
     python benchmarks/detector.py --operating-point recall   # as the robust localizer uses it
     python benchmarks/detector.py --refiner none --threshold 0.45 --no-votes   # network alone
+    python benchmarks/detector.py --no-votes --baseline   # A/B against the default, interleaved
+
+This virtual machine's speed drifts by about 10 % within minutes, so two separate runs cannot
+resolve a smaller latency difference. ``--baseline`` also runs the default detector (committed
+weights, same operating point) on every image, alternating which of the two goes first, and
+prints both latencies and the per-image ratio.
 """
 
 from __future__ import annotations
@@ -29,11 +35,20 @@ from uav_struct_env.datasets import DatasetConfig, render_layout
 
 
 def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0,
-         threads: int = 1, json_out: str | None = None, **detector_kwargs) -> dict:
-    """Run the benchmark; ``detector_kwargs`` go to :class:`LearnedDetector` (None: default)."""
+         threads: int = 1, json_out: str | None = None, baseline: bool = False,
+         **detector_kwargs) -> dict:
+    """Run the benchmark; ``detector_kwargs`` go to :class:`LearnedDetector` (None: default).
+
+    ``baseline``: also time the default detector at the same operating point, interleaved.
+    """
     cv2.setNumThreads(threads)
-    det = LearnedDetector("all", threads=threads,
-                          **{k: v for k, v in detector_kwargs.items() if v is not None})
+    kwargs = {k: v for k, v in detector_kwargs.items() if v is not None}
+    det = LearnedDetector("all", threads=threads, **kwargs)
+    base = None
+    if baseline:
+        point = {"operating_point": kwargs["operating_point"]} if "operating_point" in kwargs else {}
+        base = LearnedDetector("all", threads=threads, **point)
+    base_latencies = []
     config = DatasetConfig(n_layouts=layouts, views_per_layout=views, seed=seed, scale=1.0)
     counts = {t: {"tp": 0, "fp": 0, "fn": 0, "err": []} for t in LANDMARK_TYPES}
     latencies = []
@@ -41,11 +56,16 @@ def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0
     # Render everything first: the renderer's own threads must not run during the timing.
     frames = [f for layout in tqdm(range(layouts), desc="render", unit="layout")
               for f in render_layout(config, layout)]
-    det.detect_all(np.zeros((720, 1280, 3), np.uint8))  # warm-up
-    for rgb, rec in frames:
-        t0 = time.perf_counter()
-        uv, _, kinds = det.detect_all(rgb)
-        latencies.append(time.perf_counter() - t0)
+    for d in (det, base):
+        if d is not None:
+            d.detect_all(np.zeros((720, 1280, 3), np.uint8))  # warm-up
+    for i, (rgb, rec) in enumerate(frames):
+        if base is not None and i % 2 == 0:
+            base_latencies.append(_timed(base, rgb)[0])
+        dt, (uv, _, kinds) = _timed(det, rgb)
+        latencies.append(dt)
+        if base is not None and i % 2 == 1:
+            base_latencies.append(_timed(base, rgb)[0])
         n_images += 1
         kps = np.array(rec["keypoints"], np.float64).reshape(-1, 4)
         for t, name in enumerate(LANDMARK_TYPES):
@@ -80,9 +100,25 @@ def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0
               f"{100 * r:>6.1f}% {e:>13.2f}")
     print(f"latency per 1280x720 image, {threads} thread(s): median {np.median(lat):.1f} ms, "
           f"p90 {np.percentile(lat, 90):.1f} ms (resize + network + decoding + refinement)")
+    if base is not None:
+        b = np.array(base_latencies) * 1e3
+        report["baseline"] = {"detector": repr(base),
+                              "latency_ms": {"median": float(np.median(b)),
+                                             "p90": float(np.percentile(b, 90)),
+                                             "mean": float(b.mean())},
+                              "median_ratio": float(np.median(lat / b))}
+        print(f"baseline {base!r}\n  interleaved on the same images: median {np.median(b):.1f} ms, "
+              f"p90 {np.percentile(b, 90):.1f} ms; this / baseline per image: median "
+              f"{np.median(lat / b):.3f}")
     if json_out:
         Path(json_out).write_text(json.dumps(report, indent=2))
     return report
+
+
+def _timed(det: LearnedDetector, rgb: np.ndarray) -> tuple[float, tuple]:
+    t0 = time.perf_counter()
+    out = det.detect_all(rgb)
+    return time.perf_counter() - t0, out
 
 
 if __name__ == "__main__":
@@ -106,9 +142,11 @@ if __name__ == "__main__":
                     help="candidates from heatmap peaks only (the decoding before votes)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--json", dest="json_out", default=None)
+    ap.add_argument("--baseline", action="store_true",
+                    help="also time the default detector, interleaved image by image")
     a = ap.parse_args()
     refiner = {None: None, "none": False}.get(a.refiner, a.refiner)
-    main(a.seed, a.layouts, a.views, a.match_px, a.threads, a.json_out, model=a.model,
+    main(a.seed, a.layouts, a.views, a.match_px, a.threads, a.json_out, a.baseline, model=a.model,
          score_threshold=a.threshold, refiner=refiner, refine_iterations=a.iterations,
          refine_threshold=a.refine_threshold, operating_point=a.operating_point,
          votes=not a.no_votes, vote_threshold=a.vote_threshold)
