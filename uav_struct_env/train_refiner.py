@@ -41,7 +41,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from localization.learned import LANDMARK_TYPES, LearnedDetector, match_detections
+from localization.learned import DEFAULT_MODEL, LANDMARK_TYPES, LearnedDetector, match_detections
 from localization.refine import HALF, PATCH, POSITIVE_RADIUS, extract_patches
 from uav_struct_env.datasets.landmarks import load_labels
 from uav_struct_env.train_detector import LandmarkCrops, conv_bn_relu, export_checked
@@ -247,11 +247,12 @@ def evaluate(refiner: str | Path, labels: dict, match_px: float = 3.0,
 def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
           max_steps: int | None = None, batch: int = 128, lr: float = 2e-3, width: int = 16,
           seed: int = 0, threads: int = 2, eval_every: int = 500, workers: int = 1,
-          log=print) -> dict:
+          detector_model: str | None = None, log=print) -> dict:
     """Train from scratch on mined windows; returns the summary.
 
     Writes ``out/{last,best}.pt``, ``out/log.jsonl``, ``out/refiner.onnx`` and
     ``out/summary.json``. Stops after ``minutes`` of wall time or ``max_steps`` steps.
+    Validation runs the refiner behind ``detector_model`` (None: the committed keypoint network).
     """
     torch.manual_seed(seed)
     torch.set_num_threads(threads)
@@ -271,7 +272,8 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
         return loss, {"bce": bce, "offset_px": l1}
 
     def validate() -> dict:
-        return evaluate(export_refiner(model, out_dir / "candidate.onnx"), val_labels)
+        return evaluate(export_refiner(model, out_dir / "candidate.onnx"), val_labels,
+                        detector_model=detector_model)
 
     summary = fit(model, make_loader(ds, batch, workers, seed), step_loss, out_dir,
                   minutes=minutes, max_steps=max_steps, lr=lr, warmup_steps=100,
@@ -280,7 +282,8 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
     onnx_path = export_refiner(model, out_dir / "refiner.onnx")
     (out_dir / "candidate.onnx").unlink(missing_ok=True)
     summary.update(params=sum(p.numel() for p in model.parameters()), train_windows=len(ds),
-                   onnx=str(onnx_path), seed=seed, batch=batch, width=width)
+                   onnx=str(onnx_path), seed=seed, batch=batch, width=width,
+                   detector_model=str(Path(detector_model or DEFAULT_MODEL).resolve()))
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
 
@@ -295,13 +298,19 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--out", required=True)
     ap.add_argument("--windows", default=None,
                     help="mined windows .npz (default OUT/windows.npz, mined when missing)")
+    ap.add_argument("--detector-model", default=None, metavar="ONNX",
+                    help="keypoint network whose candidates are mined and behind which the "
+                         "refiner is validated (default: the committed one); give the new "
+                         "one when retraining both networks")
     add_training_arguments(ap, minutes=15.0, batch=128, lr=2e-3)
     a = ap.parse_args(argv)
+    if a.detector_model is not None and not Path(a.detector_model).is_file():
+        ap.error(f"--detector-model: no such file: {a.detector_model!r}")
     windows = Path(a.windows or Path(a.out) / "windows.npz")
     if not windows.exists():
-        mine(a.data, str(windows), seed=a.seed)
+        mine(a.data, str(windows), model=a.detector_model, seed=a.seed)
     summary = train(str(windows), a.out, a.val, a.minutes, a.max_steps, a.batch, a.lr, a.width,
-                    a.seed, a.threads, a.eval_every, a.workers)
+                    a.seed, a.threads, a.eval_every, a.workers, a.detector_model)
     print(json.dumps(summary, indent=2))
     return summary
 

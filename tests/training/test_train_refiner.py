@@ -51,10 +51,14 @@ def test_mined_windows_and_patch_targets(full_res_dataset, tmp_path):
 
 def test_tiny_training_run_exports_a_working_refiner(full_res_dataset, tmp_path):
     out = tmp_path / "run"
+    keypoint_net = tmp_path / "kp.onnx"  # the keypoint network to mine and validate behind
+    keypoint_net.write_bytes(DEFAULT_MODEL.read_bytes())
     summary = main(["--data", str(full_res_dataset), "--val", str(full_res_dataset), "--out",
                     str(out), "--max-steps", "3", "--batch", "8", "--workers", "0",
-                    "--threads", "1", "--eval-every", "2", "--width", "4"])
+                    "--threads", "1", "--eval-every", "2", "--width", "4",
+                    "--detector-model", str(keypoint_net)])
     assert summary["steps"] == 3 and summary["train_windows"] > 0
+    assert summary["detector_model"] == str(keypoint_net.resolve())
     for name in ("windows.npz", "last.pt", "best.pt", "refiner.onnx", "log.jsonl", "summary.json"):
         assert (out / name).is_file()
     uv, scores = PatchRefiner(out / "refiner.onnx").refine(
@@ -69,3 +73,12 @@ def test_mine_rejects_half_resolution_data(tmp_path):
     make_dataset([str(data), "--layouts", "1", "--views", "1", "--seed", "5", "--scale", "0.25"])
     with pytest.raises(ValueError, match="full-resolution renders"):
         mine(str(data), str(tmp_path / "w.npz"))
+
+
+def test_missing_keypoint_network_is_a_usage_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--data", str(tmp_path), "--out", str(tmp_path / "run"),
+              "--detector-model", str(tmp_path / "nope.onnx")])
+    assert exc.value.code == 2
+    assert "--detector-model: no such file" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
