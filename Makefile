@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 EXTRAS ?= dev,rl,train
 
-.PHONY: demo test test-slow lint bench clean
+.PHONY: demo test test-slow lint bench detector clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -28,6 +28,37 @@ lint: $(STAMP)
 bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in the README
 	for b in render env_step localizer wrapper_throughput detector; do \
 		[ -f benchmarks/$$b.py ] && $(BIN)/python benchmarks/$$b.py || exit 1; done
+
+# The learned detector from scratch, as localization/models/MODEL_CARD.md trained it: four
+# rendered datasets (~17 min; existing ones are kept), the keypoint network (42 min), then the
+# patch refiner mined from that network's candidates (1.5 + 15 min), into $(DETECTOR_RUN).
+# Evaluate the result with benchmarks/detector.py --model/--refiner and uav-struct study
+# --detector learned --detector-model/--refiner-model (README, "With the learned detector").
+DETECTOR_RUN ?= runs/detector
+DATA := $(DETECTOR_RUN)/data
+DATASET := $(BIN)/python -m uav_struct_env.datasets
+
+detector: $(DETECTOR_RUN)/refiner/refiner.onnx
+
+$(DATA)/keypoint_train/labels.json: | $(STAMP)
+	$(DATASET) $(DATA)/keypoint_train --layouts 200 --views 15 --seed 0 --workers 2
+$(DATA)/keypoint_val/labels.json: | $(STAMP)
+	$(DATASET) $(DATA)/keypoint_val --layouts 6 --views 10 --seed 1
+$(DATA)/refiner_train/labels.json: | $(STAMP)
+	$(DATASET) $(DATA)/refiner_train --layouts 150 --views 10 --seed 3 --scale 1.0 --workers 2
+$(DATA)/refiner_val/labels.json: | $(STAMP)
+	$(DATASET) $(DATA)/refiner_val --layouts 6 --views 10 --seed 1 --scale 1.0
+
+$(DETECTOR_RUN)/keypoint/model.onnx: $(DATA)/keypoint_train/labels.json $(DATA)/keypoint_val/labels.json
+	$(BIN)/python -m uav_struct_env.train_detector --data $(DATA)/keypoint_train \
+		--val $(DATA)/keypoint_val --out $(DETECTOR_RUN)/keypoint --minutes 42 --batch 16 \
+		--crop 256 192 --workers 1 --threads 2 --eval-every 400 --seed 0
+
+$(DETECTOR_RUN)/refiner/refiner.onnx: $(DETECTOR_RUN)/keypoint/model.onnx \
+		$(DATA)/refiner_train/labels.json $(DATA)/refiner_val/labels.json
+	$(BIN)/python -m uav_struct_env.train_refiner --data $(DATA)/refiner_train \
+		--val $(DATA)/refiner_val --out $(DETECTOR_RUN)/refiner --minutes 15 --eval-every 1000 \
+		--workers 1 --seed 0 --detector-model $(DETECTOR_RUN)/keypoint/model.onnx
 
 clean:
 	rm -rf $(VENV) renders results
