@@ -168,20 +168,19 @@ def test_full_study_meets_the_issue_targets(tmp_path):
 
 @pytest.mark.slow
 def test_learned_detector_study_against_table_one(tmp_path):
-    """Issue 7 on the paper's protocol with the learned detector: detection rates at or above the
-    paper's Table I, pose medians at or below its Table II, column-top F1 above the paper's.
-    Slab and opening corners reach 99.7 % F1 (the paper: 100 %); this guards that level."""
+    """Issue 7 on the paper's protocol with the learned detector: detection rates and association
+    F1 at or above the paper's Table I (F1 100 / 100 / 94.2 %), pose medians at or below its
+    Table II."""
     from uav_struct_env.study import run_study
 
     config = StudyConfig(workers=2, detector="learned",
                          methods=("slab_corners", "opening_corners", "column_tops"))
     results = run_study(config, tmp_path, progress=False, figures=False)["methods"]
-    paper = {"slab_corners": (0.991, 0.185), "opening_corners": (0.969, 1.192),
-             "column_tops": (0.957, 0.163)}
-    for key, (detection, median) in paper.items():
+    paper = {"slab_corners": (0.991, 1.0, 0.185), "opening_corners": (0.969, 1.0, 1.192),
+             "column_tops": (0.957, 0.942, 0.163)}
+    for key, (detection, f1, median) in paper.items():
         r = results[key]
         assert r["successful"] == r["total"] == 40, key
         assert r["detection_rate"] >= detection, key
+        assert r["association_f1"] >= f1, key
         assert r["translation_error_m"]["median"] <= median, key
-        assert r["association_f1"] >= 0.99, key
-    assert results["column_tops"]["association_f1"] >= 0.942
