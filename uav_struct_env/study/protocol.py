@@ -161,13 +161,13 @@ class StudyConfig:
         imaging: camera effects on the rendered images (``"ideal"`` or ``"camera"``, see
             :mod:`uav_struct_env.sim.imaging`); they matter to pixel-reading detectors (ArUco,
             learned), not to the projection detector.
+        workers: processes rendering and localizing in parallel.
+        methods: keys of :data:`METHODS` to run (default all).
         detector_model: with ``detector="learned"``, the keypoint network's ONNX file (None:
             the committed ``localization/models/landmarks_v1.onnx``), e.g. one retrained with
             ``python -m uav_struct_env.train_detector``; stored resolved to an absolute path.
         refiner_model: with ``detector="learned"``, the patch refiner's ONNX file (None: the
             committed one), e.g. from ``python -m uav_struct_env.train_refiner``.
-        workers: processes rendering and localizing in parallel.
-        methods: keys of :data:`METHODS` to run (default all).
     """
 
     seed: int = 0
@@ -183,10 +183,10 @@ class StudyConfig:
     false_positives: float = 0.0
     renderer: str = "auto"
     imaging: str = "ideal"
-    detector_model: str | None = None
-    refiner_model: str | None = None
     workers: int = 1
     methods: tuple[str, ...] = field(default_factory=lambda: tuple(m.key for m in METHODS))
+    detector_model: str | None = None
+    refiner_model: str | None = None
 
     def __post_init__(self) -> None:
         def choice(name: str, options: tuple[str, ...]) -> None:
