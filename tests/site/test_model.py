@@ -8,6 +8,7 @@ from uav_struct_env.site import (
     ColumnGrid,
     Opening,
     Site,
+    building_site,
     make_site,
     paper_building,
     paper_site,
@@ -130,21 +131,21 @@ def test_sites_with_bad_markers_or_stage_raise():
     b = paper_building()
     m = ArucoMarker(id=1, side=1.0, center=(-4.0, 0.0, 0.01))
     with pytest.raises(SiteGeometryError, match=r"duplicate marker ids \[1\]"):
-        Site(b, markers=(m, ArucoMarker(id=1, side=1.0, center=(-4.0, 6.0, 0.01))))
+        building_site(b, markers=(m, ArucoMarker(id=1, side=1.0, center=(-4.0, 6.0, 0.01))))
     with pytest.raises(
         SiteGeometryError, match=r"marker 2 at \(4\.0, 4\.0\) lies under the building"
     ):
-        Site(b, markers=(ArucoMarker(id=2, side=1.0, center=(4.0, 4.0, 0.0)),))
+        building_site(b, markers=(ArucoMarker(id=2, side=1.0, center=(4.0, 4.0, 0.0)),))
     with pytest.raises(SiteGeometryError, match=r"markers 1 and 5 overlap"):
-        Site(b, markers=(m, ArucoMarker(id=5, side=1.0, center=(-4.2, 0.5, 0.01))))
+        building_site(b, markers=(m, ArucoMarker(id=5, side=1.0, center=(-4.2, 0.5, 0.01))))
     with pytest.raises(SiteGeometryError, match=r"marker id must be an int in \[0, 50\).*got 50"):
         ArucoMarker(id=50, side=1.0, center=(0, 0, 0))
     with pytest.raises(SiteGeometryError, match=r"marker 0 side must be a positive.*0\.0"):
         ArucoMarker(id=0, side=0.0, center=(0, 0, 0))
     with pytest.raises(
-        SiteGeometryError, match=r"stage must be one of \('slab', 'columns'\), got 'roof'"
+        SiteGeometryError, match=r"stage must be one of \('Level 1/slab', 'slab', 'Level 1/columns', 'columns', 'Level 2/slab'\), got 'roof'"
     ):
-        Site(b, stage="roof")
+        building_site(b, stage="roof")
     with pytest.raises(ValueError, match=r"landmark set must be one of .* got 'doors'"):
         paper_site().landmarks("doors")
 
@@ -161,7 +162,7 @@ def test_any_building_is_expressible():
             Opening("shaft", (17.0, 3.5), (1.5, 1.5)),
         ),
     )
-    site = Site(b, stage="columns")
+    site = building_site(b, stage="columns")
     assert len(site.landmarks("column_tops")) == 10
     assert len(site.landmarks("opening_corners")) == 8
     np.testing.assert_allclose(site.landmarks("column_tops").xyz[:, 2], 4.2 + 3.6 - 0.3)

@@ -105,7 +105,7 @@ def _yaw_pose(x: float, y: float, z: float, yaw: float) -> NDArray[np.float64]:
 
 def _add_clutter(world, site: Site, rng: np.random.Generator) -> None:
     """Stacks of material and equipment-sized boxes around (and a few on) the building."""
-    xmin, ymin, xmax, ymax = site.building.slab_bounds
+    xmin, ymin, xmax, ymax = site.footprint_bounds
     cx, cy = (xmin + xmax) / 2, (ymin + ymax) / 2
     reach = max(xmax - xmin, ymax - ymin) / 2
     for _ in range(int(rng.integers(3, 15))):
@@ -126,7 +126,7 @@ def _add_clutter(world, site: Site, rng: np.random.Generator) -> None:
                                _yaw_pose(x, y, z + he[2], yaw + rng.uniform(-0.2, 0.2)))
                 z += 2 * he[2]
     # Small stacks on the slab, kept 1 m inside its edges (they must not sit on a landmark).
-    top = site.building.first_floor_z
+    top = max(s.z_top for s in site.floor)
     for _ in range(int(rng.integers(0, 3))):
         if xmax - xmin < 3 or ymax - ymin < 3:
             break
@@ -149,7 +149,7 @@ def _random_light(rng: np.random.Generator) -> dict:
 def _random_view(
     site: Site, rng: np.random.Generator, config: DatasetConfig
 ) -> NDArray[np.float64]:
-    xmin, ymin, xmax, ymax = site.building.slab_bounds
+    xmin, ymin, xmax, ymax = site.footprint_bounds
     centre = np.asarray(site.center, dtype=np.float64)
     half = math.hypot(xmax - xmin, ymax - ymin) / 2
     az = rng.uniform(0, 2 * math.pi)

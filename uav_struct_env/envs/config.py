@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -28,9 +29,13 @@ from uav_struct_env.sim.imaging import ImagingModel, make_imaging
 from uav_struct_env.sim.schedule import ScheduleSpec
 from uav_struct_env.sim.sensors import SensorModel, make_noise
 from uav_struct_env.sim.uav import FlightLimits, Geofence
-from uav_struct_env.site import LANDMARK_SETS, STAGES, Site
+from uav_struct_env.site import LANDMARK_SETS, Site, paper_site
 
 __all__ = ["PRESETS", "RENDER_MODES", "RENDERERS", "EnvConfig", "make_config"]
+
+
+def _is_site_file(site: object) -> bool:
+    return isinstance(site, str) and site.lower().endswith((".json", ".ifc")) and Path(site).is_file()
 
 RENDER_MODES = ("rgb_array",)
 RENDERERS = ("auto", "tiny", "egl")
@@ -41,9 +46,13 @@ class EnvConfig:
     """Configuration of the four-UAV environment. Units: metres, seconds, radians, pixels.
 
     Attributes:
-        stage: construction stage, ``"slab"`` or ``"columns"``.
-        site: ``"paper"``, ``"random"`` (drawn once per env from ``site_seed``) or a
-            :class:`~uav_struct_env.site.Site`.
+        stage: construction stage: one of the site's stage names (``"slab"`` or ``"columns"``
+            for the paper's building; ``"Level 2/slab"`` ... for an IFC file, see
+            :func:`~uav_struct_env.site.ifc_stages`); None: a given Site's own stage, else
+            ``"columns"``.
+        site: ``"paper"``, ``"random"`` (drawn once per env from ``site_seed``), a
+            :class:`~uav_struct_env.site.Site`, or the path of a site file (``*.json``) or an
+            IFC file (``*.ifc``, needs the ``ifc`` extra).
         marker_size: ArUco marker side (m), or None for no markers.
         image_size: ``(W, H)`` of the observed images. The intrinsics are the paper's camera
             scaled to this size (same field of view).
@@ -78,7 +87,7 @@ class EnvConfig:
             viewpoint-planning task); ``0`` (default) keeps the aimed views and draws nothing.
     """
 
-    stage: str = "columns"
+    stage: str | None = None
     site: str | Site = "paper"
     marker_size: float | None = 1.0
     image_size: tuple[int, int] = (1280, 720)
@@ -103,10 +112,16 @@ class EnvConfig:
     start_yaw_jitter: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.stage not in STAGES:
-            raise ConfigError(f"stage must be one of {STAGES}, got {self.stage!r}")
-        if not (isinstance(self.site, Site) or self.site in ("paper", "random")):
-            raise ConfigError(f"site must be 'paper', 'random' or a Site, got {self.site!r}")
+        if not (isinstance(self.site, Site) or self.site in ("paper", "random") or _is_site_file(self.site)):
+            raise ConfigError(
+                f"site must be 'paper', 'random', a Site or an existing *.json / *.ifc file, got {self.site!r}"
+            )
+        if self.stage is not None and not isinstance(self.stage, str):
+            raise ConfigError(f"stage must be a stage name (str) or None, got {self.stage!r}")
+        names = (self.site.stage_names if isinstance(self.site, Site)
+                 else paper_site().stage_names if self.site in ("paper", "random") else None)
+        if self.stage is not None and names is not None and self.stage not in names:
+            raise ConfigError(f"stage must be one of {names}, got {self.stage!r}")
         if self.marker_size is not None:
             if (
                 isinstance(self.marker_size, bool)

@@ -65,19 +65,19 @@ class MapView:
         return self.pixels / (2.0 * self.half_size)
 
 
-def _rect(
-    img: NDArray[np.uint8], view: MapView, bounds: Sequence[float], color, thickness: int
-) -> None:
-    xmin, ymin, xmax, ymax = bounds
-    cv2.rectangle(
-        img, view.to_px((xmin, ymax)), view.to_px((xmax, ymin)), color, thickness, cv2.LINE_AA
-    )
+def _polygon(img: NDArray[np.uint8], view: MapView, outline: NDArray[np.float64], color, thickness: int) -> None:
+    pts = np.array([view.to_px(p) for p in outline], np.int32)
+    if thickness < 0:
+        cv2.fillPoly(img, [pts], color, cv2.LINE_AA)
+    else:
+        cv2.polylines(img, [pts], True, color, thickness, cv2.LINE_AA)
 
 
 def draw_site_map(site: Site, uavs: Sequence[UavMarker], view: MapView) -> NDArray[np.uint8]:
     """Top-down map (pixels x pixels x 3, uint8 RGB) of the site and the UAVs.
 
-    Shows the slab outline and openings, the cast columns (darker: exposed tops), the ArUco
+    Shows the built elements (slabs with their openings, beams, walls), the cast columns
+    (darker: exposed tops), the ArUco
     markers, a 10 m scale bar and, per UAV, its ground-truth position (filled disc) with a heading
     tick, its prior position (ring) joined to the truth by a thin line, and its label. A finished
     UAV is drawn with a cross.
@@ -98,21 +98,15 @@ def draw_site_map(site: Site, uavs: Sequence[UavMarker], view: MapView) -> NDArr
         _, v = view.to_px((0.0, y0 + k * step))
         cv2.line(img, (0, v), (n - 1, v), (200, 196, 182), 1)
         k += 1
-    for slab in site.slabs:
-        _rect(img, view, slab.bounds, (175, 170, 160), -1)
-        _rect(img, view, slab.bounds, (90, 90, 90), 1)
-        for op in slab.openings:
-            _rect(img, view, op.bounds, (214, 210, 196), -1)
-            _rect(img, view, op.bounds, (90, 90, 90), 1)
-    exposed = {c.index for c in site.exposed_columns}
-    for col in site.columns:
-        if col.storey == 0 and col.index in exposed:
-            continue
-        sx, sy = col.section
-        color = (40, 40, 40) if col.index in exposed and col.storey > 0 else (110, 110, 110)
-        _rect(
-            img, view, (col.x - sx / 2, col.y - sy / 2, col.x + sx / 2, col.y + sy / 2), color, -1
-        )
+    for element in sorted((e for e in site.built if e.kind != "column"), key=lambda e: e.z_top):
+        _polygon(img, view, element.outline, (175, 170, 160), -1)
+        _polygon(img, view, element.outline, (90, 90, 90), 1)
+        for hole in getattr(element, "holes", ()):
+            _polygon(img, view, hole.outline, (214, 210, 196), -1)
+            _polygon(img, view, hole.outline, (90, 90, 90), 1)
+    exposed = {c.guid for c in site.exposed_columns}
+    for col in sorted(site.columns, key=lambda c: c.guid in exposed):
+        _polygon(img, view, col.outline, (40, 40, 40) if col.guid in exposed else (110, 110, 110), -1)
     for m in site.markers:
         c = m.corners_world[:, :2]
         pts = np.array([view.to_px(p) for p in c], np.int32)

@@ -104,18 +104,18 @@ class _ViewTargets:
     """What a viewpoint must see, precomputed from a site."""
 
     center: NDArray[np.float64]  # building centre, (3,)
-    half_extent: NDArray[np.float64]  # slab outline half sizes (hx, hy)
-    structural: NDArray[np.float64]  # (M, 3), both stages
+    half_extent: NDArray[np.float64]  # footprint half sizes (hx, hy)
+    structural: NDArray[np.float64]  # (M, 3), the floor's slab and columns stages
     markers: tuple[NDArray[np.float64], ...]  # per marker (4, 3) corners
     marker_centres: NDArray[np.float64]  # (K, 2)
 
     @classmethod
     def from_site(cls, site: Site) -> _ViewTargets:
-        xmin, ymin, xmax, ymax = site.building.slab_bounds
+        xmin, ymin, xmax, ymax = site.footprint_bounds
         return cls(
             center=np.asarray(site.center, dtype=np.float64),
             half_extent=np.array([(xmax - xmin) / 2, (ymax - ymin) / 2]),
-            structural=site.with_stage("columns").landmarks("all").xyz,
+            structural=site.with_columns_exposed().landmarks("all").xyz,
             markers=tuple(m.corners_world for m in site.markers),
             marker_centres=np.array([m.center[:2] for m in site.markers], dtype=np.float64).reshape(
                 -1, 2

@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.attitude import world_from_cam_from_attitude
 from uav_struct_env.site import Site
+from uav_struct_env.site.elements import element_boxes
 
 __all__ = [
     "ACTION_COMPONENTS",
@@ -197,8 +198,8 @@ def step_uav(
 class Obstacles:
     """The structure as axis-aligned boxes ``lo`` (B, 3), ``hi`` (B, 3), with names (B,).
 
-    Built from a :class:`~uav_struct_env.site.Site`: every cast column, and each slab cut into
-    boxes around its openings (a UAV may pass through the stair opening). Markers lie flat on the
+    Built from a :class:`~uav_struct_env.site.Site`: every element built at its stage, cut into
+    boxes around openings (a UAV may pass through the stair opening). Markers lie flat on the
     ground and are not obstacles; the ground is handled by the geofence's minimum altitude.
     """
 
@@ -208,32 +209,16 @@ class Obstacles:
 
     @classmethod
     def from_site(cls, site: Site) -> Obstacles:
-        """The site's cast columns and slabs as boxes."""
+        """The elements built at the site's stage as boxes (:func:`element_boxes`)."""
         lo, hi, names = [], [], []
-        for col in site.columns:
-            sx, sy = col.section
-            lo.append((col.x - sx / 2, col.y - sy / 2, col.z_bottom))
-            hi.append((col.x + sx / 2, col.y + sy / 2, col.z_top))
-            names.append(col.name)
-        for slab in site.slabs:
-            z0, z1 = slab.z_top - slab.thickness, slab.z_top
-            xmin, ymin, xmax, ymax = slab.bounds
-            xs = sorted({xmin, xmax, *(b for op in slab.openings for b in op.bounds[0::2])})
-            ys = sorted({ymin, ymax, *(b for op in slab.openings for b in op.bounds[1::2])})
-            for x0, x1 in zip(xs[:-1], xs[1:], strict=True):
-                for y0, y1 in zip(ys[:-1], ys[1:], strict=True):
-                    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
-                    if any(
-                        o[0] < cx < o[2] and o[1] < cy < o[3]
-                        for o in (op.bounds for op in slab.openings)
-                    ):
-                        continue
-                    lo.append((x0, y0, z0))
-                    hi.append((x1, y1, z1))
-                    names.append(slab.name)
+        for element in site.built:
+            a, b = element_boxes(element)
+            lo.append(a)
+            hi.append(b)
+            names += [element.name] * len(a)
         return cls(
-            np.array(lo, dtype=np.float64).reshape(-1, 3),
-            np.array(hi, dtype=np.float64).reshape(-1, 3),
+            np.concatenate(lo).reshape(-1, 3),
+            np.concatenate(hi).reshape(-1, 3),
             tuple(names),
         )
 

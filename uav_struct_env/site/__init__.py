@@ -1,5 +1,11 @@
-"""The building model (BIM) as plain data: no pybullet, no gymnasium."""
+"""The building model (BIM) as plain data: no pybullet, no gymnasium.
 
+A :class:`Site` is a list of typed elements (:mod:`~uav_struct_env.site.elements`) with its
+construction stages and markers; the parametric grid (:mod:`~uav_struct_env.site.parametric`)
+and the IFC importer (:mod:`~uav_struct_env.site.ifc`, optional extra ``ifc``) produce them.
+"""
+
+from uav_struct_env.site.elements import Beam, Element, Hole, Stage, Storey, TriangleMesh, Wall
 from uav_struct_env.site.model import (
     LANDMARK_SETS,
     STAGES,
@@ -13,6 +19,7 @@ from uav_struct_env.site.model import (
     Site,
     Slab,
 )
+from uav_struct_env.site.parametric import building_site
 from uav_struct_env.site.presets import (
     make_site,
     markers_around,
@@ -23,6 +30,14 @@ from uav_struct_env.site.presets import (
 
 __all__ = [
     "LANDMARK_SETS",
+    "Beam",
+    "Element",
+    "Hole",
+    "Stage",
+    "Storey",
+    "TriangleMesh",
+    "Wall",
+    "building_site",
     "STAGES",
     "STRUCTURAL_SETS",
     "ArucoMarker",

@@ -21,14 +21,35 @@ from pathlib import Path
 from typing import Any
 
 from uav_struct_env.errors import SiteGeometryError
-from uav_struct_env.site.model import ArucoMarker, Building, ColumnGrid, Opening, Site
+from uav_struct_env.site.model import ArucoMarker, Site
+from uav_struct_env.site.parametric import Building, ColumnGrid, Opening, building_site
 
 __all__ = ["load_site", "save_site", "site_from_dict", "site_to_dict"]
 
 
+_SITE_KEYS = ("building", "stage", "markers", "ground_size", "name")
+
+
 def site_to_dict(site: Site) -> dict[str, Any]:
-    """A JSON-ready dict of ``site`` (inverse of :func:`site_from_dict`)."""
-    return json.loads(json.dumps(dataclasses.asdict(site)))
+    """A JSON-ready dict of a parametric ``site`` (inverse of :func:`site_from_dict`).
+
+    Raises:
+        SiteGeometryError: if the site was not made from a parametric building (an imported IFC
+            site is saved as IFC: ``site.to_ifc(path)``).
+    """
+    if site.building is None:
+        raise SiteGeometryError(
+            f"site {site.name!r} has no parametric building to save as a site file; "
+            "write it as IFC with site.to_ifc(path)"
+        )
+    data = {
+        "building": dataclasses.asdict(site.building),
+        "stage": site.stage,
+        "markers": [dataclasses.asdict(m) for m in site.markers],
+        "ground_size": site.ground_size,
+        "name": site.name,
+    }
+    return json.loads(json.dumps(data))
 
 
 def _build(cls, data: Any, where: str, **nested):
@@ -73,7 +94,18 @@ def site_from_dict(data: dict[str, Any]) -> Site:
     def building(v, where):
         return _build(Building, v, where, grid=grid, openings=openings)
 
-    return _build(Site, data, "site", building=building, markers=markers)
+    if not isinstance(data, dict):
+        raise SiteGeometryError(f"site must be a JSON object, got {data!r}")
+    unknown = sorted(set(data) - set(_SITE_KEYS))
+    if unknown:
+        raise SiteGeometryError(f"site has unknown keys {unknown}; expected some of {sorted(_SITE_KEYS)}")
+    if "building" not in data:
+        raise SiteGeometryError("site needs a 'building' entry")
+    kwargs = {k: v for k, v in data.items() if k not in ("building", "markers")}
+    return building_site(
+        building(data["building"], "site.building"), markers=markers(data.get("markers", []), "site.markers"),
+        **kwargs,
+    )
 
 
 def load_site(path: str | Path) -> Site:

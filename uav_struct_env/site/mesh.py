@@ -1,12 +1,14 @@
 """Triangle meshes with texture coordinates for every element of a site, and their textures.
 
-Each element (every cast column, each slab with its openings cut out, the ground, each marker
-sheet) becomes a :class:`SiteElement`: a ``trimesh.Trimesh`` in the project frame with
+Each element built at the site's stage (columns, slabs with their openings cut out, beams,
+walls), the ground and each marker sheet becomes a :class:`SiteElement`: a ``trimesh.Trimesh`` in the project frame with
 per-vertex UVs and flat normals, plus its own texture image. Elements are built from planar
 rectangular :class:`Face` s; the faces of one element are laid out in a texture atlas at a
 uniform scale (metres per texel), side faces of a box as one continuous strip so the concrete
 grain runs around corners. Slab faces with openings are split into the rectangles around the
-openings (exact for axis-aligned openings, no triangulation library needed).
+openings (exact for axis-aligned openings, no triangulation library needed). Any other element
+(an imported IFC element with its own triangles, or a prism with a slanted outline) becomes a
+:func:`solid_element`: its triangles, each textured by projection onto the axis plane it faces.
 
 Textures are drawn from a ``numpy.random.Generator``: each element gets its own child generator
 (``rng.spawn``), so no two surfaces share a texture and adding an element does not change the
@@ -26,7 +28,9 @@ import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
 
-from uav_struct_env.site.model import ArucoMarker, Column, Site, Slab
+from uav_struct_env.site.elements import Column, Element, Slab
+from uav_struct_env.site.model import ArucoMarker, Site
+from uav_struct_env.site.polygons import is_axis_aligned_rectangle
 from uav_struct_env.site.textures import (
     aruco_texture,
     concrete_texture,
@@ -44,10 +48,11 @@ __all__ = [
     "marker_element",
     "site_elements",
     "slab_element",
+    "solid_element",
     "write_obj",
 ]
 
-ELEMENT_KINDS = ("column", "slab", "ground", "marker")
+ELEMENT_KINDS = ("column", "slab", "beam", "wall", "ground", "marker")
 
 #: Gutter between atlas islands, in texels, against bilinear/mipmap bleeding.
 _GUTTER_TEXELS = 4
@@ -253,6 +258,74 @@ def slab_element(
     return SiteElement(f"slab {slab.name}", "slab", mesh, concrete_texture(rng, size, extent))
 
 
+def _element_triangles(element: Element) -> NDArray[np.float64]:
+    """(F, 3, 3) triangles of an element: its own mesh, or its prism triangulated."""
+    if element.mesh is not None:
+        return element.mesh.vertices[element.mesh.faces]
+    import shapely
+
+    holes = [h.outline for h in getattr(element, "holes", ())]
+    polygon = shapely.Polygon(element.outline, holes)
+    caps = shapely.get_parts(shapely.constrained_delaunay_triangles(polygon))
+    tri2d = np.array([np.asarray(t.exterior.coords)[:3] for t in caps])  # (T, 3, 2)
+    ccw = ((tri2d[:, 1, 0] - tri2d[:, 0, 0]) * (tri2d[:, 2, 1] - tri2d[:, 0, 1])
+           - (tri2d[:, 1, 1] - tri2d[:, 0, 1]) * (tri2d[:, 2, 0] - tri2d[:, 0, 0])) > 0
+    tri2d[~ccw] = tri2d[~ccw][:, ::-1]
+    z0, z1 = element.z_bottom, element.z_top
+    top = np.concatenate([tri2d, np.full((*tri2d.shape[:2], 1), z1)], axis=2)
+    bottom = np.concatenate([tri2d[:, ::-1], np.full((*tri2d.shape[:2], 1), z0)], axis=2)
+    walls = []
+    for ring in [element.outline, *[h[::-1] for h in holes]]:
+        a, b = ring, np.roll(ring, -1, axis=0)
+        lo_a, lo_b = np.column_stack([a, np.full(len(a), z0)]), np.column_stack([b, np.full(len(b), z0)])
+        hi_a, hi_b = np.column_stack([a, np.full(len(a), z1)]), np.column_stack([b, np.full(len(b), z1)])
+        walls += [np.stack([lo_a, lo_b, hi_b], axis=1), np.stack([lo_a, hi_b, hi_a], axis=1)]
+    return np.concatenate([top, bottom, *walls])
+
+
+def solid_element(
+    element: Element, rng: np.random.Generator, *, texel_size: float = 0.015, max_texture: int = 1024
+) -> SiteElement:
+    """Any element as textured triangles: each triangle projected onto the axis plane it faces.
+
+    The texture covers a square of the element's largest extent, so the concrete grain has the
+    same scale on every face; vertices are not shared (flat normals per triangle).
+    """
+    tri = _element_triangles(element)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    length = np.linalg.norm(n, axis=1)
+    tri, n = tri[length > 1e-12], n[length > 1e-12] / length[length > 1e-12, None]
+    dominant = np.argmax(np.abs(n), axis=1)
+    planes = np.array([[1, 2], [0, 2], [0, 1]])[dominant]  # x-facing -> (y, z), ...
+    lo = tri.reshape(-1, 3).min(axis=0)
+    extent = float(np.max(tri.reshape(-1, 3).max(axis=0) - lo))
+    rel = (tri - lo) / extent  # (F, 3, 3) in [0, 1]
+    uv = np.take_along_axis(rel, planes[:, None, :].repeat(3, axis=1), axis=2)
+    size = _texture_px(extent, texel_size, max_texture)
+    mesh = trimesh.Trimesh(
+        vertices=tri.reshape(-1, 3),
+        faces=np.arange(3 * len(tri)).reshape(-1, 3),
+        vertex_normals=np.repeat(n, 3, axis=0),
+        visual=trimesh.visual.TextureVisuals(uv=uv.reshape(-1, 2)),
+        process=False,
+    )
+    return SiteElement(f"{element.kind} {element.name}", element.kind, mesh,
+                       concrete_texture(rng, size, extent))
+
+
+def element_mesh(
+    element: Element, rng: np.random.Generator, *, texel_size: float = 0.015, max_texture: int = 512
+) -> SiteElement:
+    """The renderable mesh of one built element: exact boxes where it is one, else triangles."""
+    if isinstance(element, Column) and element.is_box:
+        return column_element(element, rng, texel_size=texel_size, max_texture=max_texture)
+    if isinstance(element, Slab) and element.is_box and all(
+        is_axis_aligned_rectangle(h.outline) for h in element.holes
+    ):
+        return slab_element(element, rng, texel_size=texel_size, max_texture=2 * max_texture)
+    return solid_element(element, rng, texel_size=texel_size, max_texture=2 * max_texture)
+
+
 def _axis_aligned(marker: ArucoMarker) -> bool:
     q = (marker.yaw / (math.pi / 2)) % 1.0
     return min(q, 1.0 - q) < 1e-9
@@ -301,7 +374,7 @@ def ground_elements(
     where the cameras look and there is no seam (a seam would be a false straight edge for a
     corner detector). The ground is cut out under axis-aligned marker sheets.
     """
-    xmin, ymin, xmax, ymax = site.building.slab_bounds
+    xmin, ymin, xmax, ymax = site.footprint_bounds
     cx, cy = (xmin + xmax) / 2, (ymin + ymax) / 2
     half = site.ground_size / 2
     core = min(max(core, 0.6 * max(xmax - xmin, ymax - ymin) + 6.0), half)
@@ -387,7 +460,8 @@ def site_elements(
             twice this (they are an order of magnitude larger).
 
     Returns:
-        Columns (in ``site.columns`` order), slabs, ground pieces, then markers.
+        The built elements kind by kind (columns, slabs, beams, walls; each in the site's element
+        order), the ground, then markers.
     """
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
@@ -396,15 +470,9 @@ def site_elements(
         raise ValueError(f"texture_size must be an int >= 16 (pixels), got {texture_size!r}")
     if not (isinstance(texel_size, (int, float)) and texel_size > 0):
         raise ValueError(f"texel_size must be a positive length in metres, got {texel_size!r}")
-    n = len(site.columns) + len(site.slabs) + 1
-    rngs = iter(rng.spawn(n))
-    elements: list[SiteElement] = []
-    for column in site.columns:
-        elements.append(column_element(column, next(rngs), texel_size=texel_size,
-                                       max_texture=texture_size))
-    for slab in site.slabs:
-        elements.append(slab_element(slab, next(rngs), texel_size=texel_size,
-                                     max_texture=2 * texture_size))
+    built = [e for kind in ELEMENT_KINDS for e in site.built if e.kind == kind]
+    rngs = iter(rng.spawn(len(built) + 1))
+    elements = [element_mesh(e, next(rngs), texel_size=texel_size, max_texture=texture_size) for e in built]
     elements += ground_elements(site, next(rngs), texture_size=2 * texture_size)
     elements += [marker_element(m) for m in site.markers]
     return tuple(elements)

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from uav_struct_env.errors import ConfigError
-from uav_struct_env.site.model import ArucoMarker, Building, ColumnGrid, Opening, Site
+from uav_struct_env.site.model import ArucoMarker, Site
+from uav_struct_env.site.parametric import Building, ColumnGrid, Opening, building_site
 
 __all__ = ["PRESETS", "make_site", "markers_around", "paper_building", "paper_site", "random_site"]
 
@@ -34,18 +35,22 @@ def paper_building() -> Building:
 
 
 def markers_around(
-    building: Building,
+    building: Building | Site,
     side: float,
     distance: float = 3.0,
     per_side: int = 2,
     first_id: int = 0,
     dictionary: str = "DICT_4X4_50",
 ) -> tuple[ArucoMarker, ...]:
-    """``per_side`` markers on the ground ``distance`` m outside each slab edge, evenly spaced.
+    """``per_side`` markers on the ground ``distance`` m outside each footprint edge, evenly spaced.
 
-    Order: south (y min), north (y max), west (x min), east (x max); ids count up from ``first_id``.
+    ``building`` is a parametric :class:`Building` (its slab outline) or any :class:`Site` (the
+    bounding box of its footprint). Order: south (y min), north (y max), west (x min), east
+    (x max); ids count up from ``first_id``.
     """
-    xmin, ymin, xmax, ymax = building.slab_bounds
+    xmin, ymin, xmax, ymax = (
+        building.footprint_bounds if isinstance(building, Site) else building.slab_bounds
+    )
     fractions = (np.arange(per_side) + 0.5) / per_side
     centres: list[tuple[float, float]] = []
     for y in (ymin - distance, ymax + distance):
@@ -67,7 +72,7 @@ def paper_site(stage: str = "columns", marker_size: float | None = 1.0) -> Site:
             ArucoMarker(id=k, side=marker_size, center=(x, y, 0.01))
             for k, (x, y) in enumerate(_PAPER_MARKER_CENTRES)
         )
-    return Site(building, stage=stage, markers=markers, name="paper")
+    return building_site(building, stage=stage, markers=markers, name="paper")
 
 
 # Two per side, 3 m outside the slab edge (slab: x -0.3..8.3, y -0.3..11.3): S, N, W, E.
@@ -122,7 +127,7 @@ def random_site(rng: np.random.Generator, stage: str | None = None, marker_size:
         if marker_size is None
         else markers_around(building, marker_size, distance=float(rng.uniform(2.0, 4.0)))
     )
-    return Site(building, stage=stage, markers=markers, name="random")
+    return building_site(building, stage=stage, markers=markers, name="random")
 
 
 PRESETS = {"paper": paper_site}
@@ -130,32 +135,40 @@ PRESETS = {"paper": paper_site}
 
 def make_site(
     site: str | Site = "paper",
-    stage: str = "columns",
+    stage: str | None = None,
     marker_size: float | None = 1.0,
     rng: np.random.Generator | None = None,
 ) -> Site:
     """Resolve a site argument at ``stage``.
 
-    ``site`` is a :class:`Site`, a preset name, ``"random"`` (needs ``rng``) or the path of a
-    site file (``*.json``, see :mod:`uav_struct_env.site.io`).
+    ``site`` is a :class:`Site`, a preset name, ``"random"`` (needs ``rng``), the path of a
+    site file (``*.json``, see :mod:`uav_struct_env.site.io`) or of an IFC file (``*.ifc``,
+    :func:`~uav_struct_env.site.ifc.load_ifc`). ``stage`` None keeps a Site's (or site file's)
+    own stage; for a preset it means ``"columns"``; an IFC file needs one.
 
     For a :class:`Site` or a site file, ``marker_size`` resizes its markers (a site without
     markers gets two per side 3 m out); None removes them.
     """
-    if isinstance(site, str) and (site.endswith(".json") or Path(site).is_file()):
+    if isinstance(site, str) and site.lower().endswith(".ifc"):
+        from uav_struct_env.site.ifc import load_ifc
+
+        site = load_ifc(site, stage=stage)
+    elif isinstance(site, str) and (site.endswith(".json") or Path(site).is_file()):
         from uav_struct_env.site.io import load_site
 
         site = load_site(site)
     if isinstance(site, Site):
+        stage = site.stage if stage is None else stage
         if marker_size is None:
             markers: tuple[ArucoMarker, ...] = ()
         elif site.markers:
             markers = tuple(dataclasses.replace(m, side=marker_size) for m in site.markers)
         else:
-            markers = markers_around(site.building, marker_size)
+            markers = markers_around(site, marker_size)
         if markers == site.markers and site.stage == stage:
             return site
-        return Site(site.building, stage, markers, site.ground_size, site.name)
+        return dataclasses.replace(site, stage=stage, markers=markers)
+    stage = "columns" if stage is None else stage
     if site == "random":
         if rng is None:
             raise ConfigError("site='random' needs a numpy.random.Generator (rng)")

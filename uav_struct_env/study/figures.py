@@ -135,11 +135,12 @@ def plot_viewpoint_map(site: Site, rows: Sequence[ImageResult], method: str, pat
     plt = _pyplot()
     mine = [r for r in rows if r.method == method]
     fig, ax = plt.subplots(figsize=(7, 7))
-    xmin, ymin, xmax, ymax = site.building.slab_bounds
-    ax.add_patch(plt.Rectangle((xmin, ymin), xmax - xmin, ymax - ymin, fill=False, lw=1.5, color="k"))
+    for slab in site.floor:
+        ax.add_patch(plt.Polygon(slab.outline, closed=True, fill=False, lw=1.5, color="k"))
+        for hole in slab.holes:
+            ax.add_patch(plt.Polygon(hole.outline, closed=True, fill=False, lw=1.0, color="0.4"))
     for c in site.columns:
-        sx, sy = c.section
-        ax.add_patch(plt.Rectangle((c.x - sx / 2, c.y - sy / 2), sx, sy, color="0.3"))
+        ax.add_patch(plt.Polygon(c.outline, closed=True, color="0.3"))
     for mk in site.markers:
         h = mk.side / 2
         ax.add_patch(plt.Rectangle((mk.center[0] - h, mk.center[1] - h), 2 * h, 2 * h, color="tab:purple"))

@@ -1,0 +1,152 @@
+"""Landmarks derived from a site's elements, in one place, with ids allocated once per building.
+
+Which landmarks a stage exposes to the air:
+
+==================  ==========================================================================
+set                 landmarks
+==================  ==========================================================================
+``slab_corners``    the corners of the outline of each slab of the stage's topmost built
+                    structural floor (outline order: counter-clockwise from min y, then min x)
+``opening_corners`` the corners of every opening through those slabs, same order
+``column_tops``     the top centre of every built column that no built slab or beam covers
+                    (an element over the column's axis whose underside is at most
+                    :data:`COVER_GAP` m above the column top)
+``aruco``           each marker's four corners, OpenCV order
+``all``             the three structural sets together
+==================  ==========================================================================
+
+Ids: :class:`LandmarkRegistry` numbers every landmark any stage of the building can expose,
+set by set (structural sets, then markers) and element by element in the site's element order,
+from 0 up. So ids are unique at any building size, the same at every stage of a building and
+the same for the same input; ``LandmarkSet.elements`` names the element (guid) each landmark
+belongs to.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from uav_struct_env.site.elements import Column, Element, Slab
+
+if TYPE_CHECKING:
+    from uav_struct_env.site.model import ArucoMarker
+
+__all__ = [
+    "COVER_GAP",
+    "LANDMARK_SETS",
+    "STRUCTURAL_SETS",
+    "LandmarkRegistry",
+    "LandmarkSet",
+    "exposed_landmarks",
+]
+
+STRUCTURAL_SETS = ("slab_corners", "opening_corners", "column_tops")
+LANDMARK_SETS = (*STRUCTURAL_SETS, "aruco", "all")
+
+#: A slab or beam whose underside is at most this far above a column top covers that top, m.
+COVER_GAP = 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class LandmarkSet:
+    """A named set of landmarks: ids (M,), positions (M, 3), labels and element guids (M,)."""
+
+    name: str
+    ids: NDArray[np.int64]
+    xyz: NDArray[np.float64]
+    labels: tuple[str, ...]
+    elements: tuple[str, ...] = field(default=())
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+
+# A landmark before it gets an id: (set, element guid, corner key, label, xyz).
+_Point = tuple[str, str, str, str, tuple[float, float, float]]
+
+
+def _slab_corners(slab: Slab) -> list[_Point]:
+    return [
+        ("slab_corners", slab.guid, f"corner {k}", f"{slab.name} corner {k}", (x, y, slab.z_top))
+        for k, (x, y) in enumerate(slab.outline.tolist())
+    ]
+
+
+def _opening_corners(slab: Slab) -> list[_Point]:
+    return [
+        ("opening_corners", slab.guid, f"{hole.guid} corner {k}", f"{hole.name} corner {k}",
+         (x, y, slab.z_top))
+        for hole in slab.holes
+        for k, (x, y) in enumerate(hole.outline.tolist())
+    ]
+
+
+def _column_top(column: Column) -> list[_Point]:
+    return [("column_tops", column.guid, "top", f"{column.name} top", column.top_center)]
+
+
+def _marker_corners(marker: ArucoMarker) -> list[_Point]:
+    return [
+        ("aruco", f"marker {marker.id}", f"corner {k}", f"marker {marker.id} corner {k}", tuple(xyz))
+        for k, xyz in enumerate(marker.corners_world.tolist())
+    ]
+
+
+def _covered(column: Column, built: tuple[Element, ...]) -> bool:
+    xy = np.array([column.axis])
+    for e in built:
+        if e.kind not in ("slab", "beam") or e is column:
+            continue
+        if e.z_top > column.z_top and e.z_bottom <= column.z_top + COVER_GAP and e.covers(xy)[0]:
+            return True
+    return False
+
+
+def exposed_landmarks(
+    name: str,
+    built: tuple[Element, ...],
+    floor: tuple[Slab, ...],
+    markers: tuple[ArucoMarker, ...],
+) -> list[_Point]:
+    """The landmarks of set ``name`` (not ``all``) exposed with ``built`` elements standing."""
+    if name == "slab_corners":
+        return [p for slab in floor for p in _slab_corners(slab)]
+    if name == "opening_corners":
+        return [p for slab in floor for p in _opening_corners(slab)]
+    if name == "column_tops":
+        return [
+            p for e in built if isinstance(e, Column) and not _covered(e, built) for p in _column_top(e)
+        ]
+    if name == "aruco":
+        return [p for m in markers for p in _marker_corners(m)]
+    raise ValueError(f"landmark set must be one of {LANDMARK_SETS}, got {name!r}")
+
+
+class LandmarkRegistry:
+    """Ids for every landmark any stage of a building can expose (see the module docstring)."""
+
+    def __init__(self, elements: tuple[Element, ...], markers: tuple[ArucoMarker, ...]) -> None:
+        slabs = [e for e in elements if isinstance(e, Slab) and e.structural]
+        columns = [e for e in elements if isinstance(e, Column)]
+        points = [p for s in slabs for p in _slab_corners(s)]
+        points += [p for s in slabs for p in _opening_corners(s)]
+        points += [p for c in columns for p in _column_top(c)]
+        points += [p for m in markers for p in _marker_corners(m)]
+        self._ids = {p[:3]: k for k, p in enumerate(points)}
+
+    def __len__(self) -> int:
+        return len(self._ids)
+
+    def landmark_set(self, name: str, points: list[_Point]) -> LandmarkSet:
+        """A :class:`LandmarkSet` of ``points`` with their allocated ids."""
+        return LandmarkSet(
+            name,
+            np.array([self._ids[p[:3]] for p in points], dtype=np.int64),
+            np.array([p[4] for p in points], dtype=np.float64).reshape(-1, 3),
+            tuple(p[3] for p in points),
+            tuple(p[1] for p in points),
+        )
