@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-EXTRAS ?= dev,rl,train
+EXTRAS ?= dev,rl,train,ifc
 
 .PHONY: demo test test-slow lint bench detector clean
 

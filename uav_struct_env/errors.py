@@ -17,3 +17,7 @@ class ConfigError(UavStructError, ValueError):
 
 class RendererUnavailableError(UavStructError, RuntimeError):
     """A requested rendering backend cannot start on this machine."""
+
+
+class IfcImportError(SiteGeometryError):
+    """An IFC file that cannot become a site (not IFC, no structure, no landmark-bearing floor)."""

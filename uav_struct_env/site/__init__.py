@@ -6,6 +6,7 @@ and the IFC importer (:mod:`~uav_struct_env.site.ifc`, optional extra ``ifc``) p
 """
 
 from uav_struct_env.site.elements import Beam, Element, Hole, Stage, Storey, TriangleMesh, Wall
+from uav_struct_env.site.ifc import ImportReport, ifc_report, ifc_stages, load_ifc, write_ifc
 from uav_struct_env.site.model import (
     LANDMARK_SETS,
     STAGES,
@@ -33,11 +34,16 @@ __all__ = [
     "Beam",
     "Element",
     "Hole",
+    "ImportReport",
     "Stage",
     "Storey",
     "TriangleMesh",
     "Wall",
     "building_site",
+    "ifc_report",
+    "ifc_stages",
+    "load_ifc",
+    "write_ifc",
     "STAGES",
     "STRUCTURAL_SETS",
     "ArucoMarker",

@@ -30,10 +30,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from uav_struct_env.errors import SiteGeometryError
 from uav_struct_env.site.elements import Column, Element, Slab
 
 if TYPE_CHECKING:
-    from uav_struct_env.site.model import ArucoMarker
+    from uav_struct_env.site.model import ArucoMarker, Site
 
 __all__ = [
     "COVER_GAP",
@@ -41,6 +42,7 @@ __all__ = [
     "STRUCTURAL_SETS",
     "LandmarkRegistry",
     "LandmarkSet",
+    "check_landmarks",
     "exposed_landmarks",
 ]
 
@@ -150,3 +152,30 @@ class LandmarkRegistry:
             tuple(p[3] for p in points),
             tuple(p[1] for p in points),
         )
+
+
+def check_landmarks(site: Site, name: str, minimum: int = 4) -> LandmarkSet:
+    """The landmark set ``name`` exposed at the site's stage, if it has at least ``minimum``.
+
+    A pose needs four correspondences: a stage that exposes fewer of the requested set (an
+    imported building without columns asked for ``column_tops``) cannot localize with it.
+
+    Raises:
+        ValueError: for an unknown set name or ``minimum`` < 1.
+        SiteGeometryError: naming the stage, the set and how many it exposes, with the sets this
+            stage exposes enough of and the stages that expose enough of this set.
+    """
+    if name not in LANDMARK_SETS:
+        raise ValueError(f"landmark set must be one of {LANDMARK_SETS}, got {name!r}")
+    if isinstance(minimum, bool) or not isinstance(minimum, (int, np.integer)) or minimum < 1:
+        raise ValueError(f"minimum must be an int >= 1, got {minimum!r}")
+    found = site.landmarks(name)
+    if len(found) >= minimum:
+        return found
+    sets = [n for n in LANDMARK_SETS if n != name and len(site.landmarks(n)) >= minimum]
+    stages = [st.name for st in site.stages if len(site.with_stage(st.name).landmarks(name)) >= minimum]
+    raise SiteGeometryError(
+        f"stage {site.stage!r} of site {site.name!r} exposes {len(found)} {name} landmark(s), fewer "
+        f"than the {minimum} a pose needs; sets with at least {minimum} at this stage: {sets or 'none'}; "
+        f"stages with at least {minimum} {name}: {stages or 'none'}"
+    )

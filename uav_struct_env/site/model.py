@@ -16,9 +16,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -271,6 +273,12 @@ class Site:
         xmin, ymin, xmax, ymax = self.footprint_bounds
         top = max(e.z_top for e in self.built)
         return np.array([(xmin + xmax) / 2, (ymin + ymax) / 2, top / 2])
+
+    def to_ifc(self, path: str | os.PathLike) -> Path:
+        """Write the building as IFC4 (:func:`uav_struct_env.site.ifc.write_ifc`; extra ``ifc``)."""
+        from uav_struct_env.site.ifc import write_ifc
+
+        return write_ifc(self, path)
 
     # ----------------------------------------------------------------------------- landmarks
     @cached_property
