@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 import cv2
+import numpy as np
+
+from uav_struct_env.site import make_site
 
 __all__ = ["main", "render_views"]
 
@@ -20,6 +24,7 @@ def render_views(
     viewpoint: int = 0,
     renderer: str = "auto",
     image_size: tuple[int, int] = (1280, 720),
+    site: str = "paper",
 ) -> list[Path]:
     """Render every UAV's view at scripted ``viewpoint`` plus the ``rgb_array`` frame; return the paths."""
     import uav_struct_env
@@ -27,16 +32,17 @@ def render_views(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     env = uav_struct_env.parallel_env(
-        stage=stage, renderer=renderer, image_size=image_size, render_mode="rgb_array"
+        stage=stage, site=site, renderer=renderer, image_size=image_size, render_mode="rgb_array"
     )
+    tag = re.sub(r"[^A-Za-z0-9_.-]+", "_", stage)
     try:
         obs, _ = env.reset(seed=seed, options={"viewpoint": viewpoint})
         paths = []
         for agent in env.possible_agents:
-            path = out / f"{stage}_{agent}_viewpoint{viewpoint}.png"
+            path = out / f"{tag}_{agent}_viewpoint{viewpoint}.png"
             cv2.imwrite(str(path), cv2.cvtColor(obs[agent]["image"], cv2.COLOR_RGB2BGR))
             paths.append(path)
-        path = out / f"{stage}_overview_viewpoint{viewpoint}.png"
+        path = out / f"{tag}_overview_viewpoint{viewpoint}.png"
         cv2.imwrite(str(path), cv2.cvtColor(env.render(), cv2.COLOR_RGB2BGR))
         paths.append(path)
     finally:
@@ -48,15 +54,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point."""
     p = argparse.ArgumentParser(prog="uav-struct render", description=__doc__)
     p.add_argument("--out", default="renders", help="output folder (default: renders)")
-    p.add_argument("--stage", default="both", choices=("slab", "columns", "both"))
+    p.add_argument("--site", default="paper",
+                   help="paper, random, a site file (*.json) or an IFC file (*.ifc) (default: paper)")
+    p.add_argument("--stage", default="both",
+                   help="a stage name of the site, or 'both': its floor's slab and columns stages "
+                   "(default: both; the paper's first floor, an IFC file's last floor)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--viewpoint", type=int, default=0, help="scripted viewpoint index (0-9)")
     p.add_argument("--renderer", default="auto", choices=("auto", "tiny", "egl"))
     args = p.parse_args(argv)
-    stages = ("slab", "columns") if args.stage == "both" else (args.stage,)
+    try:
+        if args.stage == "both":
+            site = make_site(args.site, stage=None, marker_size=None, rng=np.random.default_rng(args.seed))
+            stages = [s for s in (site.floor_stage("slab"), site.floor_stage("columns")) if s]
+            stages = ["slab", "columns"] if args.site in ("paper", "random") else stages
+        else:
+            stages = [args.stage]
+    except (ValueError, ImportError, FileNotFoundError) as err:
+        print(f"uav-struct render: error: {err}", file=sys.stderr)
+        return 2
     for stage in stages:
         for path in render_views(
-            args.out, stage=stage, seed=args.seed, viewpoint=args.viewpoint, renderer=args.renderer
+            args.out, stage=stage, seed=args.seed, viewpoint=args.viewpoint, renderer=args.renderer,
+            site=args.site,
         ):
             print(path.resolve())
     return 0

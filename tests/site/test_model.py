@@ -7,7 +7,6 @@ from uav_struct_env.site import (
     Building,
     ColumnGrid,
     Opening,
-    Site,
     building_site,
     make_site,
     paper_building,
@@ -143,7 +142,9 @@ def test_sites_with_bad_markers_or_stage_raise():
     with pytest.raises(SiteGeometryError, match=r"marker 0 side must be a positive.*0\.0"):
         ArucoMarker(id=0, side=0.0, center=(0, 0, 0))
     with pytest.raises(
-        SiteGeometryError, match=r"stage must be one of \('Level 1/slab', 'slab', 'Level 1/columns', 'columns', 'Level 2/slab'\), got 'roof'"
+        SiteGeometryError,
+        match=r"stage must be one of \('Level 1/slab', 'slab', 'Level 1/columns', 'columns', "
+        r"'Level 2/slab'\), got 'roof'",
     ):
         building_site(b, stage="roof")
     with pytest.raises(ValueError, match=r"landmark set must be one of .* got 'doors'"):

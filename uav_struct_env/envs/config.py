@@ -114,7 +114,8 @@ class EnvConfig:
     def __post_init__(self) -> None:
         if not (isinstance(self.site, Site) or self.site in ("paper", "random") or _is_site_file(self.site)):
             raise ConfigError(
-                f"site must be 'paper', 'random', a Site or an existing *.json / *.ifc file, got {self.site!r}"
+                "site must be 'paper', 'random', a Site or an existing *.json / *.ifc file, "
+                f"got {self.site!r}"
             )
         if self.stage is not None and not isinstance(self.stage, str):
             raise ConfigError(f"stage must be a stage name (str) or None, got {self.stage!r}")

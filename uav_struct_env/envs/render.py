@@ -65,7 +65,9 @@ class MapView:
         return self.pixels / (2.0 * self.half_size)
 
 
-def _polygon(img: NDArray[np.uint8], view: MapView, outline: NDArray[np.float64], color, thickness: int) -> None:
+def _polygon(
+    img: NDArray[np.uint8], view: MapView, outline: NDArray[np.float64], color, thickness: int
+) -> None:
     pts = np.array([view.to_px(p) for p in outline], np.int32)
     if thickness < 0:
         cv2.fillPoly(img, [pts], color, cv2.LINE_AA)

@@ -52,6 +52,7 @@ from uav_struct_env.sim.schedule import (
     _ViewTargets,
     make_schedule,
     sample_viewpoint,
+    site_scale,
 )
 from uav_struct_env.sim.sensors import Reading
 from uav_struct_env.sim.uav import ACTION_COMPONENTS, Obstacles, UavState, step_uav
@@ -101,8 +102,11 @@ class UavStructParallelEnv(ParallelEnv):
         w, h = cfg.image_size
         self.camera = Camera().scaled(w, h)
         self.obstacles = Obstacles.from_site(self.site)
+        #: The schedule spec and geofence fitted to the building's size (sim.schedule.site_scale).
+        self.schedule_spec = cfg.schedule.fitted(self.site)
+        self.geofence = cfg.geofence.scaled(site_scale(self.site))
         self.viewpoint_schedule: ViewpointSchedule = make_schedule(
-            self.site, cfg.n_agents, cfg.schedule
+            self.site, cfg.n_agents, self.schedule_spec
         )
         self._targets = _ViewTargets.from_site(self.site)
         self._world = None
@@ -198,7 +202,7 @@ class UavStructParallelEnv(ParallelEnv):
             self._scripted_viewpoint = k
         else:
             self._states = {
-                a: sample_viewpoint(self._targets, i, n, self._rng, self.config.schedule)[0]
+                a: sample_viewpoint(self._targets, i, n, self._rng, self.schedule_spec)[0]
                 for i, a in enumerate(self.possible_agents)
             }
             jitter = self.config.start_yaw_jitter
@@ -297,7 +301,7 @@ class UavStructParallelEnv(ParallelEnv):
         reasons: dict[str, str | None] = {}
         clearance = self.obstacles.distances(pos)
         for k, a in enumerate(live):
-            fence = cfg.geofence.violation(pos[k], center)
+            fence = self.geofence.violation(pos[k], center)
             reasons[a] = (
                 fence
                 if fence is not None

@@ -19,11 +19,18 @@ camera (the paper's 1280 x 720, fx = fy = 1108.5 px); otherwise it is redrawn in
 (From 15 m out the near-side markers often fall below the frame, so both cannot be required.)
 In-frame is a projection check: columns may still occlude some landmarks.
 
+The distance and height ranges are made for buildings up to :data:`REFERENCE_EXTENT` (plan side,
+height; the family of :func:`~uav_struct_env.site.random_site` layouts, the paper's building
+among them). :meth:`ScheduleSpec.fitted` scales both ranges by :func:`site_scale` for a larger
+building (an imported IFC building), so its landmarks fit in the image too; the environment
+scales its geofence's distance by the same factor.
+
 Everything comes from ``numpy.random.default_rng(spec.seed)``, so one seed is one schedule.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -40,13 +47,25 @@ from uav_struct_env.site import Site
 
 __all__ = [
     "PAPER_K",
+    "REFERENCE_EXTENT",
     "ScheduleSpec",
     "ViewpointSchedule",
     "make_schedule",
     "sample_viewpoint",
     "side_azimuth",
     "side_name",
+    "site_scale",
 ]
+
+#: (largest plan side, height) in m of the buildings the default ranges are made for.
+REFERENCE_EXTENT = (27.0, 9.0)
+
+
+def site_scale(site: Site) -> float:
+    """How much larger than :data:`REFERENCE_EXTENT` the building is (at least 1)."""
+    xmin, ymin, xmax, ymax = site.footprint_bounds
+    height = max(e.z_top for e in site.elements)
+    return float(max(1.0, max(xmax - xmin, ymax - ymin) / REFERENCE_EXTENT[0], height / REFERENCE_EXTENT[1]))
 
 _SIDE_NAMES_4 = ("south", "east", "north", "west")
 
@@ -87,6 +106,17 @@ class ScheduleSpec:
             raise ConfigError(
                 f"ScheduleSpec.azimuth_spread must be in [0, 2 pi) rad, got {self.azimuth_spread!r}"
             )
+
+    def fitted(self, site: Site) -> ScheduleSpec:
+        """This spec with the distance and height ranges scaled by :func:`site_scale`."""
+        k = site_scale(site)
+        if k == 1.0:
+            return self
+        return dataclasses.replace(
+            self,
+            distance=(self.distance[0] * k, self.distance[1] * k),
+            height=(self.height[0] * k, self.height[1] * k),
+        )
 
 
 def side_azimuth(agent_index: int, n_agents: int) -> float:

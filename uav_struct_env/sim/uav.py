@@ -124,6 +124,12 @@ class Geofence:
                 f"({self.max_altitude})"
             )
 
+    def scaled(self, factor: float) -> Geofence:
+        """The fence with ``max_distance`` times ``factor`` (for a building larger than the paper's)."""
+        if factor == 1.0:
+            return self
+        return Geofence(self.min_altitude, self.max_altitude, self.max_distance * factor)
+
     def violation(self, position: ArrayLike, center_xy: ArrayLike) -> str | None:
         """Why ``position`` (3,) is outside the fence (``"below_min_altitude"`` ...), or None."""
         p = np.asarray(position, dtype=np.float64)

@@ -127,4 +127,4 @@ def landmark_visibility(
         tol = depth_tolerance(z[idx], camera, abs_tol=abs_tol, rel_tol=rel_tol,
                               depth_bits=depth_bits)
         visible[idx] = np.any(samples >= (z[idx] - tol)[:, None], axis=1)
-    return {"ids": ids_arr, "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}
+    return {"ids": ids_arr.copy(), "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}

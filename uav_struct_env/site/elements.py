@@ -68,7 +68,8 @@ class TriangleMesh:
             raise SiteGeometryError(f"mesh vertices must be a finite (V, 3) array, got shape {v.shape}")
         if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or f.min() < 0 or f.max() >= len(v):
             raise SiteGeometryError(
-                f"mesh faces must be a non-empty (F, 3) array of vertex indices < {len(v)}, got shape {f.shape}"
+                f"mesh faces must be a non-empty (F, 3) array of vertex indices < {len(v)}, "
+                f"got shape {f.shape}"
             )
         object.__setattr__(self, "vertices", v)
         object.__setattr__(self, "faces", f)

@@ -144,14 +144,12 @@ class LandmarkRegistry:
         return len(self._ids)
 
     def landmark_set(self, name: str, points: list[_Point]) -> LandmarkSet:
-        """A :class:`LandmarkSet` of ``points`` with their allocated ids."""
-        return LandmarkSet(
-            name,
-            np.array([self._ids[p[:3]] for p in points], dtype=np.int64),
-            np.array([p[4] for p in points], dtype=np.float64).reshape(-1, 3),
-            tuple(p[3] for p in points),
-            tuple(p[1] for p in points),
-        )
+        """A :class:`LandmarkSet` of ``points`` with their allocated ids (read-only arrays)."""
+        ids = np.array([self._ids[p[:3]] for p in points], dtype=np.int64)
+        xyz = np.array([p[4] for p in points], dtype=np.float64).reshape(-1, 3)
+        ids.setflags(write=False)
+        xyz.setflags(write=False)
+        return LandmarkSet(name, ids, xyz, tuple(p[3] for p in points), tuple(p[1] for p in points))
 
 
 def check_landmarks(site: Site, name: str, minimum: int = 4) -> LandmarkSet:

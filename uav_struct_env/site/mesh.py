@@ -1,14 +1,15 @@
 """Triangle meshes with texture coordinates for every element of a site, and their textures.
 
 Each element built at the site's stage (columns, slabs with their openings cut out, beams,
-walls), the ground and each marker sheet becomes a :class:`SiteElement`: a ``trimesh.Trimesh`` in the project frame with
-per-vertex UVs and flat normals, plus its own texture image. Elements are built from planar
-rectangular :class:`Face` s; the faces of one element are laid out in a texture atlas at a
-uniform scale (metres per texel), side faces of a box as one continuous strip so the concrete
-grain runs around corners. Slab faces with openings are split into the rectangles around the
-openings (exact for axis-aligned openings, no triangulation library needed). Any other element
-(an imported IFC element with its own triangles, or a prism with a slanted outline) becomes a
-:func:`solid_element`: its triangles, each textured by projection onto the axis plane it faces.
+walls), the ground and each marker sheet becomes a :class:`SiteElement`: a ``trimesh.Trimesh``
+in the project frame with per-vertex UVs and flat normals, plus its own texture image. Elements
+are built from planar rectangular :class:`Face` s; the faces of one element are laid out in a
+texture atlas at a uniform scale (metres per texel), side faces of a box as one continuous strip
+so the concrete grain runs around corners. Slab faces with openings are split into the
+rectangles around the openings (exact for axis-aligned openings, no triangulation library
+needed). Any other element (an imported IFC element with its own triangles, or a prism with a
+slanted outline) becomes a :func:`solid_element`: its triangles, each textured by projection
+onto the axis plane it faces.
 
 Textures are drawn from a ``numpy.random.Generator``: each element gets its own child generator
 (``rng.spawn``), so no two surfaces share a texture and adding an element does not change the

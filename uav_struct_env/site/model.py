@@ -232,6 +232,21 @@ class Site:
         later = [st for st in self.stages if st.floor == floor and st.built >= self.current_stage.built]
         return self.with_stage(later[-1].name) if later[-1] is not self.current_stage else self
 
+    def floor_stage(self, role: str) -> str | None:
+        """The stage of this site's floor in ``role``, or None if the floor has no such stage.
+
+        ``role`` ``"slab"``: the floor just built (the floor's first stage); ``"columns"``: with
+        the columns standing on it (its last stage, if that adds columns). The paper's two
+        stages are the first floor's roles; the study evaluates each method in its role.
+        """
+        if role not in ("slab", "columns"):
+            raise ValueError(f"role must be 'slab' or 'columns', got {role!r}")
+        same = [st for st in self.stages if st.floor == self.current_stage.floor]
+        first, last = same[0], same[-1]
+        if role == "slab":
+            return first.name
+        return last.name if last is not first else None
+
     # ----------------------------------------------------------------------------- elements
     @cached_property
     def built(self) -> tuple[Element, ...]:

@@ -55,9 +55,13 @@ def canonical_outline(outline: ArrayLike, where: str, *, tol: float = 1e-6) -> N
     try:
         p = np.array(outline, dtype=np.float64)
     except (TypeError, ValueError):
-        raise SiteGeometryError(f"{where} must be a (K, 2) array of plan points in metres, got {outline!r}") from None
+        raise SiteGeometryError(
+            f"{where} must be a (K, 2) array of plan points in metres, got {outline!r}"
+        ) from None
     if p.ndim != 2 or p.shape[1] != 2 or not np.all(np.isfinite(p)):
-        raise SiteGeometryError(f"{where} must be a finite (K, 2) array of plan points, got shape {p.shape}")
+        raise SiteGeometryError(
+            f"{where} must be a finite (K, 2) array of plan points, got shape {p.shape}"
+        )
     if len(p) > 1 and np.allclose(p[0], p[-1], atol=tol):
         p = p[:-1]
     changed = True
@@ -75,7 +79,9 @@ def canonical_outline(outline: ArrayLike, where: str, *, tol: float = 1e-6) -> N
             p = np.delete(p, k, axis=0)
             changed = True
     if len(p) < 3 or abs(signed_area(p)) <= tol:
-        raise SiteGeometryError(f"{where} needs at least three corners enclosing an area, got {len(p)} corners")
+        raise SiteGeometryError(
+            f"{where} needs at least three corners enclosing an area, got {len(p)} corners"
+        )
     if signed_area(p) < 0:
         p = p[::-1]
     start = int(np.lexsort((p[:, 0], p[:, 1]))[0])

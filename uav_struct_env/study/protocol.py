@@ -12,7 +12,10 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.site import make_site
 
 __all__ = [
     "ASSOCIATIONS",
@@ -150,7 +153,8 @@ class StudyConfig:
         association: ``"robust"`` or ``"paper"`` (plain linear assignment).
         noise: onboard prior model, ``"paper"`` (3 m, 2/2/5 deg, alternating signs) or
             ``"gnss_ins"``.
-        site: ``"paper"``, ``"random"`` (drawn from ``seed``) or the path of a site file.
+        site: ``"paper"``, ``"random"`` (drawn from ``seed``), the path of a site file
+            (``*.json``) or of an IFC file (``*.ifc``, needs the ``ifc`` extra).
         n_viewpoints: viewpoints per UAV (10 in the paper; ``--quick`` uses 2).
         n_agents: UAVs, one per side (4 in the paper).
         image_size: (W, H); the paper's camera is scaled to it.
@@ -168,6 +172,10 @@ class StudyConfig:
             ``python -m uav_struct_env.train_detector``; stored resolved to an absolute path.
         refiner_model: with ``detector="learned"``, the patch refiner's ONNX file (None: the
             committed one), e.g. from ``python -m uav_struct_env.train_refiner``.
+        stage: the floor to evaluate, by any of its stage names (``"Level 2/slab"``): the slab
+            methods run at the floor's slab stage, column tops at its columns stage. None: the
+            paper's first floor (``"slab"`` / ``"columns"``), or an IFC file's last floor.
+            Methods whose stage the building lacks (no columns on that floor) are left out.
     """
 
     seed: int = 0
@@ -187,6 +195,7 @@ class StudyConfig:
     methods: tuple[str, ...] = field(default_factory=lambda: tuple(m.key for m in METHODS))
     detector_model: str | None = None
     refiner_model: str | None = None
+    stage: str | None = None
 
     def __post_init__(self) -> None:
         def choice(name: str, options: tuple[str, ...]) -> None:
@@ -201,8 +210,11 @@ class StudyConfig:
             self.site in ("paper", "random") or Path(self.site).is_file()
         ):
             raise ConfigError(
-                f"site must be 'paper', 'random' or an existing site file (*.json), got {self.site!r}"
+                f"site must be 'paper', 'random' or an existing site file (*.json) or IFC file (*.ifc), "
+                f"got {self.site!r}"
             )
+        if self.stage is not None and not isinstance(self.stage, str):
+            raise ConfigError(f"stage must be a stage name (str) or None, got {self.stage!r}")
         for name in ("seed",):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
@@ -236,11 +248,33 @@ class StudyConfig:
             raise ConfigError(f"methods must be a non-empty subset of {keys}, got {list(self.methods)}")
         object.__setattr__(self, "methods", tuple(self.methods))
         object.__setattr__(self, "image_size", tuple(int(v) for v in self.image_size))
+        object.__setattr__(self, "_stages", self._resolve_stages())
+
+    def _resolve_stages(self) -> dict[str, str | None]:
+        """Stage name for each scene role (``"slab"``, ``"columns"``) on this site."""
+        if self.stage is None and (self.site in ("paper", "random") or self.site.endswith(".json")):
+            return {"slab": "slab", "columns": "columns"}
+        try:
+            site = make_site(
+                self.site, stage=self.stage, marker_size=None, rng=np.random.default_rng(self.seed)
+            )
+        except ValueError as err:  # SiteGeometryError: an unknown stage, a malformed file
+            raise ConfigError(str(err)) from None
+        return {role: site.floor_stage(role) for role in ("slab", "columns")}
+
+    def scene_stage(self, scene: Scene) -> str:
+        """The site's stage name that ``scene`` is rendered at."""
+        return self._stages[scene.stage]
+
+    @property
+    def skipped_methods(self) -> tuple[str, ...]:
+        """Requested methods whose stage this building lacks (no columns on the floor)."""
+        return tuple(m.key for m in METHODS if m.key in self.methods and self._stages[m.scene.stage] is None)
 
     @property
     def selected_methods(self) -> tuple[Method, ...]:
-        """The methods to run, in table order."""
-        return tuple(m for m in METHODS if m.key in self.methods)
+        """The methods to run, in table order (without :attr:`skipped_methods`)."""
+        return tuple(m for m in METHODS if m.key in self.methods and self._stages[m.scene.stage] is not None)
 
     @property
     def scenes(self) -> tuple[Scene, ...]:

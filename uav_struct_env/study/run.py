@@ -23,7 +23,6 @@ from localization.aruco import ArucoLocalizer
 from localization.geometry import camera_center, invert, project
 from localization.learned import LearnedDetector
 from localization.metrics import pose_errors
-from uav_struct_env.site.io import load_site
 from uav_struct_env.study.protocol import METHODS, Method, Scene, StudyConfig
 from uav_struct_env.wrappers.frame import localize_frame
 
@@ -96,9 +95,9 @@ def _env_for(config: StudyConfig, scene: Scene):
         import uav_struct_env
 
         env = uav_struct_env.parallel_env(
-            stage=scene.stage,
+            stage=config.scene_stage(scene),
             marker_size=scene.marker_size,
-            site=config.site if config.site in ("paper", "random") else load_site(config.site),
+            site=config.site,
             image_size=config.image_size,
             noise=config.noise,
             renderer=config.renderer,

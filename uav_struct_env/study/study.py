@@ -63,10 +63,11 @@ def run_study(config: StudyConfig, out: str | Path, *, progress: bool = True, fi
     if figures:
         plot_fig2(overlays, out / "fig2_associations.png")
         plot_error_cdfs(rows, out / "error_cdf.png")
-        site = make_site(config.site, stage="slab", marker_size=1.0, rng=np.random.default_rng(config.seed))
-        structural = [m.key for m in config.selected_methods if m.structural]
+        structural = [m for m in config.selected_methods if m.structural]
         if structural:
-            plot_viewpoint_map(site, rows, structural[0], out / "viewpoint_map.png")
+            site = make_site(config.site, stage=config.scene_stage(structural[0].scene), marker_size=1.0,
+                             rng=np.random.default_rng(config.seed))
+            plot_viewpoint_map(site, rows, structural[0].key, out / "viewpoint_map.png")
     return results
 
 
@@ -88,7 +89,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--site",
         default="paper",
-        help="site: paper, random (drawn from --seed) or a site file (*.json)",
+        help="site: paper, random (drawn from --seed), a site file (*.json) or an IFC file (*.ifc)",
+    )
+    p.add_argument(
+        "--stage",
+        default=None,
+        help="the floor to evaluate, by one of its stage names (e.g. 'Level 2/slab'; list them with "
+        "python -c \"from uav_struct_env.site import ifc_stages; print(ifc_stages('b.ifc'))\"); "
+        "default: the paper's first floor, or an IFC file's last floor",
     )
     p.add_argument("--workers", type=int, default=1, help="parallel processes (default 1)")
     p.add_argument("--pixel-sigma", type=float, default=1.0, help="projection detector noise, px")
@@ -145,10 +153,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             detector_model=args.detector_model,
             refiner_model=args.refiner_model,
             workers=args.workers,
+            stage=args.stage,
         )
-    except ValueError as err:
+    except (ValueError, ImportError) as err:
         print(f"uav-struct study: error: {err}", file=sys.stderr)
         return 2
+    if config.skipped_methods:
+        floor = config.scene_stage(config.selected_methods[0].scene)
+        print(f"uav-struct study: note: {', '.join(config.skipped_methods)} left out: the floor of "
+              f"stage {floor!r} has no columns stage", file=sys.stderr)
     results = run_study(config, args.out, progress=not args.no_progress, figures=not args.no_figures)
     out = Path(args.out)
     print(
