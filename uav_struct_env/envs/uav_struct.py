@@ -50,9 +50,8 @@ from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.schedule import (
     ViewpointSchedule,
     _ViewTargets,
-    make_schedule,
+    fit_schedule,
     sample_viewpoint,
-    site_scale,
 )
 from uav_struct_env.sim.sensors import Reading
 from uav_struct_env.sim.uav import ACTION_COMPONENTS, Obstacles, UavState, step_uav
@@ -102,12 +101,11 @@ class UavStructParallelEnv(ParallelEnv):
         w, h = cfg.image_size
         self.camera = Camera().scaled(w, h)
         self.obstacles = Obstacles.from_site(self.site)
-        #: The schedule spec and geofence fitted to the building's size (sim.schedule.site_scale).
-        self.schedule_spec = cfg.schedule.fitted(self.site)
-        self.geofence = cfg.geofence.scaled(site_scale(self.site))
-        self.viewpoint_schedule: ViewpointSchedule = make_schedule(
-            self.site, cfg.n_agents, self.schedule_spec
-        )
+        # The schedule's ranges and the geofence fitted to the building (sim.schedule.fit_schedule).
+        self.viewpoint_schedule: ViewpointSchedule
+        self.viewpoint_schedule, scale = fit_schedule(self.site, cfg.n_agents, cfg.schedule)
+        self.schedule_spec = self.viewpoint_schedule.spec
+        self.geofence = cfg.geofence.scaled(scale)
         self._targets = _ViewTargets.from_site(self.site)
         self._world = None
 

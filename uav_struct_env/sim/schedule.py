@@ -22,8 +22,9 @@ In-frame is a projection check: columns may still occlude some landmarks.
 The distance and height ranges are made for buildings up to :data:`REFERENCE_EXTENT` (plan side,
 height; the family of :func:`~uav_struct_env.site.random_site` layouts, the paper's building
 among them). :meth:`ScheduleSpec.fitted` scales both ranges by :func:`site_scale` for a larger
-building (an imported IFC building), so its landmarks fit in the image too; the environment
-scales its geofence's distance by the same factor.
+building (an imported IFC building), and :func:`fit_schedule` widens them further, 25 % at a
+time, until every UAV finds its viewpoints (a long building whose markers fall below the frame
+from 15 m); the environment scales its geofence's distance by the same factor.
 
 Everything comes from ``numpy.random.default_rng(spec.seed)``, so one seed is one schedule.
 """
@@ -54,6 +55,7 @@ __all__ = [
     "sample_viewpoint",
     "side_azimuth",
     "side_name",
+    "fit_schedule",
     "site_scale",
 ]
 
@@ -107,9 +109,8 @@ class ScheduleSpec:
                 f"ScheduleSpec.azimuth_spread must be in [0, 2 pi) rad, got {self.azimuth_spread!r}"
             )
 
-    def fitted(self, site: Site) -> ScheduleSpec:
-        """This spec with the distance and height ranges scaled by :func:`site_scale`."""
-        k = site_scale(site)
+    def scaled(self, k: float) -> ScheduleSpec:
+        """This spec with the distance and height ranges times ``k``."""
         if k == 1.0:
             return self
         return dataclasses.replace(
@@ -318,3 +319,25 @@ def make_schedule(
         tuple(side_name(i, n_agents) for i in range(n_agents)),
         spec,
     )
+
+
+def fit_schedule(
+    site: Site, n_agents: int = 4, spec: ScheduleSpec = ScheduleSpec(), *, attempts: int = 6
+) -> tuple[ViewpointSchedule, float]:
+    """:func:`make_schedule` with the ranges scaled to the building: ``(schedule, factor)``.
+
+    Starts at :func:`site_scale` (1 for the paper's and the random layouts, whose schedules are
+    unchanged) and widens the ranges by 25 % per failed attempt.
+
+    Raises:
+        ConfigError: the last attempt's error, if no attempt finds every viewpoint.
+    """
+    k = site_scale(site)
+    for attempt in range(attempts):
+        try:
+            return make_schedule(site, n_agents, spec.scaled(k)), k
+        except ConfigError:
+            if attempt == attempts - 1:
+                raise
+            k *= 1.25
+    raise AssertionError("unreachable")
