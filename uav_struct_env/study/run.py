@@ -36,6 +36,7 @@ class ImageResult:
     viewpoint: int
     success: bool
     failure_reason: str
+    failure_code: str  # a localization.FailureCode value, "" on success
     translation_error_m: float
     rotation_error_deg: float
     prior_translation_error_m: float
@@ -202,6 +203,7 @@ def _row(method, uav, viewpoint, est, gt, prior, truth, K, pixel_sigma, **counts
         viewpoint=viewpoint,
         success=bool(est.success),
         failure_reason=est.failure_reason or "",
+        failure_code=est.failure_code.value if est.failure_code is not None else "",
         translation_error_m=t_err,
         rotation_error_deg=r_err,
         prior_translation_error_m=p_err[0],
