@@ -1,7 +1,7 @@
 """Stage 1, detection with a learned network: the real-time structural-landmark detector.
 
 :class:`LearnedDetector` runs a small fully-convolutional keypoint network (trained on simulator
-renders by :mod:`uav_struct_env.train_detector`; weights and their figures in
+renders by :mod:`uav_struct_env.training.train_detector`; weights and their figures in
 ``localization/models/``) with ONNX Runtime (:mod:`localization.inference`) -- no PyTorch at
 inference -- and decodes its output into anonymous sub-pixel detections with scores, following
 the :class:`Detector` protocol of :mod:`localization.detect`, so the localizer takes it in place
@@ -358,8 +358,8 @@ class LearnedDetector:
         Downscales to the training width (:data:`TRAINED_WIDTH`, never up) and takes the
         operating point of :func:`operating_point_for`; the study and the LocalizationWrapper
         build theirs this way. ``model`` and ``refiner`` select other weights (for example
-        networks retrained with :mod:`uav_struct_env.train_detector` and
-        :mod:`uav_struct_env.train_refiner`), as in the constructor; the operating point's
+        networks retrained with :mod:`uav_struct_env.training.train_detector` and
+        :mod:`uav_struct_env.training.train_refiner`), as in the constructor; the operating point's
         thresholds were chosen for the committed weights.
         """
         return cls(landmarks, model=model, refiner=refiner,

@@ -5,7 +5,7 @@ places a landmark with a stride-4 heatmap: most candidates land within a few pix
 landmark, but the tail (3-8 px off at full resolution, mostly stair-opening corners whose top
 surface meets the opening's inner face with little contrast) is too coarse for a 3-pixel
 tolerance. :class:`PatchRefiner` looks again, at full resolution, at a small patch around
-every candidate: a small CNN (trained by :mod:`uav_struct_env.train_refiner`; weights in
+every candidate: a small CNN (trained by :mod:`uav_struct_env.training.train_refiner`; weights in
 ``localization/models/``) returns, per landmark type, the probability that a landmark of that
 type lies within :data:`POSITIVE_RADIUS` px of the patch centre and its offset from the centre.
 Refinement is iterated (the patch is re-centred on the previous estimate), and the score of the

@@ -17,3 +17,7 @@ class ConfigError(UavStructError, ValueError):
 
 class RendererUnavailableError(UavStructError, RuntimeError):
     """A requested rendering backend cannot start on this machine."""
+
+
+class ClosedError(UavStructError, RuntimeError):
+    """An environment (or its world) was used after ``close()``: make a new one instead."""
