@@ -50,13 +50,13 @@ $(DATA)/refiner_val/labels.json: | $(STAMP)
 	$(DATASET) $(DATA)/refiner_val --layouts 6 --views 10 --seed 1 --scale 1.0
 
 $(DETECTOR_RUN)/keypoint/model.onnx: $(DATA)/keypoint_train/labels.json $(DATA)/keypoint_val/labels.json
-	$(BIN)/python -m uav_struct_env.train_detector --data $(DATA)/keypoint_train \
+	$(BIN)/python -m uav_struct_env.training.train_detector --data $(DATA)/keypoint_train \
 		--val $(DATA)/keypoint_val --out $(DETECTOR_RUN)/keypoint --minutes 42 --batch 16 \
 		--crop 256 192 --workers 1 --threads 2 --eval-every 400 --seed 0
 
 $(DETECTOR_RUN)/refiner/refiner.onnx: $(DETECTOR_RUN)/keypoint/model.onnx \
 		$(DATA)/refiner_train/labels.json $(DATA)/refiner_val/labels.json
-	$(BIN)/python -m uav_struct_env.train_refiner --data $(DATA)/refiner_train \
+	$(BIN)/python -m uav_struct_env.training.train_refiner --data $(DATA)/refiner_train \
 		--val $(DATA)/refiner_val --out $(DETECTOR_RUN)/refiner --minutes 15 --eval-every 1000 \
 		--workers 1 --seed 0 --detector-model $(DETECTOR_RUN)/keypoint/model.onnx
 

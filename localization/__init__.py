@@ -14,7 +14,9 @@ One stage per module: :mod:`~localization.detect`, :mod:`~localization.associate
 
 from localization.aruco import ARUCO_MODES, ArucoLocalizer, MarkerSpec
 from localization.associate import Association, assign, associate_paper, associate_robust
+from localization.checks import check_choice, check_number
 from localization.detect import Detections, Detector, ProjectionDetector
+from localization.failure import FailureCode
 from localization.metrics import (
     AssociationScores,
     CramerRaoBound,
@@ -23,13 +25,15 @@ from localization.metrics import (
     cramer_rao_bound,
     detection_rate,
     latency_summary,
+    median_p90,
+    pooled_scores,
     pose_errors,
     recall_at,
     rotation_error_deg,
     summarize_errors,
     translation_error_m,
 )
-from localization.pipeline import ASSOCIATION_METHODS, Localizer, PoseEstimate
+from localization.pipeline import ASSOCIATION_METHODS, Localizer, PoseEstimate, image_size_from_K
 from localization.pnp import PnPResult, PriorSigmas, pose_covariance, solve_pnp
 
 __all__ = [
@@ -43,6 +47,7 @@ __all__ = [
     "Detections",
     "Detector",
     "ErrorSummary",
+    "FailureCode",
     "Localizer",
     "PnPResult",
     "PoseEstimate",
@@ -51,10 +56,15 @@ __all__ = [
     "assign",
     "associate_paper",
     "associate_robust",
+    "check_choice",
+    "check_number",
     "association_scores",
     "cramer_rao_bound",
     "detection_rate",
+    "image_size_from_K",
     "latency_summary",
+    "median_p90",
+    "pooled_scores",
     "pose_covariance",
     "pose_errors",
     "recall_at",

@@ -31,6 +31,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
+from localization.checks import check_number
+from localization.failure import FailureCode
 from localization.geometry import (
     camera_center,
     check_intrinsics,
@@ -53,7 +55,7 @@ __all__ = ["ARUCO_MODES", "ArucoLocalizer", "MarkerSpec", "marker_corners"]
 ARUCO_MODES = ("average", "joint")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class MarkerSpec:
     """A marker of the map: id, side of the black square (m), pose of its frame in the world."""
 
@@ -85,14 +87,10 @@ def _as_spec(m: Any, i: int) -> MarkerSpec:
                 f"markers[{i}] must be (id, side_m, world_from_marker) or have those attributes, "
                 f"got {m!r}"
             ) from None
-    if isinstance(mid, bool) or not isinstance(mid, (int, np.integer)) or mid < 0:
-        raise ValueError(f"markers[{i}] id must be an int >= 0, got {mid!r}")
-    if isinstance(side, bool) or not isinstance(side, (int, float, np.integer, np.floating)):
-        raise TypeError(f"markers[{i}] side must be a number (metres), got {side!r}")
-    if not (np.isfinite(side) and side > 0):
-        raise ValueError(f"markers[{i}] side must be finite and > 0 metres, got {side!r}")
+    mid = check_number(f"markers[{i}] id", mid, 0, integer=True, type_error=ValueError)
+    side = check_number(f"markers[{i}] side", side, 0.0, lo_open=True)
     T = check_transform(f"markers[{i}] world_from_marker", T)
-    return MarkerSpec(int(mid), float(side), T)
+    return MarkerSpec(mid, side, T)
 
 
 class ArucoLocalizer:
@@ -232,18 +230,19 @@ class ArucoLocalizer:
                 known.append((k, i))
         timings = {"associate": time.perf_counter() - t0}
 
-        def fail(reason: str) -> PoseEstimate:
+        def fail(code: FailureCode, reason: str) -> PoseEstimate:
             timings["total"] = time.perf_counter() - t0
             return PoseEstimate(
                 success=False,
                 cam_from_world=fallback.copy(),
                 assignment=assignment,
                 failure_reason=reason,
+                failure_code=code,
                 timings=timings,
             )
 
         if not known:
-            return fail(f"no known marker detected (ids seen: {ids.tolist()})")
+            return fail(FailureCode.NO_MARKERS, f"no known marker detected (ids seen: {ids.tolist()})")
         m = assignment >= 0
         X = self.corners_world[assignment[m]]
         uv = c.reshape(-1, 2)[m]
@@ -263,17 +262,17 @@ class ArucoLocalizer:
             )
             if not res.success:
                 timings["pnp"] = time.perf_counter() - t1
-                return fail(res.failure_reason or "PnP failed")
+                return fail(res.failure_code or FailureCode.PNP_FAILED, res.failure_reason or "PnP failed")
             T = res.cam_from_world
         else:
             T = self._average(known, c, prior)
             if T is None:
                 timings["pnp"] = time.perf_counter() - t1
-                return fail("every marker pose puts the marker behind the camera")
+                return fail(FailureCode.BEHIND_CAMERA, "every marker pose puts the marker behind the camera")
         res_px, depth = reprojection_residuals(self.K, T, X, uv)
         timings["pnp"] = time.perf_counter() - t1
         if not np.all(depth > 0):
-            return fail("the pose puts marker corners behind the camera")
+            return fail(FailureCode.BEHIND_CAMERA, "the pose puts marker corners behind the camera")
         t2 = time.perf_counter()
         cov = pose_covariance(self.K, T, X, self.pixel_sigma)
         timings["covariance"] = time.perf_counter() - t2

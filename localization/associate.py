@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
+from localization.failure import FailureCode
 from localization.geometry import invert, project
 from localization.pnp import (
     PriorSigmas,
@@ -69,7 +70,7 @@ GRID_OFFSETS = tuple(
 )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Association:
     """Result of an association.
 
@@ -82,6 +83,7 @@ class Association:
         n_hypotheses: number of distinct hypotheses evaluated.
         failure_reason: set when nothing could be assigned (e.g. no landmark in front of the
             camera), else None.
+        failure_code: the :class:`~localization.failure.FailureCode` of ``failure_reason``.
     """
 
     assignment: NDArray[np.int64]
@@ -90,6 +92,7 @@ class Association:
     score: float
     n_hypotheses: int = 1
     failure_reason: str | None = None
+    failure_code: FailureCode | None = None
 
     @property
     def n_assigned(self) -> int:
@@ -176,6 +179,7 @@ def associate_paper(
             0.0,
             1,
             "no landmark projects in front of the prior camera near the image",
+            FailureCode.NO_CANDIDATES,
         )
     good = np.flatnonzero(np.isfinite(detections_uv).all(axis=1))
     local = assign(detections_uv[good], proj, None)
@@ -426,10 +430,13 @@ def associate_robust(
             np.inf,
             0,
             "no landmark projects in front of the prior camera near the image",
+            FailureCode.NO_CANDIDATES,
         )
     good = np.flatnonzero(np.isfinite(detections_uv).all(axis=1))
     if good.size == 0:
-        return Association(empty, prior, 0.0, np.inf, 0, "no finite detection")
+        return Association(
+            empty, prior, 0.0, np.inf, 0, "no finite detection", FailureCode.TOO_FEW_DETECTIONS
+        )
     det = detections_uv
     need = max(min_correspondences, 3)
 
@@ -545,13 +552,15 @@ def associate_robust(
 
     if not finals:
         if rejected_by_prior:
+            code = FailureCode.INCONSISTENT_WITH_PRIOR
             reason = (
                 f"all {rejected_by_prior} association hypotheses give poses inconsistent with "
                 f"the prior (Mahalanobis^2 > {max_prior_mahalanobis_sq})"
             )
         else:
+            code = FailureCode.NO_CONSISTENT_ASSOCIATION
             reason = f"no association hypothesis with {need} or more consistent correspondences"
-        return Association(empty, prior, 0.0, np.inf, len(coarse), reason)
+        return Association(empty, prior, 0.0, np.inf, len(coarse), reason, code)
 
     # 3. scoring
     best = None

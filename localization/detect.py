@@ -20,12 +20,13 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
+from localization.checks import check_number
 from localization.geometry import as_points
 
 __all__ = ["Detections", "Detector", "ProjectionDetector", "check_image_size"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Detections:
     """Anonymous 2D landmark detections in one image.
 
@@ -113,19 +114,9 @@ class ProjectionDetector:
     ) -> None:
         if not isinstance(landmarks, str):
             raise TypeError(f"landmarks must be a landmark-set name (str), got {landmarks!r}")
-        for name, value in (
-            ("pixel_sigma", pixel_sigma),
-            ("miss_rate", miss_rate),
-            ("false_positives", false_positives),
-        ):
-            if isinstance(value, bool) or not isinstance(
-                value, (int, float, np.integer, np.floating)
-            ):
-                raise TypeError(f"{name} must be a number, got {value!r}")
-            if not np.isfinite(value) or value < 0:
-                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
-        if miss_rate > 1:
-            raise ValueError(f"miss_rate must be in [0, 1], got {miss_rate!r}")
+        pixel_sigma = check_number("pixel_sigma", pixel_sigma, 0.0)
+        miss_rate = check_number("miss_rate", miss_rate, 0.0, 1.0)
+        false_positives = check_number("false_positives", false_positives, 0.0)
         if rng is not None and not isinstance(rng, np.random.Generator):
             raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
         self.landmarks = landmarks

@@ -1,7 +1,7 @@
 """Stage 1, detection with a learned network: the real-time structural-landmark detector.
 
 :class:`LearnedDetector` runs a small fully-convolutional keypoint network (trained on simulator
-renders by :mod:`uav_struct_env.train_detector`; weights and their figures in
+renders by :mod:`uav_struct_env.training.train_detector`; weights and their figures in
 ``localization/models/``) with ONNX Runtime (:mod:`localization.inference`) -- no PyTorch at
 inference -- and decodes its output into anonymous sub-pixel detections with scores, following
 the :class:`Detector` protocol of :mod:`localization.detect`, so the localizer takes it in place
@@ -47,6 +47,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
 
+from localization.checks import check_number
 from localization.detect import Detections
 from localization.geometry import as_points
 from localization.inference import OnnxNet
@@ -314,11 +315,9 @@ class LearnedDetector:
             )
         for name, value, lo, hi in (("score_threshold", score_threshold, 0.0, 1.0),
                                     ("scale", scale, 1e-3, 1.0)):
-            if not isinstance(value, (int, float)) or not lo < value <= hi:
-                raise ValueError(f"{name} must be a number in ({lo}, {hi}], got {value!r}")
+            check_number(name, value, lo, hi, lo_open=True, type_error=ValueError)
         for name, value in (("nms_px", nms_px), ("match_px", match_px)):
-            if not isinstance(value, (int, float)) or not value > 0:
-                raise ValueError(f"{name} must be a positive number of pixels, got {value!r}")
+            check_number(name, value, 0.0, lo_open=True, type_error=ValueError)
         path = Path(DEFAULT_MODEL if model is None else model)
         if not path.is_file():
             raise FileNotFoundError(f"learned detector model not found: {path}")
@@ -330,18 +329,16 @@ class LearnedDetector:
         self.scale = float(scale)
         self.match_px = float(match_px)
         self.max_per_type = int(max_per_type)
-        if isinstance(corner_window, bool) or not isinstance(corner_window, int) or corner_window < 0:
-            raise ValueError(f"corner_window must be an int >= 0 (px), got {corner_window!r}")
-        self.corner_window = corner_window
+        self.corner_window = check_number(
+            "corner_window", corner_window, 0, integer=True, type_error=ValueError
+        )
         self.corner_max_shift = float(corner_max_shift)
-        if not isinstance(refine_threshold, (int, float)) or not 0.0 <= refine_threshold < 1.0:
-            raise ValueError(f"refine_threshold must be a number in [0, 1), got {refine_threshold!r}")
+        check_number("refine_threshold", refine_threshold, 0.0, 1.0, hi_open=True, type_error=ValueError)
         if not isinstance(votes, bool):
             raise ValueError(f"votes must be True or False, got {votes!r}")
         if vote_threshold is None:
             vote_threshold = score_threshold
-        if not isinstance(vote_threshold, (int, float)) or not 0.0 < vote_threshold <= 1.0:
-            raise ValueError(f"vote_threshold must be a number in (0, 1], got {vote_threshold!r}")
+        check_number("vote_threshold", vote_threshold, 0.0, 1.0, lo_open=True, type_error=ValueError)
         self.refine_threshold = float(refine_threshold)
         self.votes = votes
         self.vote_threshold = float(vote_threshold)
@@ -361,8 +358,8 @@ class LearnedDetector:
         Downscales to the training width (:data:`TRAINED_WIDTH`, never up) and takes the
         operating point of :func:`operating_point_for`; the study and the LocalizationWrapper
         build theirs this way. ``model`` and ``refiner`` select other weights (for example
-        networks retrained with :mod:`uav_struct_env.train_detector` and
-        :mod:`uav_struct_env.train_refiner`), as in the constructor; the operating point's
+        networks retrained with :mod:`uav_struct_env.training.train_detector` and
+        :mod:`uav_struct_env.training.train_refiner`), as in the constructor; the operating point's
         thresholds were chosen for the committed weights.
         """
         return cls(landmarks, model=model, refiner=refiner,

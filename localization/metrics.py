@@ -52,6 +52,8 @@ __all__ = [
     "cramer_rao_bound",
     "detection_rate",
     "latency_summary",
+    "median_p90",
+    "pooled_scores",
     "pose_errors",
     "recall_at",
     "rotation_error_deg",
@@ -121,6 +123,16 @@ def _stats(x: NDArray) -> tuple[float, float]:
     if x.size == 0:
         return float("nan"), float("nan")
     return float(np.median(x)), float(np.percentile(x, 90))
+
+
+def median_p90(values: ArrayLike) -> dict[str, float]:
+    """``{"median": ..., "p90": ...}`` of the finite ``values`` (NaN for both when there are none).
+
+    Non-finite entries (a failed pose's NaN error, an infinite bound) are left out.
+    """
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    median, p90 = _stats(v[np.isfinite(v)])
+    return {"median": median, "p90": p90}
 
 
 def summarize_errors(
@@ -281,6 +293,21 @@ def association_scores(
         p = r = 1.0
     f1 = 2 * p * r / (p + r) if (p + r) > 0 else 0.0
     return AssociationScores(correct, assigned, true_det, float(p), float(r), float(f1))
+
+
+def pooled_scores(correct: int, assigned: int, true_detections: int) -> AssociationScores:
+    """Association scores from counts pooled over many images (sums of counts, then ratios).
+
+    ``precision = correct / assigned``, ``recall = correct / true_detections``, F1 their harmonic
+    mean; NaN where a denominator is 0 (and F1 NaN unless both are defined and not both 0).
+    """
+    nan = float("nan")
+    p = correct / assigned if assigned else nan
+    r = correct / true_detections if true_detections else nan
+    f1 = 2 * p * r / (p + r) if np.isfinite(p) and np.isfinite(r) and p + r > 0 else nan
+    return AssociationScores(
+        int(correct), int(assigned), int(true_detections), float(p), float(r), float(f1)
+    )
 
 
 def latency_summary(timings: Iterable[Mapping[str, float]]) -> dict[str, dict[str, float]]:

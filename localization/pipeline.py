@@ -8,6 +8,7 @@ est.success, est.cam_from_world, est.assignment
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -16,7 +17,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.associate import Association, associate_paper, associate_robust
+from localization.checks import check_choice, check_number
 from localization.detect import Detections, check_image_size
+from localization.failure import FailureCode
 from localization.geometry import (
     as_points,
     camera_center,
@@ -34,12 +37,12 @@ from localization.pnp import (
     solve_pnp,
 )
 
-__all__ = ["ASSOCIATION_METHODS", "Localizer", "PoseEstimate"]
+__all__ = ["ASSOCIATION_METHODS", "Localizer", "PoseEstimate", "image_size_from_K"]
 
 ASSOCIATION_METHODS = ("paper", "robust")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PoseEstimate:
     """A camera pose estimate with its quality.
 
@@ -53,7 +56,9 @@ class PoseEstimate:
             ``pixel_sigma``. Parameterization: first 3 = camera centre in the project frame [m],
             last 3 = small rotation vector [rad] in the project frame perturbing
             ``world_from_cam`` (``R' = exp([dtheta]x) R``). All inf when unknown.
-        failure_reason: why it failed, or None.
+        failure_reason: why it failed, for people (with the numbers of the case), or None.
+        failure_code: why it failed, for grouping: a :class:`~localization.failure.FailureCode`
+            (``UNKNOWN`` when a failed estimate was built without one), None on success.
         timings: seconds per stage (``validate``, ``associate``, ``pnp``, ``covariance``,
             ``total``). ``associate`` includes the PnP runs made inside robust association.
         prior_mahalanobis_sq: squared Mahalanobis distance of the estimate from the prior.
@@ -70,6 +75,11 @@ class PoseEstimate:
     timings: dict[str, float] = field(default_factory=dict)
     prior_mahalanobis_sq: float = float("nan")
     n_hypotheses: int = 0
+    failure_code: FailureCode | None = None
+
+    def __post_init__(self) -> None:
+        if not self.success and self.failure_code is None:
+            object.__setattr__(self, "failure_code", FailureCode.UNKNOWN)
 
     @property
     def world_from_cam(self) -> NDArray[np.float64]:
@@ -87,17 +97,6 @@ class PoseEstimate:
         return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
 
 
-def _positive_number(name: str, value: object, allow_zero: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name} must be a number, got {value!r}")
-    v = float(value)
-    if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        raise ValueError(
-            f"{name} must be finite and {'>=' if allow_zero else '>'} 0, got {value!r}"
-        )
-    return v
-
-
 class Localizer:
     """Structural-landmark localizer: association with the BIM, then PnP.
 
@@ -106,7 +105,11 @@ class Localizer:
         K: (3, 3) camera intrinsics.
         association: ``"robust"`` (default) or ``"paper"`` (see :mod:`localization.associate`).
         pixel_sigma: detector noise, px (gates and the covariance).
-        image_size: (W, H) for the "near the image" filter; default ``(round(2 cx), round(2 cy))``.
+        image_size: (W, H) of the detections' image. Association keeps only the landmarks whose
+            prior projection falls within ``margin_px`` of ``[-0.5, W - 0.5] x [-0.5, H - 0.5]``,
+            and ``margin_px`` defaults to a quarter of the larger side. Default:
+            :func:`image_size_from_K` -- exact for the paper's camera and for every camera the
+            environment scales from it (128 x 72 gives 128 x 72); pass it for other cameras.
         margin_px: how far outside the image a prior projection may fall and still be a
             candidate; default a quarter of the larger image side.
         min_correspondences: fewer inliers fail (>= 3; the paper and the default use 4).
@@ -153,56 +156,38 @@ class Localizer:
             raise ValueError("landmarks_xyz must be finite")
         self.landmarks_xyz = X
         self.K = check_intrinsics("K", K)
-        if not isinstance(association, str):
-            raise TypeError(
-                f"association must be one of {ASSOCIATION_METHODS}, got {association!r}"
-            )
-        if association not in ASSOCIATION_METHODS:
-            raise ValueError(
-                f"association must be one of {ASSOCIATION_METHODS}, got {association!r}"
-            )
-        self.association = association
-        self.pixel_sigma = _positive_number("pixel_sigma", pixel_sigma)
+        self.association = check_choice(
+            "association", association, ASSOCIATION_METHODS, type_error=TypeError
+        )
+        self.pixel_sigma = check_number("pixel_sigma", pixel_sigma, 0, lo_open=True)
         if image_size is None:
-            image_size = (int(round(2 * self.K[0, 2])), int(round(2 * self.K[1, 2])))
-            if image_size[0] <= 0 or image_size[1] <= 0:
-                raise ValueError(
-                    "cannot infer image_size from K's principal point; pass image_size"
-                )
+            image_size = image_size_from_K(self.K)
         self.image_size = check_image_size("image_size", image_size)
         self.margin_px = (
             0.25 * max(self.image_size)
             if margin_px is None
-            else _positive_number("margin_px", margin_px, allow_zero=True)
+            else check_number("margin_px", margin_px, 0)
         )
-        if isinstance(min_correspondences, bool) or not isinstance(
-            min_correspondences, (int, np.integer)
-        ):
-            raise TypeError(f"min_correspondences must be an int, got {min_correspondences!r}")
-        if min_correspondences < 3:
-            raise ValueError(f"min_correspondences must be >= 3, got {min_correspondences}")
-        self.min_correspondences = int(min_correspondences)
-        self.gate_px = None if gate_px is None else _positive_number("gate_px", gate_px)
-        self.coarse_gate_px = _positive_number("coarse_gate_px", coarse_gate_px)
-        if (
-            isinstance(max_hypotheses, bool)
-            or not isinstance(max_hypotheses, (int, np.integer))
-            or max_hypotheses < 0
-        ):
-            raise ValueError(f"max_hypotheses must be an int >= 0, got {max_hypotheses!r}")
-        self.max_hypotheses = int(max_hypotheses)
+        self.min_correspondences = check_number(
+            "min_correspondences", min_correspondences, 3, integer=True
+        )
+        self.gate_px = None if gate_px is None else check_number("gate_px", gate_px, 0, lo_open=True)
+        self.coarse_gate_px = check_number("coarse_gate_px", coarse_gate_px, 0, lo_open=True)
+        self.max_hypotheses = check_number(
+            "max_hypotheses", max_hypotheses, 0, integer=True, type_error=ValueError
+        )
         self.prior_sigmas = self._prior_sigmas(prior_sigmas)
         self.ransac = bool(ransac)
-        self.ransac_threshold_px = _positive_number("ransac_threshold_px", ransac_threshold_px)
+        self.ransac_threshold_px = check_number("ransac_threshold_px", ransac_threshold_px, 0, lo_open=True)
         self.max_position_std_m = (
             None
             if max_position_std_m is None
-            else _positive_number("max_position_std_m", max_position_std_m)
+            else check_number("max_position_std_m", max_position_std_m, 0, lo_open=True)
         )
         self.max_prior_mahalanobis_sq = (
             None
             if max_prior_mahalanobis_sq is None
-            else _positive_number("max_prior_mahalanobis_sq", max_prior_mahalanobis_sq)
+            else check_number("max_prior_mahalanobis_sq", max_prior_mahalanobis_sq, 0, lo_open=True)
         )
         self.coplanar = is_coplanar(X)
 
@@ -287,7 +272,10 @@ class Localizer:
         timings["validate"] = t1 - t0
 
         def fail(
-            reason: str, assignment: NDArray[np.int64] | None = None, n_hyp: int = 0
+            code: FailureCode,
+            reason: str,
+            assignment: NDArray[np.int64] | None = None,
+            n_hyp: int = 0,
         ) -> PoseEstimate:
             timings["total"] = time.perf_counter() - t0
             return PoseEstimate(
@@ -295,6 +283,7 @@ class Localizer:
                 cam_from_world=prior.copy(),
                 assignment=unassigned if assignment is None else assignment,
                 failure_reason=reason,
+                failure_code=code,
                 timings=timings,
                 prior_mahalanobis_sq=0.0,
                 n_hypotheses=n_hyp,
@@ -305,19 +294,24 @@ class Localizer:
         if usable.sum() < need:
             timings.update(associate=0.0, pnp=0.0, covariance=0.0)
             what = "no detections" if n == 0 else f"{int(usable.sum())} usable (finite) detections"
-            return fail(f"too few detections: {what}, need {need}")
+            return fail(FailureCode.TOO_FEW_DETECTIONS, f"too few detections: {what}, need {need}")
 
         assoc = self.associate(det, prior)
         t2 = time.perf_counter()
         timings["associate"] = t2 - t1
         if assoc.failure_reason is not None:
             timings.update(pnp=0.0, covariance=0.0)
-            return fail(assoc.failure_reason, n_hyp=assoc.n_hypotheses)
+            return fail(
+                assoc.failure_code or FailureCode.UNKNOWN,
+                assoc.failure_reason,
+                n_hyp=assoc.n_hypotheses,
+            )
         a = assoc.assignment.copy()
         m = a >= 0
         if m.sum() < need:
             timings.update(pnp=0.0, covariance=0.0)
             return fail(
+                FailureCode.TOO_FEW_CORRESPONDENCES,
                 f"too few correspondences: {int(m.sum())} assigned, need {need}",
                 a,
                 assoc.n_hypotheses,
@@ -338,7 +332,12 @@ class Localizer:
             )
             if not res.success:
                 timings.update(pnp=time.perf_counter() - t2, covariance=0.0)
-                return fail(res.failure_reason or "PnP failed", a, assoc.n_hypotheses)
+                return fail(
+                    res.failure_code or FailureCode.PNP_FAILED,
+                    res.failure_reason or "PnP failed",
+                    a,
+                    assoc.n_hypotheses,
+                )
             T = res.cam_from_world
             idx_m = np.flatnonzero(m)
             a[idx_m[~res.inliers]] = -1
@@ -349,18 +348,24 @@ class Localizer:
             _, depth = reprojection_residuals(self.K, T, X, u)
             if not np.all(depth > 0):
                 timings.update(pnp=time.perf_counter() - t2, covariance=0.0)
-                return fail("refined pose puts landmarks behind the camera", a, assoc.n_hypotheses)
+                return fail(
+                    FailureCode.BEHIND_CAMERA,
+                    "refined pose puts landmarks behind the camera",
+                    a,
+                    assoc.n_hypotheses,
+                )
         t3 = time.perf_counter()
         timings["pnp"] = t3 - t2
         cov = pose_covariance(self.K, T, self.landmarks_xyz[a[m]], self.pixel_sigma)
         timings["covariance"] = time.perf_counter() - t3
         if not np.all(np.isfinite(T)):
-            return fail("PnP returned a non-finite pose", a, assoc.n_hypotheses)
+            return fail(FailureCode.PNP_FAILED, "PnP returned a non-finite pose", a, assoc.n_hypotheses)
         spread = _minor_spread_px(det[m])
         if spread < max(2.0 * self.pixel_sigma, 1.0):
             # Landmarks whose images lie on one line (a plane seen edge-on) admit several poses
             # that fit equally well; the covariance at any one of them does not show it.
             return fail(
+                FailureCode.DEGENERATE_GEOMETRY,
                 f"degenerate geometry: the inlier detections lie on a line (spread across it "
                 f"{spread:.2g} px), the landmarks are seen edge-on",
                 a,
@@ -370,6 +375,7 @@ class Localizer:
             std = float(np.sqrt(np.max(np.diag(cov)[:3]))) if np.all(np.isfinite(cov)) else np.inf
             if std > self.max_position_std_m:
                 return fail(
+                    FailureCode.ILL_CONDITIONED,
                     f"ill-conditioned geometry: position std {std:.3g} m > "
                     f"max_position_std_m={self.max_position_std_m}",
                     a,
@@ -388,6 +394,29 @@ class Localizer:
             prior_mahalanobis_sq=prior_mahalanobis_sq(T, prior, self.prior_sigmas),
             n_hypotheses=assoc.n_hypotheses,
         )
+
+
+def image_size_from_K(K: ArrayLike) -> tuple[int, int]:
+    """The image size ``(W, H)`` that ``K``'s principal point implies: ``(ceil(2 cx), ceil(2 cy))``.
+
+    A principal point lies between the image centre in pixel-centre coordinates, ``(W - 1) / 2``,
+    and the centre of the pixel rectangle, ``W / 2``; so ``2 cx`` lies in ``[W - 1, W]`` and the
+    image is ``ceil(2 cx)`` wide. The paper's camera (``cx = 640 = W / 2``) gives 1280; the
+    environment's cameras scaled from it keep its half-pixel offset (``cx = 63.55`` at 128 px)
+    and give their own width, where ``round(2 cx)`` gave 127. A camera whose principal point is
+    exactly ``(W - 1) / 2`` is ambiguous with width ``W - 1`` and gives that: pass ``image_size``.
+
+    Raises:
+        ValueError: if the principal point is not positive.
+    """
+    k = check_intrinsics("K", K)
+    # The tolerance keeps an exact 2 cx (the paper's camera) from rounding up through float noise.
+    w, h = (int(math.ceil(2.0 * float(c) - 1e-6)) for c in (k[0, 2], k[1, 2]))
+    if w <= 0 or h <= 0:
+        raise ValueError(
+            f"cannot infer image_size from K's principal point ({k[0, 2]}, {k[1, 2]}); pass image_size"
+        )
+    return w, h
 
 
 def _minor_spread_px(uv: NDArray[np.float64]) -> float:

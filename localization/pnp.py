@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization.failure import FailureCode
 from localization.geometry import (
     as_points,
     camera_center,
@@ -74,7 +75,7 @@ class PriorSigmas:
         )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PnPResult:
     """Outcome of :func:`solve_pnp`.
 
@@ -84,6 +85,7 @@ class PnPResult:
         rmse_px: reprojection RMSE over the inliers, px (inf when not successful).
         inliers: (N,) bool mask of the correspondences used in the final refinement.
         failure_reason: why not, or None.
+        failure_code: the :class:`~localization.failure.FailureCode` of ``failure_reason``.
         candidates: every candidate pose considered (before refinement).
     """
 
@@ -93,6 +95,7 @@ class PnPResult:
     inliers: NDArray[np.bool_]
     failure_reason: str | None = None
     candidates: tuple[NDArray[np.float64], ...] = field(default=(), repr=False)
+    failure_code: FailureCode | None = field(default=None, kw_only=True)
 
 
 # --------------------------------------------------------------------------------------------
@@ -433,13 +436,14 @@ def solve_pnp(
     n = X.shape[0]
     inliers = np.ones(n, dtype=bool)
 
-    def fail(reason: str) -> PnPResult:
-        return PnPResult(False, fallback.copy(), np.inf, np.zeros(n, dtype=bool), reason)
+    def fail(code: FailureCode, reason: str) -> PnPResult:
+        return PnPResult(False, fallback.copy(), np.inf, np.zeros(n, dtype=bool), reason, failure_code=code)
 
     finite = np.isfinite(X).all(axis=1) & np.isfinite(u).all(axis=1)
     inliers &= finite
     if inliers.sum() < max(min_points, 3):
         return fail(
+            FailureCode.TOO_FEW_CORRESPONDENCES,
             f"too few correspondences: {int(inliers.sum())} usable, need {max(min_points, 3)}"
         )
     if ransac and inliers.sum() >= 6:
@@ -464,7 +468,7 @@ def solve_pnp(
     coplanar = is_coplanar(Xi)
     cands = pnp_candidates(Xi, ui, K, coplanar=coplanar)
     if not cands:
-        return fail("PnP solver found no pose (degenerate layout)")
+        return fail(FailureCode.PNP_FAILED, "PnP solver found no pose (degenerate layout)")
     k = select_candidate(
         cands,
         Xi,
@@ -477,11 +481,11 @@ def solve_pnp(
         prior_sigmas=prior_sigmas,
     )
     if k is None:
-        return fail("every PnP candidate puts landmarks behind the camera")
+        return fail(FailureCode.BEHIND_CAMERA, "every PnP candidate puts landmarks behind the camera")
     T = cands[k]
     if refine:
         T, _ = refine_pose(Xi, ui, K, T)
     rmse, ok = _rmse_and_depth_ok(K, T, Xi, ui)
     if not ok or not np.isfinite(rmse):
-        return fail("refined pose puts landmarks behind the camera")
+        return fail(FailureCode.BEHIND_CAMERA, "refined pose puts landmarks behind the camera")
     return PnPResult(True, T, rmse, inliers, None, tuple(cands))

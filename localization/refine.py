@@ -5,7 +5,7 @@ places a landmark with a stride-4 heatmap: most candidates land within a few pix
 landmark, but the tail (3-8 px off at full resolution, mostly stair-opening corners whose top
 surface meets the opening's inner face with little contrast) is too coarse for a 3-pixel
 tolerance. :class:`PatchRefiner` looks again, at full resolution, at a small patch around
-every candidate: a small CNN (trained by :mod:`uav_struct_env.train_refiner`; weights in
+every candidate: a small CNN (trained by :mod:`uav_struct_env.training.train_refiner`; weights in
 ``localization/models/``) returns, per landmark type, the probability that a landmark of that
 type lies within :data:`POSITIVE_RADIUS` px of the patch centre and its offset from the centre.
 Refinement is iterated (the patch is re-centred on the previous estimate), and the score of the
@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization.checks import check_number
 from localization.geometry import as_points
 from localization.inference import OnnxNet
 
@@ -89,13 +90,9 @@ class PatchRefiner:
         path = Path(DEFAULT_REFINER if model is None else model)
         if not path.is_file():
             raise FileNotFoundError(f"refiner model not found: {path}")
-        if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
-            raise ValueError(f"iterations must be an int >= 1, got {iterations!r}")
         self.model_path = path
-        self.iterations = iterations
-        if not isinstance(recentre_px, (int, float)) or recentre_px < 0:
-            raise ValueError(f"recentre_px must be a number >= 0, got {recentre_px!r}")
-        self.recentre_px = float(recentre_px)
+        self.iterations = check_number("iterations", iterations, 1, integer=True, type_error=ValueError)
+        self.recentre_px = check_number("recentre_px", recentre_px, 0.0, type_error=ValueError)
         self._net = OnnxNet(path, threads)
 
     def predict(self, image: NDArray[np.uint8], uv: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:

@@ -21,3 +21,7 @@ class RendererUnavailableError(UavStructError, RuntimeError):
 
 class IfcImportError(SiteGeometryError):
     """An IFC file that cannot become a site (not IFC, no structure, no landmark-bearing floor)."""
+
+
+class ClosedError(UavStructError, RuntimeError):
+    """An environment (or its world) was used after ``close()``: make a new one instead."""

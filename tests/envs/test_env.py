@@ -260,3 +260,20 @@ def test_other_uavs_are_drawn_but_not_the_own_airframe():
     dark_before = (obs["uav_0"]["image"][window].max(axis=2) < 60).mean()
     assert dark_after > 0.1 and dark_before < 0.01  # a dark airframe appeared ahead
     env.close()
+
+
+def test_closed_env_raises_a_clear_closed_error():
+    from uav_struct_env.errors import ClosedError
+
+    env = uav_struct_env.parallel_env("train", max_cycles=3, render_mode="rgb_array")
+    env.reset(seed=0)
+    env.close()
+    env.close()  # twice is harmless
+    for call in (
+        lambda: env.reset(seed=0),
+        lambda: env.step({a: np.zeros(5, np.float32) for a in env.possible_agents}),
+        env.render,
+    ):
+        with pytest.raises(ClosedError, match="environment is closed.*create a new one"):
+            call()
+    assert issubclass(ClosedError, RuntimeError)

@@ -4,6 +4,7 @@ import math
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from uav_struct_env.errors import ConfigError
@@ -122,7 +123,9 @@ def test_bad_study_options_are_rejected_with_the_value():
 def test_learned_detector_weights_by_path(tmp_path, monkeypatch):
     from localization.learned import DEFAULT_MODEL
     from localization.refine import DEFAULT_REFINER
-    from uav_struct_env.study.run import _detector
+    from localization.synthetic import PAPER_K
+    from uav_struct_env.stack import build_stack
+    from uav_struct_env.study.run import stack_spec
 
     with pytest.raises(ConfigError, match=r"detector_model applies to detector='learned' only, "
                                           r"got detector='projection'"):
@@ -135,7 +138,8 @@ def test_learned_detector_weights_by_path(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     config = StudyConfig(detector="learned", detector_model="kp.onnx", refiner_model="ref.onnx")
     assert config.detector_model == str(model.resolve())  # recorded absolute in results.json
-    det = _detector(config, next(m for m in METHODS if m.key == "slab_corners"), 0, 0)
+    spec = stack_spec(config, next(m for m in METHODS if m.key == "slab_corners"))
+    det = build_stack(spec, PAPER_K, config.image_size, model_xyz=np.eye(4, 3)).detector
     assert det.model_path == model.resolve() and det.refiner.model_path == refiner.resolve()
     assert det.landmarks == "slab_corners" and det.scale == 0.5
 

@@ -9,7 +9,7 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("onnx")
 
 from localization.learned import LearnedDetector, decode  # noqa: E402
-from uav_struct_env.train_detector import _targets, main  # noqa: E402
+from uav_struct_env.training.train_detector import _targets, main  # noqa: E402
 
 
 def test_targets_decode_round_trip():

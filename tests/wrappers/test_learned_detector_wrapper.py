@@ -23,8 +23,8 @@ def test_learned_detector_column_tops_paper_camera_at_half_size(tmp_path):
         "column_tops", preset="paper", env_overrides={"image_size": (640, 360), "max_cycles": 2},
         detector="learned", detector_model=model, refiner_model=str(refiner),
     )
-    assert isinstance(env._detector, LearnedDetector) and env._detector.scale == 1.0
-    assert env._detector.model_path == model and env._detector.refiner.model_path == refiner
+    assert isinstance(env.stack.detector, LearnedDetector) and env.stack.detector.scale == 1.0
+    assert env.stack.detector.model_path == model and env.stack.detector.refiner.model_path == refiner
     obs, infos = env.reset(seed=0, options={"viewpoint": 0})
     frames = env.last_frames
     assert len(frames) == 4

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 import uav_struct_env
+from localization import Detections
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.wrappers import (
-    LAYOUT_COMPONENTS,
+    PRIVILEGED_LAYOUT_COMPONENTS,
     LocalizationWrapper,
     make_localization_env,
     make_train_env,
@@ -39,7 +40,9 @@ def test_spaces_cached_identical_and_observations_inside():
 
 
 def test_scripted_view_localizes_accurately_and_reports_quality():
-    env = make_localization_env("column_tops", env_overrides={"image_size": (128, 72), **SMALL})
+    env = make_localization_env(
+        "column_tops", env_overrides={"image_size": (128, 72), **SMALL}, privileged=True
+    )
     obs, infos = env.reset(seed=0, options={"viewpoint": 3})
     assert "image" in obs["uav_0"]
     for a in env.possible_agents:
@@ -55,7 +58,7 @@ def test_scripted_view_localizes_accurately_and_reports_quality():
         q = obs[a]["pose"][3:]
         assert np.linalg.norm(q) == pytest.approx(1.0, abs=1e-5)
         assert np.all(obs[a]["pose_std"] < 1.0) and obs[a]["localized"][0] == 1.0
-        layout = dict(zip(LAYOUT_COMPONENTS, obs[a]["layout"], strict=True))
+        layout = dict(zip(PRIVILEGED_LAYOUT_COMPONENTS, obs[a]["layout"], strict=True))
         assert layout["visible_frac"] > 0.5 and abs(layout["centroid_u"]) < 0.5
         assert layout["site_dir_z"] > 0.9  # the scripted views aim at the building
         assert 0.1 < layout["site_distance_hm"] < 0.6
@@ -191,3 +194,70 @@ def test_aruco_detector_localizes_from_the_rendered_markers():
         assert loc["translation_error_m"] < 0.5 < loc["prior_translation_error_m"]
     finally:
         wenv.close()
+
+
+
+class InFrameDetector:
+    """A user's detector (the Detector protocol): every landmark projecting into the frame,
+    whether or not the simulator's truth calls it visible."""
+
+    def detect(self, image, context):
+        t = context["landmarks"]["column_tops"]
+        keep = np.asarray(t["in_frame"], bool)
+        return Detections(np.asarray(t["uv"])[keep], true_ids=np.asarray(t["ids"])[keep])
+
+
+def _perturb_truth(base):
+    """Change only ground truth in the env's infos: the true pose by 5 m, every landmark invisible."""
+    reset, step = base.reset, base.step
+
+    def patch(infos):
+        for info in infos.values():
+            info["world_from_cam"] = info["world_from_cam"].copy()
+            info["world_from_cam"][:3, 3] += 5.0
+            info["landmarks"]["column_tops"]["visible"] = np.zeros_like(
+                info["landmarks"]["column_tops"]["visible"]
+            )
+
+    def new_reset(*a, **k):
+        obs, infos = reset(*a, **k)
+        patch(infos)
+        return obs, infos
+
+    def new_step(*a, **k):
+        out = step(*a, **k)
+        patch(out[-1])
+        return out
+
+    base.reset, base.step = new_reset, new_step
+
+
+def test_default_observations_identical_when_only_ground_truth_changes():
+    outs, infos = {}, {}
+    for privileged in (False, True):
+        for perturbed in (False, True):
+            env = make_localization_env(
+                "column_tops",
+                env_overrides={"image_size": (128, 72), **SMALL},
+                detector=InFrameDetector(),
+                privileged=privileged,
+            )
+            if perturbed:
+                _perturb_truth(env.unwrapped)
+            obs, info = env.reset(seed=3, options={"viewpoint": 2})
+            obs2, _, _, _, info2 = env.step(hold(env))
+            outs[privileged, perturbed], infos[privileged, perturbed] = [obs, obs2], [info, info2]
+            env.close()
+    for step in range(2):
+        for a, plain in outs[False, False][step].items():
+            changed = outs[False, True][step][a]
+            assert set(plain) == set(changed)
+            for k in plain:
+                np.testing.assert_array_equal(plain[k], changed[k], err_msg=k)
+            assert plain["localized"][0] == 1.0 and plain["layout"][0] > 0.3  # inlier fraction
+            # the truth did change: the scored error and the privileged feature see it
+            e0 = infos[False, False][step][a]["localization"]["translation_error_m"]
+            e1 = infos[False, True][step][a]["localization"]["translation_error_m"]
+            assert abs(e1 - e0) > 1.0
+            assert outs[True, False][step][a]["layout"][0] > 0.3
+            assert outs[True, True][step][a]["layout"][0] == 0.0

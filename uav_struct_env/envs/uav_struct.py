@@ -44,6 +44,7 @@ from pettingzoo import ParallelEnv
 from localization.geometry import invert
 from uav_struct_env.envs.config import EnvConfig, make_config
 from uav_struct_env.envs.render import MapView, UavMarker, compose_frame, draw_site_map
+from uav_struct_env.errors import ClosedError
 from uav_struct_env.sim.airframes import Airframes
 from uav_struct_env.sim.attitude import world_from_cam_from_attitude
 from uav_struct_env.sim.camera import Camera
@@ -108,6 +109,7 @@ class UavStructParallelEnv(ParallelEnv):
         self.geofence = cfg.geofence.scaled(scale)
         self._targets = _ViewTargets.from_site(self.site)
         self._world = None
+        self._closed = False
 
         obs = {
             "image": spaces.Box(0, 255, (h, w, 3), np.uint8),
@@ -149,7 +151,12 @@ class UavStructParallelEnv(ParallelEnv):
     # ------------------------------------------------------------------ world
     @property
     def world(self):
-        """The env's :class:`~uav_struct_env.sim.world.SiteWorld` (built on first use)."""
+        """The env's :class:`~uav_struct_env.sim.world.SiteWorld` (built on first use).
+
+        Raises:
+            ClosedError: after :meth:`close`.
+        """
+        self._check_open()
         if self._world is None:
             from uav_struct_env.sim.world import SiteWorld
 
@@ -178,6 +185,7 @@ class UavStructParallelEnv(ParallelEnv):
         Raises:
             ValueError: if ``viewpoint`` is not an int in ``[0, n_viewpoints)``.
         """
+        self._check_open()
         if seed is not None:
             self._rng = np.random.default_rng(seed)
         viewpoint = None if options is None else options.get("viewpoint")
@@ -254,6 +262,7 @@ class UavStructParallelEnv(ParallelEnv):
             ValueError: for an action to an unknown or finished agent, or one that is NaN/inf,
                 of the wrong shape or of a non-numeric dtype (message names agent and value).
         """
+        self._check_open()
         if not isinstance(actions, dict):
             raise ValueError(
                 "actions must be a dict mapping agent names to actions, "
@@ -374,6 +383,7 @@ class UavStructParallelEnv(ParallelEnv):
     # ------------------------------------------------------------------ render / close
     def render(self) -> NDArray[np.uint8] | None:
         """The ``rgb_array`` frame: views side by side plus the top-down map (None otherwise)."""
+        self._check_open()
         if self.render_mode is None:
             warnings.warn(
                 "render() called with render_mode=None; pass render_mode='rgb_array'", stacklevel=2
@@ -403,8 +413,19 @@ class UavStructParallelEnv(ParallelEnv):
         w, h = cfg.image_size
         return compose_frame(views, site_map, cfg.render_view_height, w / h)
 
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ClosedError(
+                "this uav_struct_v0 environment is closed (close() released its pybullet "
+                "client); create a new one with uav_struct_env.parallel_env(...)"
+            )
+
     def close(self) -> None:
-        """Release the pybullet client."""
+        """Release the pybullet client; later reset/step/render raise :class:`ClosedError`.
+
+        Closing twice is harmless.
+        """
+        self._closed = True
         self._airframes = None
         if self._world is not None:
             self._world.close()

@@ -8,14 +8,15 @@ scene once per viewpoint and evaluates all of its methods on the same frames.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from localization.checks import check_choice, check_number
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.site import make_site
+from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS
 
 __all__ = [
     "ASSOCIATIONS",
@@ -28,8 +29,8 @@ __all__ = [
     "StudyConfig",
 ]
 
-DETECTORS = ("projection", "learned")
-ASSOCIATIONS = ("paper", "robust")
+#: Detector and association names, from the localization stack (uav_struct_env.stack).
+DETECTORS = STRUCTURAL_DETECTORS
 NOISES = ("paper", "gnss_ins")
 
 
@@ -169,9 +170,9 @@ class StudyConfig:
         methods: keys of :data:`METHODS` to run (default all).
         detector_model: with ``detector="learned"``, the keypoint network's ONNX file (None:
             the committed ``localization/models/landmarks_v1.onnx``), e.g. one retrained with
-            ``python -m uav_struct_env.train_detector``; stored resolved to an absolute path.
+            ``python -m uav_struct_env.training.train_detector``; stored resolved to an absolute path.
         refiner_model: with ``detector="learned"``, the patch refiner's ONNX file (None: the
-            committed one), e.g. from ``python -m uav_struct_env.train_refiner``.
+            committed one), e.g. from ``python -m uav_struct_env.training.train_refiner``.
         stage: the floor to evaluate, by any of its stage names (``"Level 2/slab"``): the slab
             methods run at the floor's slab stage, column tops at its columns stage. None: the
             paper's first floor (``"slab"`` / ``"columns"``), or an IFC file's last floor.
@@ -198,14 +199,13 @@ class StudyConfig:
     stage: str | None = None
 
     def __post_init__(self) -> None:
-        def choice(name: str, options: tuple[str, ...]) -> None:
-            if getattr(self, name) not in options:
-                raise ConfigError(f"{name} must be one of {options}, got {getattr(self, name)!r}")
-
-        choice("detector", DETECTORS)
-        choice("imaging", ("ideal", "camera"))
-        choice("association", ASSOCIATIONS)
-        choice("noise", NOISES)
+        for name, options in (
+            ("detector", DETECTORS),
+            ("imaging", ("ideal", "camera")),
+            ("association", ASSOCIATIONS),
+            ("noise", NOISES),
+        ):
+            check_choice(name, getattr(self, name), options, error=ConfigError)
         if not isinstance(self.site, str) or not (
             self.site in ("paper", "random") or Path(self.site).is_file()
         ):
@@ -215,22 +215,17 @@ class StudyConfig:
             )
         if self.stage is not None and not isinstance(self.stage, str):
             raise ConfigError(f"stage must be a stage name (str) or None, got {self.stage!r}")
-        for name in ("seed",):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise ConfigError(f"{name} must be an int >= 0, got {v!r}")
+        check_number("seed", self.seed, 0, integer=True, error=ConfigError, type_error=ConfigError)
         for name in ("n_viewpoints", "n_agents", "workers"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ConfigError(f"{name} must be a positive int, got {v!r}")
+            check_number(
+                name, getattr(self, name), 1, integer=True, error=ConfigError, type_error=ConfigError
+            )
         for name, lo, hi in (
-            ("pixel_sigma", 0.0, math.inf),
+            ("pixel_sigma", 0.0, None),
             ("miss_rate", 0.0, 1.0),
-            ("false_positives", 0.0, math.inf),
+            ("false_positives", 0.0, None),
         ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (lo <= v <= hi) or math.isnan(v):
-                raise ConfigError(f"{name} must be a number in [{lo}, {hi}], got {v!r}")
+            check_number(name, getattr(self, name), lo, hi, error=ConfigError, type_error=ConfigError)
         for name in ("detector_model", "refiner_model"):
             v = getattr(self, name)
             if v is None:

@@ -2,8 +2,10 @@
 
 Statistics follow the paper: error medians and P90 over the *successful* poses only, with the
 success count beside them. Detection rate and association precision/recall/F1 are pooled over
-all images of a method (sums of counts, then ratios). A value that cannot be computed (no
-successful pose, nothing visible) is ``null`` in JSON and ``—`` in the tables.
+all images of a method (sums of counts, then ratios). Every statistic comes from
+:mod:`localization.metrics`, which gives NaN where a value cannot be computed (no successful
+pose, nothing visible); at the JSON boundary NaN becomes ``null`` (``—`` in the tables). Failures
+are grouped by their :class:`~localization.FailureCode`, with a count and an example message.
 """
 
 from __future__ import annotations
@@ -15,57 +17,71 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
-
+from localization import FailureCode
+from localization.metrics import (
+    DEFAULT_THRESHOLDS,
+    median_p90,
+    pooled_scores,
+    recall_at,
+    summarize_errors,
+)
 from uav_struct_env.study.protocol import METHODS, Method, StudyConfig
 from uav_struct_env.study.run import ImageResult
 
-__all__ = ["summarize", "write_csv", "write_results_json", "table1_markdown", "table2_markdown"]
+__all__ = [
+    "failure_breakdown",
+    "summarize",
+    "write_csv",
+    "write_results_json",
+    "table1_markdown",
+    "table2_markdown",
+]
 
-RECALL_THRESHOLDS = ((0.25, 1.0), (0.5, 2.0), (1.0, 5.0))
-
-
-def _num(x: float) -> float | None:
-    return float(x) if x is not None and math.isfinite(x) else None
-
-
-def _stats(values: Sequence[float]) -> dict[str, float | None]:
-    v = np.asarray([x for x in values if math.isfinite(x)], dtype=float)
-    if v.size == 0:
-        return {"median": None, "p90": None}
-    return {"median": float(np.median(v)), "p90": float(np.percentile(v, 90))}
+#: The (m, deg) recall thresholds of results.json: the first three of the package's defaults.
+RECALL_THRESHOLDS = DEFAULT_THRESHOLDS[:3]
 
 
-def _ratio(a: int, b: int) -> float | None:
-    return a / b if b else None
+def _ratio(a: int, b: int) -> float:
+    return a / b if b else float("nan")
+
+
+def failure_breakdown(rows: Sequence[ImageResult]) -> dict[str, dict]:
+    """Failed images grouped by :class:`~localization.FailureCode` value, most frequent first.
+
+    Each group holds its ``count`` and an ``example`` message (the first one).
+    """
+    groups: dict[str, dict] = {}
+    for r in rows:
+        if not r.success:
+            code = r.failure_code or FailureCode.UNKNOWN.value
+            g = groups.setdefault(code, {"count": 0, "example": r.failure_reason})
+            g["count"] += 1
+    return dict(sorted(groups.items(), key=lambda kv: -kv[1]["count"]))
 
 
 def summarize(method: Method, rows: Sequence[ImageResult]) -> dict:
-    """The ``results.json`` entry of one method."""
+    """The ``results.json`` entry of one method (NaN where undefined; null once written)."""
     ok = [r for r in rows if r.success]
     visible = sum(r.n_visible for r in rows)
     true_det = sum(r.n_true_detections for r in rows)
-    assigned = sum(r.n_assigned for r in rows)
     correct = sum(r.n_correct for r in rows)
+    scores = pooled_scores(correct, sum(r.n_assigned for r in rows), true_det)
     # Structural: detections of a true landmark / visible landmarks. Markers: correctly decoded
     # visible markers / visible markers (n_true_detections counts the visible markers there).
     detection_rate = _ratio(true_det, visible) if method.structural else _ratio(correct, true_det)
-    precision = _ratio(correct, assigned)
-    recall = _ratio(correct, true_det)
-    f1 = (
-        2 * precision * recall / (precision + recall)
-        if precision is not None and recall is not None and precision + recall > 0
-        else None
+    errors = summarize_errors(
+        [r.translation_error_m for r in rows],
+        [r.rotation_error_deg for r in rows],
+        [r.success for r in rows],
+    ).as_dict()
+    t_stats = errors["translation_error_m"]
+    crb_t = median_p90([r.crb_translation_m for r in rows])
+    recall = recall_at(
+        [r.translation_error_m for r in rows],
+        [r.rotation_error_deg for r in rows],
+        [r.success for r in rows],
+        RECALL_THRESHOLDS,
     )
-    t = [r.translation_error_m for r in ok]
-    rot = [r.rotation_error_deg for r in ok]
-    crb_t = _stats([r.crb_translation_m for r in rows])
-    crb_r = _stats([r.crb_rotation_deg for r in rows])
-    t_stats = _stats(t)
-    failures: dict[str, int] = {}
-    for r in rows:
-        if not r.success:
-            failures[r.failure_reason or "unknown"] = failures.get(r.failure_reason or "unknown", 0) + 1
     return {
         "label": method.label,
         "stage": method.scene.stage,
@@ -73,29 +89,21 @@ def summarize(method: Method, rows: Sequence[ImageResult]) -> dict:
         "successful": len(ok),
         "total": len(rows),
         "translation_error_m": t_stats,
-        "rotation_error_deg": _stats(rot),
+        "rotation_error_deg": errors["rotation_error_deg"],
         "detection_rate": detection_rate,
-        "association_precision": precision,
-        "association_recall": recall,
-        "association_f1": f1,
-        "latency_s": _stats([r.latency_s for r in rows]),
+        "association_precision": scores.precision,
+        "association_recall": scores.recall,
+        "association_f1": scores.f1,
+        "latency_s": median_p90([r.latency_s for r in rows]),
         "cramer_rao_translation_m": crb_t,
-        "cramer_rao_rotation_deg": crb_r,
+        "cramer_rao_rotation_deg": median_p90([r.crb_rotation_deg for r in rows]),
         "median_error_over_bound": (
-            t_stats["median"] / crb_t["median"]
-            if t_stats["median"] is not None and crb_t["median"] not in (None, 0.0)
-            else None
+            t_stats["median"] / crb_t["median"] if crb_t["median"] != 0.0 else float("nan")
         ),
-        "recall_at": {
-            f"{tm}m_{rd}deg": sum(r.translation_error_m <= tm and r.rotation_error_deg <= rd for r in ok)
-            / len(rows)
-            for tm, rd in RECALL_THRESHOLDS
-        }
-        if rows
-        else {},
-        "prior_translation_error_m": _stats([r.prior_translation_error_m for r in rows]),
-        "prior_rotation_error_deg": _stats([r.prior_rotation_error_deg for r in rows]),
-        "failures": failures,
+        "recall_at": {f"{tm}m_{rd}deg": v for (tm, rd), v in recall.items()} if rows else {},
+        "prior_translation_error_m": median_p90([r.prior_translation_error_m for r in rows]),
+        "prior_rotation_error_deg": median_p90([r.prior_rotation_error_deg for r in rows]),
+        "failures": failure_breakdown(rows),
     }
 
 
@@ -112,12 +120,13 @@ def results_dict(config: StudyConfig, rows: Sequence[ImageResult], extra_config:
 
 
 def _clean(obj):
+    """The JSON boundary: NaN and infinities (undefined statistics) become null."""
     if isinstance(obj, dict):
         return {k: _clean(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [_clean(v) for v in obj]
     if isinstance(obj, float):
-        return _num(obj)
+        return obj if math.isfinite(obj) else None
     return obj
 
 

@@ -11,22 +11,19 @@ each site is loaded at most once per process. Every random draw is seeded from
 from __future__ import annotations
 
 import multiprocessing as mp
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from localization import Localizer, ProjectionDetector, cramer_rao_bound
-from localization.aruco import ArucoLocalizer
+from localization import cramer_rao_bound
 from localization.geometry import camera_center, invert, project
-from localization.learned import LearnedDetector
 from localization.metrics import pose_errors
+from uav_struct_env.stack import FrameLocalization, StackSpec, build_stack
 from uav_struct_env.study.protocol import METHODS, Method, Scene, StudyConfig
-from uav_struct_env.wrappers.frame import localize_frame
 
-__all__ = ["Overlay", "ImageResult", "iter_study", "run_units"]
+__all__ = ["Overlay", "ImageResult", "iter_study", "run_units", "stack_spec"]
 
 
 @dataclass(frozen=True)
@@ -38,6 +35,7 @@ class ImageResult:
     viewpoint: int
     success: bool
     failure_reason: str
+    failure_code: str  # a localization.FailureCode value, "" on success
     translation_error_m: float
     rotation_error_deg: float
     prior_translation_error_m: float
@@ -120,6 +118,29 @@ def _rng(config: StudyConfig, method: Method, uav: int, viewpoint: int) -> np.ra
     return np.random.default_rng([config.seed, index, uav, viewpoint])
 
 
+def stack_spec(config: StudyConfig, method: Method) -> StackSpec:
+    """The localization stack the study runs ``method`` with.
+
+    The study's own policies: the localizer's noise model is floored at 0.5 px (a noise-free
+    projection detector must not collapse the gates) and the gates stay in px of the image.
+    """
+    return StackSpec(
+        landmarks=method.landmarks,
+        detector=config.detector if method.structural else "aruco",
+        association=config.association,
+        pixel_sigma=config.pixel_sigma,
+        min_localizer_sigma_px=0.5,
+        scale_gates=False,
+        miss_rate=config.miss_rate,
+        false_positives=config.false_positives,
+        detector_model=config.detector_model if method.structural else None,
+        refiner_model=config.refiner_model if method.structural else None,
+        aruco_mode=method.aruco_mode or "joint",
+        aruco_prior=method.aruco_prior,
+        aruco_pixel_sigma=config.pixel_sigma,
+    )
+
+
 def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoint: int = 0):
     """Render ``scene`` at ``viewpoint`` and evaluate its methods: ``(results, overlays)``."""
     env = _env_for(config, scene)
@@ -136,17 +157,27 @@ def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoin
         prior = invert(info["prior_world_from_cam"])
         for method in methods:
             truth = info["landmarks"][method.landmarks]
+            model_xyz = site.landmarks(method.landmarks).xyz if method.structural else None
+            stack = build_stack(
+                stack_spec(config, method),
+                K,
+                config.image_size,
+                model_xyz=model_xyz,
+                model_ids=np.asarray(truth["ids"]),
+                markers=site.markers,
+                rng=_rng(config, method, uav, viewpoint),
+            )
+            frame = stack.localize(image, {method.landmarks: truth}, prior)
+            est = frame.estimate
             if method.structural:
-                model_xyz = site.landmarks(method.landmarks).xyz
-                est, counts, det = _structural(
-                    config, method, uav, viewpoint, image, K, prior, truth, model_xyz
-                )
+                counts = _structural_counts(frame)
                 if viewpoint == overlay_viewpoint and uav == 0:
                     overlays.append(
-                        _overlay(method, uav, viewpoint, image, K, prior, est, det, truth, model_xyz)
+                        _overlay(method, uav, viewpoint, image, K, prior, est, frame.detections,
+                                 truth, model_xyz)
                     )
             else:
-                est, counts = _aruco(method, image, K, prior, truth, site.markers, config.pixel_sigma)
+                counts = _marker_counts(frame, truth, site.markers)
             sigma = max(config.pixel_sigma, 1e-3)
             results.append(_row(method, uav, viewpoint, est, gt, prior, truth, K, sigma, **counts))
     return results, overlays
@@ -171,6 +202,7 @@ def _row(method, uav, viewpoint, est, gt, prior, truth, K, pixel_sigma, **counts
         viewpoint=viewpoint,
         success=bool(est.success),
         failure_reason=est.failure_reason or "",
+        failure_code=est.failure_code.value if est.failure_code is not None else "",
         translation_error_m=t_err,
         rotation_error_deg=r_err,
         prior_translation_error_m=p_err[0],
@@ -193,49 +225,15 @@ def _row(method, uav, viewpoint, est, gt, prior, truth, K, pixel_sigma, **counts
     )
 
 
-_LEARNED: dict[tuple, LearnedDetector] = {}
-
-
-def _detector(config, method, uav, viewpoint):
-    if config.detector == "learned":
-        # One detector per process and landmark set. Its true_ids come from matching to the
-        # visible ground truth within 3 px: scoring only (see localization.learned).
-        key = (method.landmarks, config.image_size[0], config.association,
-               config.detector_model, config.refiner_model or True)
-        if key not in _LEARNED:
-            _LEARNED[key] = LearnedDetector.for_localizer(*key)
-        return _LEARNED[key]
-    return ProjectionDetector(
-        method.landmarks,
-        pixel_sigma=config.pixel_sigma,
-        miss_rate=config.miss_rate,
-        false_positives=config.false_positives,
-        rng=_rng(config, method, uav, viewpoint),
-    )
-
-
-def _structural(config, method, uav, viewpoint, image, K, prior, truth, model_xyz):
-    """Detect, associate and solve one image: ``(estimate, counts for _row, detections)``."""
-    w, h = config.image_size
-    detector = _detector(config, method, uav, viewpoint)
-    loc = Localizer(
-        model_xyz,
-        K,
-        association=config.association,
-        pixel_sigma=max(config.pixel_sigma, 0.5),
-        image_size=(w, h),
-    )
-    context = {"landmarks": {method.landmarks: truth}, "image_size": (w, h)}
-    frame = localize_frame(detector, loc, image, context, prior, None, np.asarray(truth["ids"]))
+def _structural_counts(frame: FrameLocalization) -> dict:
     scores = frame.scores
-    counts = {
+    return {
         "n_detections": len(frame.detections),
         "n_true_detections": scores.true_detections,
         "n_assigned": scores.assigned,
         "n_correct": scores.correct,
         "latency_s": frame.latency_s,
     }
-    return frame.estimate, counts, frame.detections
 
 
 def _overlay(method, uav, viewpoint, image, K, prior, est, det, truth, model_xyz) -> Overlay:
@@ -257,24 +255,22 @@ def _overlay(method, uav, viewpoint, image, K, prior, est, det, truth, model_xyz
     )
 
 
-def _aruco(method, image, K, prior, truth, markers, pixel_sigma):
-    """Localize one image from its markers: ``(estimate, counts)``."""
-    loc = ArucoLocalizer(markers, K, mode=method.aruco_mode, pixel_sigma=max(pixel_sigma, 0.5))
-    t0 = time.perf_counter()
-    found, corners = loc.detect(image)
-    est = loc.localize_corners(found, corners, prior if method.aruco_prior else None)
-    latency = time.perf_counter() - t0
-    # "Association" of markers is decoding their ids: a marker counts as visible when all its
-    # corners are, and a detection is correct when its id is one of the visible markers.
+def _marker_counts(frame: FrameLocalization, truth: dict, markers) -> dict:
+    """The detection / association counts of a marker frame for :func:`_row`.
+
+    "Association" of markers is decoding their ids: a marker counts as visible when all its
+    corners are, and a detection is correct when its id is one of the visible markers.
+    """
+    found = frame.marker_ids
     visible = np.asarray(truth["visible"], dtype=bool).reshape(-1, 4).all(axis=1)
     visible_ids = {int(m.id) for m, v in zip(markers, visible, strict=True) if v}
     correct = sum(1 for i in found.tolist() if i in visible_ids)
-    return est, {
+    return {
         "n_detections": len(found),
         "n_true_detections": len(visible_ids),
         "n_assigned": len(found),
         "n_correct": correct,
-        "latency_s": latency,
+        "latency_s": frame.latency_s,
     }
 
 

@@ -1,33 +1,58 @@
-"""PettingZoo wrappers that combine the environment with localization.
+"""PettingZoo wrappers that combine the environment with localization, one job each.
 
 from uav_struct_env.wrappers import LocalizationWrapper, make_train_env
 wenv = LocalizationWrapper(env, landmarks="column_tops")   # env must provide the truth
 wenv = make_train_env("state")                             # a documented training config
+
+``LocalizationWrapper`` composes :class:`LocalizePoses` (pose, pose_std, localized, info),
+:class:`LayoutObservation` (layout), :class:`RewardWrapper` (a reward object's terms) and
+:class:`DropKeys` (drop the image); the stack itself is :mod:`uav_struct_env.stack`.
 """
 
+from uav_struct_env.stack import FrameLocalization, localize_frame
 from uav_struct_env.wrappers.configs import (
     TRAIN_CONFIGS,
     TrainConfig,
     make_localization_env,
     make_train_env,
 )
-from uav_struct_env.wrappers.frame import FrameLocalization, localize_frame
-from uav_struct_env.wrappers.localization import (
-    DETECTORS,
+from uav_struct_env.wrappers.keys import DropKeys
+from uav_struct_env.wrappers.layout import (
     LAYOUT_COMPONENTS,
+    PRIVILEGED_LAYOUT_COMPONENTS,
+    LayoutObservation,
+)
+from uav_struct_env.wrappers.localization import DETECTORS, LocalizationWrapper
+from uav_struct_env.wrappers.localize import LocalizePoses
+from uav_struct_env.wrappers.rewards import (
     REWARDS,
-    LocalizationWrapper,
+    AnchorReward,
+    ErrorReward,
+    Reward,
+    RewardWrapper,
+    UncertaintyReward,
+    make_reward,
 )
 
 __all__ = [
     "DETECTORS",
     "LAYOUT_COMPONENTS",
+    "PRIVILEGED_LAYOUT_COMPONENTS",
     "REWARDS",
     "TRAIN_CONFIGS",
+    "AnchorReward",
+    "DropKeys",
+    "ErrorReward",
     "FrameLocalization",
+    "LayoutObservation",
     "LocalizationWrapper",
+    "LocalizePoses",
+    "Reward",
+    "RewardWrapper",
     "TrainConfig",
+    "UncertaintyReward",
     "localize_frame",
     "make_localization_env",
+    "make_reward",
     "make_train_env",
 ]

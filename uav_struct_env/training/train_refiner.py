@@ -23,7 +23,7 @@ Example (the committed refiner, see ``localization/models/MODEL_CARD.md``)::
 
     python -m uav_struct_env.datasets /tmp/refdata/train --layouts 150 --views 10 --seed 3 --scale 1.0
     python -m uav_struct_env.datasets /tmp/refdata/val --layouts 6 --views 10 --seed 1 --scale 1.0
-    python -m uav_struct_env.train_refiner --data /tmp/refdata/train --val /tmp/refdata/val \\
+    python -m uav_struct_env.training.train_refiner --data /tmp/refdata/train --val /tmp/refdata/val \\
         --out /tmp/refrun/v1 --minutes 15
 """
 
@@ -44,8 +44,8 @@ from torch.nn import functional as F
 from localization.learned import DEFAULT_MODEL, LANDMARK_TYPES, LearnedDetector, match_detections
 from localization.refine import HALF, PATCH, POSITIVE_RADIUS, extract_patches
 from uav_struct_env.datasets.landmarks import load_labels
-from uav_struct_env.train_detector import LandmarkCrops, conv_bn_relu, export_checked
-from uav_struct_env.train_loop import add_training_arguments, fit, make_loader
+from uav_struct_env.training.train_detector import LandmarkCrops, conv_bn_relu, export_checked
+from uav_struct_env.training.train_loop import add_training_arguments, fit, make_loader
 
 __all__ = ["MAX_SHIFT", "PatchNet", "PatchSamples", "export_refiner", "main", "mine", "train"]
 
@@ -289,8 +289,8 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
 
 
 def main(argv: list[str] | None = None) -> dict:
-    """Command line: ``python -m uav_struct_env.train_refiner --data DIR --out DIR``."""
-    ap = argparse.ArgumentParser(prog="python -m uav_struct_env.train_refiner",
+    """Command line: ``python -m uav_struct_env.training.train_refiner --data DIR --out DIR``."""
+    ap = argparse.ArgumentParser(prog="python -m uav_struct_env.training.train_refiner",
                                  description="Train the learned detector's patch refiner.")
     ap.add_argument("--data", required=True, nargs="+",
                     help="full-resolution training dataset(s)")

@@ -4,7 +4,8 @@
 wall-time budget (or a step budget, whichever ends first), logs every 50 steps to
 ``out/log.jsonl``, validates every ``eval_every`` steps and at the end, keeps the checkpoint with
 the best validation F1 as ``best.pt`` (``last.pt`` is the latest) and leaves the chosen one loaded
-in the model. Used by :mod:`uav_struct_env.train_detector` and :mod:`uav_struct_env.train_refiner`.
+in the model. Used by :mod:`uav_struct_env.training.train_detector` and
+:mod:`uav_struct_env.training.train_refiner`.
 """
 
 from __future__ import annotations

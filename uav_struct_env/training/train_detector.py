@@ -18,7 +18,7 @@ Example (the committed model, see ``localization/models/MODEL_CARD.md``)::
 
     python -m uav_struct_env.datasets /tmp/lmdata/train --layouts 200 --views 15 --seed 0
     python -m uav_struct_env.datasets /tmp/lmdata/val --layouts 10 --views 10 --seed 1
-    python -m uav_struct_env.train_detector --data /tmp/lmdata/train --val /tmp/lmdata/val \
+    python -m uav_struct_env.training.train_detector --data /tmp/lmdata/train --val /tmp/lmdata/val \
         --out runs/detector --minutes 45
 """
 
@@ -37,7 +37,7 @@ from torch.nn import functional as F
 
 from localization.inference import OnnxNet
 from uav_struct_env.datasets.landmarks import LANDMARK_TYPES, load_labels
-from uav_struct_env.train_loop import add_training_arguments, fit, make_loader
+from uav_struct_env.training.train_loop import add_training_arguments, fit, make_loader
 
 __all__ = ["KeypointNet", "conv_bn_relu", "export_checked", "export_onnx", "main", "train"]
 
@@ -294,8 +294,8 @@ def train(data: str, out: str, val: str | None = None, minutes: float = 45.0,
 
 
 def main(argv: list[str] | None = None) -> dict:
-    """Command line: ``python -m uav_struct_env.train_detector --data DIR --out DIR``."""
-    ap = argparse.ArgumentParser(prog="python -m uav_struct_env.train_detector",
+    """Command line: ``python -m uav_struct_env.training.train_detector --data DIR --out DIR``."""
+    ap = argparse.ArgumentParser(prog="python -m uav_struct_env.training.train_detector",
                                  description="Train the learned landmark detector.")
     ap.add_argument("--data", required=True, help="training dataset (labels.json or its folder)")
     ap.add_argument("--val", default=None, help="validation dataset (checkpoint selection)")

@@ -1,0 +1,41 @@
+"""Why a localization failed: a machine-readable :class:`FailureCode` beside the human message.
+
+Every failed :class:`~localization.pipeline.PoseEstimate` (and the
+:class:`~localization.associate.Association` / :class:`~localization.pnp.PnPResult` it came
+from) carries ``failure_code`` -- one of a closed set, for grouping and counting -- and
+``failure_reason``, a message with the numbers of that case (counts, thresholds) for people.
+Group by the code, never by the message: messages differ whenever the numbers do.
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+
+__all__ = ["FailureCode"]
+
+
+class FailureCode(str, Enum):
+    """The cause of a failed pose; its ``value`` is the string written to results.json."""
+
+    #: Fewer usable (finite) detections than the minimum number of correspondences.
+    TOO_FEW_DETECTIONS = "too_few_detections"
+    #: No model landmark projects in front of the prior camera near the image.
+    NO_CANDIDATES = "no_candidates"
+    #: Every association hypothesis gave a pose too far from the prior (Mahalanobis gate).
+    INCONSISTENT_WITH_PRIOR = "inconsistent_with_prior"
+    #: No association hypothesis kept enough mutually consistent correspondences.
+    NO_CONSISTENT_ASSOCIATION = "no_consistent_association"
+    #: Fewer assigned detections than the minimum number of correspondences.
+    TOO_FEW_CORRESPONDENCES = "too_few_correspondences"
+    #: The PnP solver returned no pose, or a non-finite one.
+    PNP_FAILED = "pnp_failed"
+    #: Every candidate pose puts landmarks (or marker corners) behind the camera.
+    BEHIND_CAMERA = "behind_camera"
+    #: The inlier detections lie on a line (landmarks seen edge-on).
+    DEGENERATE_GEOMETRY = "degenerate_geometry"
+    #: The pose covariance exceeds the localizer's ``max_position_std_m``.
+    ILL_CONDITIONED = "ill_conditioned"
+    #: No marker of the map was detected (ArUco).
+    NO_MARKERS = "no_markers"
+    #: A failure without a code (e.g. from a third-party localizer).
+    UNKNOWN = "unknown"

@@ -1,0 +1,92 @@
+"""The scalar validator, failure codes, image-size inference and array dataclasses' equality."""
+
+import math
+
+import numpy as np
+import pytest
+
+from localization import (
+    Detections,
+    FailureCode,
+    Localizer,
+    check_choice,
+    check_number,
+    image_size_from_K,
+)
+from localization.aruco import MarkerSpec
+from localization.associate import Association
+from localization.geometry import project
+from localization.pnp import PnPResult
+from localization.synthetic import PAPER_K, paper_prior, sample_viewpoints
+
+
+def test_check_number_returns_typed_values_and_names_bad_ones():
+    assert check_number("x", 3, 0.0) == 3.0 and isinstance(check_number("x", 3, 0.0), float)
+    assert check_number("n", np.int64(4), 1, integer=True) == 4
+    with pytest.raises(ValueError, match=r"threads must be an int >= 1, got 0"):
+        check_number("threads", 0, 1, integer=True)
+    with pytest.raises(TypeError, match="n must be an int, got 2.5"):
+        check_number("n", 2.5, integer=True)
+    with pytest.raises(TypeError, match="flag must be a number, got True"):
+        check_number("flag", True)
+    with pytest.raises(ValueError, match=r"p must be a number in \(0, 1\], got 0"):
+        check_number("p", 0, 0.0, 1.0, lo_open=True)
+    with pytest.raises(ValueError, match="s must be finite and > 0, got nan"):
+        check_number("s", math.nan, 0.0, lo_open=True)
+    with pytest.raises(ValueError, match="s must be finite, got inf"):
+        check_number("s", math.inf)
+    assert check_number("s", math.inf, 0.0, finite=False) == math.inf
+
+    class Mine(ValueError):
+        pass
+
+    with pytest.raises(Mine, match="r must be finite and <= 2"):
+        check_number("r", 3, hi=2, error=Mine)
+
+
+def test_check_choice():
+    assert check_choice("mode", "paper", ("paper", "robust")) == "paper"
+    with pytest.raises(ValueError, match=r"mode must be one of \('paper', 'robust'\), got 'x'"):
+        check_choice("mode", "x", ("paper", "robust"))
+    with pytest.raises(TypeError, match="mode must be one of"):
+        check_choice("mode", 3, ("paper", "robust"), type_error=TypeError)
+
+
+def test_image_size_from_K_exact_for_paper_and_scaled_cameras():
+    assert image_size_from_K(PAPER_K) == (1280, 720)
+    for w, h in ((128, 72), (64, 36), (640, 360), (256, 144)):
+        sx, sy = w / 1280, h / 720
+        K = np.array([[1108.5 * sx, 0, 640.5 * sx - 0.5], [0, 1108.5 * sy, 360.5 * sy - 0.5], [0, 0, 1]])
+        assert image_size_from_K(K) == (w, h)
+        assert Localizer(np.eye(3) * 5, K).image_size == (w, h)
+    assert Localizer(np.eye(3) * 5, PAPER_K, image_size=(1000, 700)).image_size == (1000, 700)
+    with pytest.raises(ValueError, match="image_size"):
+        Localizer(np.eye(3) * 5, PAPER_K, image_size=(0, 700))
+
+
+def test_failures_carry_a_code_and_a_message():
+    X = np.random.default_rng(0).uniform(-5, 5, (8, 3))
+    loc = Localizer(X, PAPER_K)
+    est = loc.localize(np.zeros((2, 2)), np.eye(4))
+    assert not est.success
+    assert est.failure_code is FailureCode.TOO_FEW_DETECTIONS
+    assert est.failure_reason == "too few detections: 2 usable (finite) detections, need 4"
+    assert FailureCode(est.failure_code.value) is FailureCode.TOO_FEW_DETECTIONS
+    T = sample_viewpoints(np.random.default_rng(1), 1, X.mean(axis=0))[0]
+    uv, _ = project(PAPER_K, T, X)
+    ok = loc.localize(uv, paper_prior(T, 0))
+    assert ok.success and ok.failure_code is None and ok.failure_reason is None
+
+
+def test_equality_of_array_dataclasses_is_identity_and_never_raises():
+    a = np.zeros((3, 2))
+    for make in (
+        lambda: Detections(a),
+        lambda: Association(np.zeros(3, np.int64), np.eye(4), 0.0, 0.0),
+        lambda: PnPResult(True, np.eye(4), 0.0, np.ones(3, bool)),
+        lambda: MarkerSpec(1, 0.5, np.eye(4)),
+    ):
+        x, y = make(), make()
+        assert x == x and not (x == y) and x != y
+    est = Localizer(np.eye(3) * 5, PAPER_K).localize(np.zeros((0, 2)), np.eye(4))
+    assert est == est and est != Localizer(np.eye(3) * 5, PAPER_K).localize(np.zeros((0, 2)), np.eye(4))

@@ -1,0 +1,99 @@
+"""The localization stack: one spec, one builder, the same estimate through study and wrapper."""
+
+import numpy as np
+import pytest
+
+import uav_struct_env
+from localization import Localizer
+from localization.synthetic import PAPER_K
+from uav_struct_env.errors import ConfigError
+from uav_struct_env.stack import (
+    ASSOCIATIONS,
+    DETECTORS,
+    STRUCTURAL_DETECTORS,
+    StackSpec,
+    build_stack,
+)
+from uav_struct_env.study import protocol
+from uav_struct_env.study.run import _close_envs, run_unit, stack_spec
+from uav_struct_env.wrappers import localization as wrapper_module
+from uav_struct_env.wrappers.localize import LocalizePoses
+
+
+def test_choice_lists_derive_from_the_stack():
+    assert protocol.DETECTORS == STRUCTURAL_DETECTORS == ("projection", "learned")
+    assert protocol.ASSOCIATIONS == ASSOCIATIONS == ("paper", "robust")
+    assert wrapper_module.DETECTORS == DETECTORS == ("projection", "learned", "aruco")
+    assert wrapper_module.MODES == ASSOCIATIONS
+
+
+def test_policies_are_explicit_fields():
+    X = np.random.default_rng(0).uniform(-5, 5, (8, 3))
+    wrapper = build_stack(StackSpec(), PAPER_K, (128, 72), model_xyz=X).localizer
+    assert wrapper.pixel_sigma == pytest.approx(0.1)  # 1 px at 1280 scaled to 128
+    assert wrapper.gate_px == pytest.approx(0.5) and wrapper.coarse_gate_px == pytest.approx(4.0)
+    study = build_stack(
+        StackSpec(pixel_sigma=0.2, min_localizer_sigma_px=0.5, scale_gates=False),
+        PAPER_K,
+        (128, 72),
+        model_xyz=X,
+    )
+    assert study.localizer.pixel_sigma == 0.5 and study.localizer.gate_px is None
+    assert study.localizer.coarse_gate_px == 40.0 and study.detector.pixel_sigma == 0.2
+    # at the paper's width the two gate policies agree
+    a = build_stack(StackSpec(pixel_sigma=1.0), PAPER_K, (1280, 720), model_xyz=X).localizer
+    b = Localizer(X, PAPER_K, pixel_sigma=1.0)
+    assert (a.gate_px, a.coarse_gate_px) == (max(5.0, 3.0), b.coarse_gate_px)
+
+
+class Fixed:
+    def detect(self, image, context):
+        from localization import Detections
+
+        return Detections(np.zeros((0, 2)))
+
+
+def test_spec_takes_detector_objects_and_rejects_bad_values():
+    stack = build_stack(StackSpec(detector=Fixed()), PAPER_K, (1280, 720), model_xyz=np.eye(4, 3) * 3)
+    frame = stack.localize(None, {}, np.eye(4))
+    assert not frame.estimate.success and frame.estimate.failure_code.value == "too_few_detections"
+    with pytest.raises(ConfigError, match="detector must be one of"):
+        StackSpec(detector="sift")
+    with pytest.raises(ConfigError, match="association must be one of"):
+        StackSpec(association="greedy")
+    with pytest.raises(ConfigError, match=r"miss_rate must be a number in \[0, 1\], got 2"):
+        StackSpec(miss_rate=2)
+    with pytest.raises(ConfigError, match="detector='aruco' needs landmarks='aruco'"):
+        StackSpec(detector="aruco")
+    with pytest.raises(ConfigError, match="at least 4"):
+        build_stack(StackSpec(), PAPER_K, (1280, 720), model_xyz=np.zeros((3, 3)))
+
+
+def test_same_spec_and_frame_give_the_same_estimate_through_study_and_wrapper():
+    config = protocol.StudyConfig(
+        methods=("column_tops",), n_viewpoints=1, image_size=(320, 180), pixel_sigma=0.0
+    )
+    method = config.selected_methods[0]
+    try:
+        rows, _ = run_unit(config, method.scene, 0)
+    finally:
+        _close_envs()
+    env = uav_struct_env.parallel_env(
+        stage=method.scene.stage,
+        marker_size=method.scene.marker_size,
+        image_size=config.image_size,
+        texture_seed=config.seed,
+    )
+    wrapper = LocalizePoses(env, stack_spec(config, method))
+    _, infos = wrapper.reset(seed=config.seed * 1000, options={"viewpoint": 0})
+    assert len(rows) == len(env.possible_agents) == 4
+    for row, agent in zip(rows, env.possible_agents, strict=True):
+        loc = infos[agent]["localization"]
+        assert row.success and loc["success"]
+        np.testing.assert_allclose(
+            wrapper.estimated_position(agent), [row.est_x, row.est_y, row.est_z], atol=1e-6
+        )
+        assert loc["translation_error_m"] == pytest.approx(row.translation_error_m, abs=1e-6)
+        assert loc["rotation_error_deg"] == pytest.approx(row.rotation_error_deg, abs=1e-5)
+        assert loc["n_correspondences"] == row.n_inliers and row.translation_error_m < 0.5
+    env.close()

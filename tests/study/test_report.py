@@ -1,0 +1,58 @@
+"""results.json statistics come from localization.metrics; failures are grouped by code."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from localization import FailureCode, Localizer
+from localization.synthetic import PAPER_K
+from uav_struct_env.study.protocol import METHODS, StudyConfig
+from uav_struct_env.study.report import results_dict, summarize, write_results_json
+from uav_struct_env.study.run import ImageResult
+
+NAN = float("nan")
+
+
+def _row(est, k, t_err=NAN, r_err=NAN):
+    fields = {f.name: 0 for f in dataclasses.fields(ImageResult)}
+    fields.update(
+        method="column_tops",
+        uav=k % 4,
+        viewpoint=k // 4,
+        success=bool(est.success),
+        failure_reason=est.failure_reason or "",
+        failure_code=est.failure_code.value if est.failure_code else "",
+        translation_error_m=t_err,
+        rotation_error_deg=r_err,
+        crb_translation_m=0.1,
+        crb_rotation_deg=0.2,
+        latency_s=0.01,
+    )
+    return ImageResult(**fields)
+
+
+def test_failures_group_by_code_and_nan_is_null(tmp_path):
+    loc = Localizer(np.random.default_rng(0).uniform(-5, 5, (8, 3)), PAPER_K)
+    # three failures of one cause with three different messages, one success-like row
+    fails = [loc.localize(np.zeros((n, 2)), np.eye(4)) for n in (0, 1, 2)]
+    assert {f.failure_code for f in fails} == {FailureCode.TOO_FEW_DETECTIONS}
+    assert len({f.failure_reason for f in fails}) == 3
+    ok = dataclasses.replace(fails[0], success=True, failure_reason=None, failure_code=None)
+    rows = [_row(f, k) for k, f in enumerate(fails)] + [_row(ok, 3, 0.2, 0.5)]
+    method = next(m for m in METHODS if m.key == "column_tops")
+    entry = summarize(method, rows)
+    assert entry["failures"] == {
+        "too_few_detections": {"count": 3, "example": "too few detections: no detections, need 4"}
+    }
+    assert entry["successful"] == 1 and entry["total"] == 4
+    assert entry["translation_error_m"] == {"median": 0.2, "p90": pytest.approx(0.2)}
+    assert entry["recall_at"] == {"0.25m_1.0deg": 0.25, "0.5m_2.0deg": 0.25, "1.0m_5.0deg": 0.25}
+    assert entry["median_error_over_bound"] == pytest.approx(2.0)
+    assert np.isnan(entry["association_f1"])  # nothing assigned, nothing true: undefined
+    results = results_dict(StudyConfig(methods=("column_tops",)), rows)
+    write_results_json(tmp_path / "results.json", results)
+    written = json.loads((tmp_path / "results.json").read_text())["methods"]["column_tops"]
+    assert written["association_f1"] is None and written["association_precision"] is None
+    assert written["failures"]["too_few_detections"]["count"] == 3

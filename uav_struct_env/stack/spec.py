@@ -1,0 +1,310 @@
+"""The localization stack as data: a :class:`StackSpec` and the one builder, :func:`build_stack`.
+
+A stack is what turns one camera frame into a pose: a detector (a name, or any object that
+follows :class:`localization.Detector`), an association method, the localizer's noise model and
+gates, model weights and prior sigmas. The study (:mod:`uav_struct_env.study.run`), the
+:class:`~uav_struct_env.wrappers.LocalizationWrapper` and the benchmarks all build theirs here,
+so a new option is added in one place, and the choice lists (:data:`DETECTORS`,
+:data:`ASSOCIATIONS`) are spelled once.
+
+Two policies differed between the study and the wrapper; they are fields with each caller's
+value as that caller's default, so neither's numbers change:
+
+* ``min_localizer_sigma_px``: the localizer's noise model is ``max(pixel_sigma, this)``. The
+  study uses 0.5 px (a noise-free projection detector must not make the gates collapse), the
+  wrapper 0 (its 128 x 72 default noise is 0.1 px).
+* ``scale_gates``: the robust association's gates are given in px of the paper's 1280-px-wide
+  camera (inlier-gate floor 3 px, coarse gate 40 px) and scaled by ``W / 1280`` (the wrapper's
+  policy); ``False`` keeps them in px of the image (the study's). At 1280 px they agree.
+
+Layers: this package imports :mod:`localization` and :mod:`uav_struct_env.site` only (never
+``wrappers`` or ``study``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from localization import ASSOCIATION_METHODS, Detector, Localizer, PriorSigmas, ProjectionDetector
+from localization.checks import check_choice, check_number
+from localization.synthetic import PAPER_IMAGE_SIZE
+from uav_struct_env.errors import ConfigError
+from uav_struct_env.site import LANDMARK_SETS
+from uav_struct_env.stack.frame import FrameLocalization, localize_aruco_frame, localize_frame
+
+__all__ = [
+    "ASSOCIATIONS",
+    "DETECTORS",
+    "PAPER_WIDTH_PX",
+    "STRUCTURAL_DETECTORS",
+    "LocalizationStack",
+    "StackSpec",
+    "build_stack",
+]
+
+#: Detectors of structural landmarks, by name (any :class:`localization.Detector` object works too).
+STRUCTURAL_DETECTORS: tuple[str, ...] = ("projection", "learned")
+#: Every detector name: the structural ones and the ArUco markers' own (``landmarks="aruco"``).
+DETECTORS: tuple[str, ...] = (*STRUCTURAL_DETECTORS, "aruco")
+#: Association methods of :class:`localization.Localizer`.
+ASSOCIATIONS: tuple[str, ...] = tuple(ASSOCIATION_METHODS)
+#: Width of the paper's camera; pixel quantities "at the paper's resolution" scale by W / this.
+PAPER_WIDTH_PX: int = PAPER_IMAGE_SIZE[0]
+#: ArUco pose modes of :class:`localization.aruco.ArucoLocalizer`.
+_ARUCO_MODES = ("average", "joint")
+
+
+@dataclass(frozen=True)
+class StackSpec:
+    """Everything that decides how a frame is localized (but not the scene or the camera).
+
+    Attributes:
+        landmarks: landmark set: ``slab_corners``, ``opening_corners``, ``column_tops``,
+            ``aruco`` or ``all``.
+        detector: ``"projection"`` (true projections + noise, misses, clutter),
+            ``"learned"`` (:class:`localization.learned.LearnedDetector` on the image),
+            ``"aruco"`` (OpenCV markers; needs ``landmarks="aruco"``), or any object with
+            ``detect(image, context) -> Detections`` (used as given).
+        association: ``"robust"`` or ``"paper"``.
+        pixel_sigma: the projection detector's noise, px of the images; None: 1 px at the
+            paper's 1280-px-wide camera scaled to the image width.
+        min_localizer_sigma_px: floor of the localizer's noise model (module docstring).
+        scale_gates: scale the robust gates with the image width (module docstring).
+        miss_rate: projection detector: probability of missing a visible landmark.
+        false_positives: projection detector: mean clutter detections per image.
+        detector_model: learned detector: keypoint-network ONNX file (None: the committed one).
+        refiner_model: learned detector: patch-refiner ONNX file (None: the committed one).
+        prior_sigmas: the onboard prior's sigmas for the localizer (None: 3 m, 2/2/5 deg).
+        aruco_mode: ``"joint"`` (one PnP over all corners) or ``"average"`` (the paper's).
+        aruco_prior: the prior chooses each marker's IPPE solution (False: the lowest
+            reprojection error does).
+        aruco_pixel_sigma: ArUco corner noise, px (floored by ``min_localizer_sigma_px``).
+        localizer_kwargs: further :class:`localization.Localizer` arguments (override the
+            gates derived here).
+
+    Raises:
+        ConfigError: for an unknown name, a bad number or an option that does not apply.
+    """
+
+    landmarks: str = "column_tops"
+    detector: str | Detector = "projection"
+    association: str = "robust"
+    pixel_sigma: float | None = None
+    min_localizer_sigma_px: float = 0.0
+    scale_gates: bool = True
+    miss_rate: float = 0.0
+    false_positives: float = 0.0
+    detector_model: str | Path | None = None
+    refiner_model: str | Path | None = None
+    prior_sigmas: PriorSigmas | tuple | None = None
+    aruco_mode: str = "joint"
+    aruco_prior: bool = True
+    aruco_pixel_sigma: float = 1.0
+    localizer_kwargs: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_choice("landmarks", self.landmarks, LANDMARK_SETS, error=ConfigError)
+        if isinstance(self.detector, str):
+            check_choice("detector", self.detector, DETECTORS, error=ConfigError)
+        elif not isinstance(self.detector, Detector):
+            raise ConfigError(
+                f"detector must be one of {DETECTORS} or an object with detect(image, context), "
+                f"got {self.detector!r}"
+            )
+        if self.detector == "learned" and self.landmarks == "aruco":
+            raise ConfigError("detector='learned' detects structural landmarks, not 'aruco'")
+        if self.detector == "aruco" and self.landmarks != "aruco":
+            raise ConfigError(f"detector='aruco' needs landmarks='aruco', got {self.landmarks!r}")
+        check_choice("association", self.association, ASSOCIATIONS, error=ConfigError)
+        check_choice("aruco_mode", self.aruco_mode, _ARUCO_MODES, error=ConfigError)
+        for name in ("detector_model", "refiner_model"):
+            path = getattr(self, name)
+            if path is None:
+                continue
+            if self.detector != "learned":
+                raise ConfigError(
+                    f"{name} applies to detector='learned' only, got detector={self.detector!r}"
+                )
+            if not isinstance(path, (str, Path)) or not Path(path).is_file():
+                raise ConfigError(f"{name} must be an existing ONNX file, got {path!r}")
+        if self.pixel_sigma is not None:
+            check_number("pixel_sigma", self.pixel_sigma, 0.0, error=ConfigError, type_error=ConfigError)
+        for name, hi in (
+            ("min_localizer_sigma_px", None),
+            ("miss_rate", 1.0),
+            ("false_positives", None),
+            ("aruco_pixel_sigma", None),
+        ):
+            check_number(name, getattr(self, name), 0.0, hi, error=ConfigError, type_error=ConfigError)
+        object.__setattr__(self, "localizer_kwargs", dict(self.localizer_kwargs))
+
+    @property
+    def structural(self) -> bool:
+        """True unless the stack localizes from ArUco markers."""
+        return self.landmarks != "aruco"
+
+    def detector_sigma(self, image_width: int) -> float:
+        """The projection detector's pixel noise at images ``image_width`` px wide."""
+        scale = image_width / PAPER_WIDTH_PX
+        return scale if self.pixel_sigma is None else float(self.pixel_sigma)
+
+    def localizer_arguments(self, image_size: tuple[int, int]) -> dict[str, Any]:
+        """The keyword arguments of :class:`localization.Localizer` for images of ``image_size``."""
+        sigma = max(self.detector_sigma(image_size[0]), self.min_localizer_sigma_px)
+        out: dict[str, Any] = {"pixel_sigma": sigma, "image_size": tuple(image_size)}
+        if self.scale_gates:
+            scale = image_size[0] / PAPER_WIDTH_PX
+            out["gate_px"] = max(5.0 * sigma, 3.0 * scale)
+            out["coarse_gate_px"] = 40.0 * scale
+        if self.prior_sigmas is not None:
+            out["prior_sigmas"] = self.prior_sigmas
+        return {**out, **self.localizer_kwargs}
+
+
+@dataclass(eq=False)
+class LocalizationStack:
+    """A built stack: detector + localizer (or the ArUco localizer) for one landmark set.
+
+    Attributes:
+        spec: what it was built from.
+        image_size: (W, H) of the frames it localizes.
+        model_ids: (M,) landmark id of each model index.
+        detector: the structural detector (None for ArUco).
+        localizer: the :class:`localization.Localizer` (None for ArUco).
+        aruco: the :class:`localization.aruco.ArucoLocalizer` (None for structural sets).
+    """
+
+    spec: StackSpec
+    image_size: tuple[int, int]
+    model_ids: NDArray[np.int64]
+    detector: Any = None
+    localizer: Localizer | None = None
+    aruco: Any = None
+
+    @property
+    def prior_std(self) -> NDArray[np.float64]:
+        """(6,) the prior's standard deviations (position m, rotation rad) in the localizer's terms."""
+        sigmas = self.localizer.prior_sigmas if self.localizer is not None else PriorSigmas()
+        return sigmas.as_array()
+
+    def seed(self, rng: np.random.Generator) -> None:
+        """Let a simulated (projection) detector draw from ``rng`` from now on."""
+        if isinstance(self.detector, ProjectionDetector):
+            self.detector.rng = rng
+
+    def localize(
+        self,
+        image: Any,
+        landmark_truth: Mapping[str, Any] | None,
+        prior_cam_from_world: NDArray[np.float64],
+        gt_cam_from_world: NDArray[np.float64] | None = None,
+    ) -> FrameLocalization:
+        """Detect, localize and score one frame.
+
+        Args:
+            image: the (H, W, 3) uint8 frame (ignored by the projection detector).
+            landmark_truth: per-set landmark truth (``info["landmarks"]``: set name -> dict of
+                ``ids``, ``xyz``, ``uv``, ``in_frame``, ``visible``); the projection detector
+                needs it, the others use it for scoring only. None or {} without truth.
+            prior_cam_from_world: (4, 4) onboard prior.
+            gt_cam_from_world: (4, 4) ground truth, or None (errors are then NaN).
+        """
+        if self.aruco is not None:
+            return localize_aruco_frame(
+                self.aruco,
+                image,
+                prior_cam_from_world,
+                gt_cam_from_world,
+                use_prior=self.spec.aruco_prior,
+            )
+        context = {"landmarks": dict(landmark_truth or {}), "image_size": self.image_size}
+        return localize_frame(
+            self.detector,
+            self.localizer,
+            image,
+            context,
+            prior_cam_from_world,
+            gt_cam_from_world,
+            self.model_ids,
+        )
+
+
+_LEARNED: dict[tuple, Any] = {}
+
+
+def _learned(spec: StackSpec, width: int) -> Any:
+    """One learned detector per process and (set, width, association, weights): they are large."""
+    from localization.learned import LearnedDetector
+
+    key = (
+        spec.landmarks,
+        int(width),
+        spec.association,
+        None if spec.detector_model is None else str(spec.detector_model),
+        True if spec.refiner_model is None else str(spec.refiner_model),
+    )
+    if key not in _LEARNED:
+        _LEARNED[key] = LearnedDetector.for_localizer(*key)
+    return _LEARNED[key]
+
+
+def build_stack(
+    spec: StackSpec,
+    K: ArrayLike,
+    image_size: Sequence[int],
+    *,
+    model_xyz: ArrayLike | None = None,
+    model_ids: ArrayLike | None = None,
+    markers: Sequence[Any] = (),
+    rng: np.random.Generator | None = None,
+) -> LocalizationStack:
+    """Build the stack of ``spec`` for a camera ``K`` with images of ``image_size`` (W, H).
+
+    Args:
+        spec: the :class:`StackSpec`.
+        K: (3, 3) intrinsics of the frames.
+        image_size: (W, H) of the frames.
+        model_xyz: (M, 3) the landmark set's BIM points (structural sets).
+        model_ids: (M,) their ids (default ``0 .. M-1``).
+        markers: the site's ArUco markers (``landmarks="aruco"``).
+        rng: the projection detector's generator (see :meth:`LocalizationStack.seed`).
+
+    Raises:
+        ConfigError: with fewer than 4 landmarks, or no markers for ArUco.
+    """
+    w, h = (int(v) for v in image_size)
+    K = np.asarray(K, dtype=np.float64)
+    if not spec.structural:
+        try:
+            from localization.aruco import ArucoLocalizer
+        except ImportError as e:  # OpenCV's aruco module missing
+            raise ConfigError(f"detector='aruco' is not available: {e}") from None
+        if not markers:
+            raise ConfigError("detector='aruco' needs markers: build the env with marker_size set")
+        sigma = max(spec.aruco_pixel_sigma, spec.min_localizer_sigma_px)
+        aruco = ArucoLocalizer(markers, K, mode=spec.aruco_mode, pixel_sigma=sigma)
+        ids = np.repeat(np.array([m.id for m in aruco.markers], dtype=np.int64), 4)
+        return LocalizationStack(spec, (w, h), ids, aruco=aruco)
+    xyz = np.asarray(model_xyz, dtype=np.float64).reshape(-1, 3)
+    if len(xyz) < 4:
+        raise ConfigError(
+            f"landmark set {spec.landmarks!r} has {len(xyz)} landmarks; at least 4 are needed to "
+            "localize"
+        )
+    ids = np.arange(len(xyz)) if model_ids is None else np.asarray(model_ids)
+    localizer = Localizer(xyz, K, association=spec.association, **spec.localizer_arguments((w, h)))
+    if not isinstance(spec.detector, str):
+        detector = spec.detector
+    elif spec.detector == "learned":
+        detector = _learned(spec, w)
+    else:
+        detector = ProjectionDetector(
+            spec.landmarks, spec.detector_sigma(w), spec.miss_rate, spec.false_positives, rng=rng
+        )
+    return LocalizationStack(spec, (w, h), ids.astype(np.int64), detector, localizer)

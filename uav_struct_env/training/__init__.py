@@ -1,0 +1,7 @@
+"""Training code of the learned detector: the keypoint network and the patch refiner.
+
+    python -m uav_struct_env.training.train_detector --data DIR --val DIR --out DIR
+    python -m uav_struct_env.training.train_refiner --data DIR --val DIR --out DIR
+
+Needs the ``train`` extra (torch). See localization/models/MODEL_CARD.md.
+"""

@@ -1,0 +1,177 @@
+"""``LocalizePoses``: localize every agent each reset and step; add its pose and quality.
+
+Each agent is localized from its own frame and onboard prior with a localization stack
+(:class:`~uav_struct_env.stack.StackSpec`, :func:`~uav_struct_env.stack.build_stack`), and the
+wrapper adds to that agent's observation
+
+* ``pose``        float32 (7,): estimated camera position xyz (project frame, m) + orientation
+  quaternion wxyz of ``world_from_cam``; the prior's pose where localization failed;
+* ``pose_std``    float32 (6,): standard deviations from the estimate's covariance (camera
+  centre x, y, z in m, rotation in rad); the localizer's prior sigmas where it failed;
+* ``localized``   float32 (1,): 1.0 if localization succeeded, else 0.0;
+
+and to its info ``localization`` (success, translation_error_m, rotation_error_deg,
+prior_translation_error_m, n_correspondences, n_detections, n_visible, association_precision,
+association_recall, association_f1, reprojection_rmse_px, position_std_m, latency_s,
+failure_reason, failure_code). Nothing it adds to the observation needs ground truth; the errors
+in ``info`` do (simulation only). Its :attr:`last_frames` feed the layout and reward wrappers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo.utils import BaseParallelWrapper
+
+from localization.geometry import camera_center, invert, quat_wxyz_from_matrix
+from uav_struct_env.errors import ConfigError
+from uav_struct_env.stack import FrameLocalization, LocalizationStack, StackSpec, build_stack
+
+__all__ = ["POSE_BOUND", "STD_BOUND", "LocalizePoses", "find_wrapper"]
+
+POSE_BOUND = 1.0e4
+STD_BOUND = 100.0
+
+
+def find_wrapper(env: Any, cls: type) -> Any:
+    """The outermost wrapper of type ``cls`` in ``env``'s wrapper chain, or None."""
+    while env is not None:
+        if isinstance(env, cls):
+            return env
+        env = env.__dict__.get("env")
+    return None
+
+
+class LocalizePoses(BaseParallelWrapper):
+    """Add ``pose``, ``pose_std``, ``localized`` and ``info["localization"]`` (module docstring).
+
+    Args:
+        env: a ``uav_struct_v0`` parallel env (or a wrapper of one). With the projection
+            detector its config's ``landmark_sets`` must include the spec's landmark set.
+        spec: the :class:`~uav_struct_env.stack.StackSpec` (default ``StackSpec()``);
+            keyword arguments override its fields.
+        **fields: :class:`~uav_struct_env.stack.StackSpec` fields.
+
+    Raises:
+        ConfigError: for a bad spec, an env that is not ``uav_struct_v0`` or one that does not
+            provide the landmark truth the projection detector needs.
+    """
+
+    def __init__(self, env: Any, spec: StackSpec | None = None, **fields: Any) -> None:
+        super().__init__(env)
+        spec = StackSpec(**fields) if spec is None else dataclasses.replace(spec, **fields)
+        base = env.unwrapped
+        config = getattr(base, "config", None)
+        if config is None or not hasattr(base, "site") or not hasattr(base, "camera"):
+            raise ConfigError(
+                f"LocalizationWrapper needs a uav_struct_v0 environment (with .config, .site and "
+                f".camera), got {type(base).__name__}"
+            )
+        landmarks = spec.landmarks
+        if spec.detector == "projection" and landmarks not in config.landmark_sets:
+            raise ConfigError(
+                f"the wrapped env provides landmark truth for {config.landmark_sets}, but "
+                f"landmarks={landmarks!r} needs it: build the env with "
+                f"landmark_sets=({landmarks!r},) (the 'train' preset sets ()), e.g. "
+                f"uav_struct_env.wrappers.make_localization_env(landmarks={landmarks!r})"
+            )
+        self.spec = spec
+        self.landmarks = landmarks
+        w, h = config.image_size
+        self.image_size = (int(w), int(h))
+        self.K = np.asarray(base.camera.K, dtype=np.float64)
+        model = base.site.landmarks(landmarks)
+        self._rng = np.random.default_rng()
+        try:
+            self.stack: LocalizationStack = build_stack(
+                spec,
+                self.K,
+                self.image_size,
+                model_xyz=model.xyz,
+                model_ids=model.ids,
+                markers=base.site.markers,
+                rng=self._rng,
+            )
+        except ConfigError as e:
+            if spec.structural and len(model.xyz) < 4:
+                raise ConfigError(f"{e} (stage {config.stage!r})") from None
+            raise
+        self.model_ids = np.asarray(model.ids, dtype=np.int64)
+        inner = env.observation_space(env.possible_agents[0])
+        keys = dict(inner.spaces)
+        keys["pose"] = spaces.Box(-POSE_BOUND, POSE_BOUND, (7,), np.float32)
+        keys["pose_std"] = spaces.Box(0.0, STD_BOUND, (6,), np.float32)
+        keys["localized"] = spaces.Box(0.0, 1.0, (1,), np.float32)
+        self._observation_space = spaces.Dict(keys)
+        self.last_frames: dict[str, FrameLocalization] = {}
+
+    @property
+    def localizer(self) -> Any:
+        """The stack's :class:`localization.Localizer` (None for ArUco)."""
+        return self.stack.localizer
+
+    def observation_space(self, agent: str) -> spaces.Dict:
+        """The cached observation space shared by all agents: the env's plus the pose keys."""
+        self.env.observation_space(agent)  # validates the agent name
+        return self._observation_space
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        """Reset the env and localize every agent; ``seed`` also seeds the detector."""
+        if seed is not None:
+            self._rng = np.random.default_rng([int(seed), 0x10CA1])
+            self.stack.seed(self._rng)
+        obs, infos = self.env.reset(seed=seed, options=options)
+        self.last_frames = {}
+        for agent in obs:
+            self._localize(agent, obs[agent], infos[agent])
+        return obs, infos
+
+    def step(self, actions: dict[str, Any]):
+        """Step the env and localize every agent that produced an observation."""
+        obs, rewards, terminations, truncations, infos = self.env.step(actions)
+        for agent in obs:
+            self._localize(agent, obs[agent], infos[agent])
+        return obs, rewards, terminations, truncations, infos
+
+    def _localize(self, agent: str, obs: dict, info: dict) -> FrameLocalization:
+        gt = invert(info["world_from_cam"])
+        prior = invert(info["prior_world_from_cam"])
+        truth_sets = info.get("landmarks", {})
+        truth = truth_sets.get(self.landmarks)
+        frame = self.stack.localize(obs["image"], truth_sets, prior, gt)
+        est = frame.estimate
+        world_from_cam = invert(est.cam_from_world)
+        pose = np.concatenate([world_from_cam[:3, 3], quat_wxyz_from_matrix(world_from_cam[:3, :3])])
+        std = est.pose_std if est.success else self.stack.prior_std
+        std = np.where(np.isfinite(std), std, STD_BOUND)
+        obs["pose"] = np.clip(pose, -POSE_BOUND, POSE_BOUND).astype(np.float32)
+        obs["pose_std"] = np.clip(std, 0.0, STD_BOUND).astype(np.float32)
+        obs["localized"] = np.array([1.0 if est.success else 0.0], np.float32)
+        position_std = float(np.sqrt(np.trace(est.covariance[:3, :3]))) if est.success else float("inf")
+        s = frame.scores
+        info["localization"] = {
+            "success": bool(est.success),
+            "translation_error_m": frame.translation_error_m,
+            "rotation_error_deg": frame.rotation_error_deg,
+            "prior_translation_error_m": frame.prior_translation_error_m,
+            "n_correspondences": int(est.n_inliers),
+            "n_detections": len(frame.detections),
+            "n_visible": int(np.sum(truth["visible"])) if truth is not None else -1,
+            "association_precision": float(s.precision),
+            "association_recall": float(s.recall),
+            "association_f1": float(s.f1),
+            "reprojection_rmse_px": float(est.reprojection_rmse_px),
+            "position_std_m": position_std,
+            "latency_s": float(frame.latency_s),
+            "failure_reason": est.failure_reason,
+            "failure_code": None if est.failure_code is None else est.failure_code.value,
+        }
+        self.last_frames[agent] = frame
+        return frame
+
+    def estimated_position(self, agent: str) -> np.ndarray:
+        """(3,) the last estimated camera centre of ``agent`` (the prior's when failed)."""
+        return camera_center(self.last_frames[agent].estimate.cam_from_world)
