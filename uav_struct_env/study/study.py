@@ -14,6 +14,7 @@ from tqdm import tqdm
 from localization.learned import DEFAULT_MODEL
 from localization.refine import DEFAULT_REFINER
 from uav_struct_env.outputs import OutputExistsError, StagedOutput
+from uav_struct_env.processes import WorkerDied
 from uav_struct_env.site import make_site
 from uav_struct_env.study.figures import plot_error_cdfs, plot_fig2, plot_viewpoint_map
 from uav_struct_env.study.protocol import ASSOCIATIONS, DETECTORS, NOISES, StudyConfig
@@ -24,7 +25,7 @@ from uav_struct_env.study.report import (
     write_csv,
     write_results_json,
 )
-from uav_struct_env.study.run import run_units
+from uav_struct_env.study.run import StudyInterrupted, run_units
 
 __all__ = ["main", "run_study"]
 
@@ -182,6 +183,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (OutputExistsError, NotADirectoryError) as err:
         print(f"uav-struct study: error: {err}", file=sys.stderr)
         return 2
+    except StudyInterrupted as stop:
+        print(f"uav-struct study: interrupted: {stop}; nothing written to {args.out}",
+              file=sys.stderr)
+        return 130
+    except WorkerDied as err:
+        print(f"uav-struct study: error: {err}; nothing written to {args.out}", file=sys.stderr)
+        return 1
     out = Path(args.out)
     print(
         f"\nTable II — camera-pose accuracy ({config.association} association, {config.noise} prior, "
