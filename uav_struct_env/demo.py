@@ -9,6 +9,8 @@ from pathlib import Path
 
 import cv2
 
+from uav_struct_env.outputs import OutputExistsError, StagedOutput, atomic_write_bytes
+
 __all__ = ["main", "render_views"]
 
 
@@ -21,7 +23,11 @@ def render_views(
     renderer: str = "auto",
     image_size: tuple[int, int] = (1280, 720),
 ) -> list[Path]:
-    """Render every UAV's view at scripted ``viewpoint`` plus the ``rgb_array`` frame; return the paths."""
+    """Render every UAV's view at scripted ``viewpoint`` plus the ``rgb_array`` frame; return the paths.
+
+    Each PNG is written atomically (no truncated file after an interruption). ``uav-struct
+    render`` writes through :class:`uav_struct_env.outputs.StagedOutput` (no earlier run lost).
+    """
     import uav_struct_env
 
     out = Path(out)
@@ -34,14 +40,25 @@ def render_views(
         paths = []
         for agent in env.possible_agents:
             path = out / f"{stage}_{agent}_viewpoint{viewpoint}.png"
-            cv2.imwrite(str(path), cv2.cvtColor(obs[agent]["image"], cv2.COLOR_RGB2BGR))
+            _write_png(path, obs[agent]["image"])
             paths.append(path)
         path = out / f"{stage}_overview_viewpoint{viewpoint}.png"
-        cv2.imwrite(str(path), cv2.cvtColor(env.render(), cv2.COLOR_RGB2BGR))
+        _write_png(path, env.render())
         paths.append(path)
     finally:
         env.close()
     return paths
+
+
+def _write_png(path: Path, rgb) -> None:
+    ok, data = cv2.imencode(".png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise RuntimeError(f"OpenCV could not encode {path.name}")
+    atomic_write_bytes(path, data.tobytes())
+
+
+#: What ``uav-struct render`` writes (the overview images last).
+RENDER_FILES = ("*_overview_viewpoint*.png", "*_viewpoint*.png")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -52,13 +69,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--viewpoint", type=int, default=0, help="scripted viewpoint index (0-9)")
     p.add_argument("--renderer", default="auto", choices=("auto", "tiny", "egl"))
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the images of an earlier run in --out (otherwise refused)")
     args = p.parse_args(argv)
     stages = ("slab", "columns") if args.stage == "both" else (args.stage,)
-    for stage in stages:
-        for path in render_views(
-            args.out, stage=stage, seed=args.seed, viewpoint=args.viewpoint, renderer=args.renderer
-        ):
-            print(path.resolve())
+    try:
+        staged = StagedOutput(args.out, overwrite=args.overwrite, owned=RENDER_FILES)
+    except (OutputExistsError, NotADirectoryError) as err:
+        print(f"uav-struct render: error: {err}", file=sys.stderr)
+        return 2
+    with staged:
+        for stage in stages:
+            render_views(staged.stage, stage=stage, seed=args.seed, viewpoint=args.viewpoint,
+                         renderer=args.renderer)
+    for path in sorted(staged.out.glob("*_viewpoint*.png")):
+        print(path.resolve())
     return 0
 
 

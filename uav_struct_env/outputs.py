@@ -38,6 +38,7 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_json",
     "atomic_write_text",
+    "claim_output_dir",
     "prepare_output_dir",
     "save_figure",
 ]
@@ -94,6 +95,18 @@ def prepare_output_dir(path: str | Path, *, overwrite: bool = False, flag: str =
                 "or choose another output folder"
             )
     return out
+
+
+def claim_output_dir(parser: Any, path: str | Path, overwrite: bool) -> Path:
+    """:func:`prepare_output_dir` for a command line: a refusal is ``parser.error`` (status 2).
+
+    ``parser`` is the command's ``argparse.ArgumentParser``; its ``--overwrite`` is named.
+    """
+    try:
+        return prepare_output_dir(path, overwrite=overwrite)
+    except (OutputExistsError, NotADirectoryError) as err:
+        parser.error(str(err))
+        raise  # parser.error exits; for parsers that do not
 
 
 def _remove_leftovers(out: Path) -> None:
