@@ -20,7 +20,6 @@ Metric definitions (the same for every policy):
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import pickle
 import time
@@ -29,6 +28,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from uav_struct_env.outputs import OutputExistsError, atomic_write_json, save_figure
 
 POLICIES = ("ppo", "random", "hold", "orbit")
 DEFAULTS: dict[str, Any] = {
@@ -39,6 +40,7 @@ DEFAULTS: dict[str, Any] = {
     "policies": POLICIES,
     "plot": "docs/figures/policy_evaluation.png",
     "json_out": None,
+    "overwrite": False,
     "max_cycles": None,
 }
 
@@ -144,7 +146,7 @@ def plot(results: dict[str, dict], path: str | Path) -> None:
     axes[1].legend(fontsize=8)
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -180,6 +182,9 @@ def main(**kwargs: Any) -> dict[str, Any]:
         raise ValueError(f"unknown policies {bad}; valid: {POLICIES}")
     if "ppo" in policies and opt["model"] is None:
         raise ValueError("policy 'ppo' needs model=<directory with model.zip>")
+    for path in (opt["plot"], opt["json_out"]):  # checked before the evaluation runs
+        if path and Path(path).exists() and not opt["overwrite"]:
+            raise OutputExistsError(f"{path!r} exists; pass --overwrite to replace it")
     overrides = {} if opt["max_cycles"] is None else {"max_cycles": opt["max_cycles"]}
     env = make_train_env(opt["config"], **overrides)
     seeds = [opt["seed"] + i for i in range(opt["episodes"])]
@@ -207,7 +212,7 @@ def main(**kwargs: Any) -> dict[str, Any]:
         del r["_final"]
     summary = {"options": {**opt, "policies": policies}, "seeds": seeds, "results": results}
     if opt["json_out"]:
-        Path(opt["json_out"]).write_text(json.dumps(summary, indent=2, default=str))
+        atomic_write_json(opt["json_out"], summary, indent=2, default=str)
     print(table(results))
     return summary
 
@@ -221,6 +226,7 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--policies", nargs="+", default=list(POLICIES), choices=POLICIES)
     p.add_argument("--plot", default=DEFAULTS["plot"])
     p.add_argument("--json-out", default=None)
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --plot / --json-out")
     p.add_argument("--max-cycles", type=int, default=None)
     return vars(p.parse_args(argv))
 
@@ -229,4 +235,7 @@ if __name__ == "__main__":
     args = _parse()
     if args["model"] is None and "ppo" in args["policies"]:
         args["policies"] = [p for p in args["policies"] if p != "ppo"]
-    main(**args)
+    try:
+        main(**args)
+    except OutputExistsError as err:
+        raise SystemExit(f"evaluate_policy.py: error: {err}") from None

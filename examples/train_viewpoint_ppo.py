@@ -20,11 +20,18 @@ import argparse
 import json
 import time
 import warnings
-from pathlib import Path
 from typing import Any
+
+from uav_struct_env.outputs import (
+    OutputExistsError,
+    atomic_path,
+    atomic_write_json,
+    prepare_output_dir,
+)
 
 DEFAULTS: dict[str, Any] = {
     "out": "runs/ppo_state",
+    "overwrite": False,
     "config": "state",
     "total_timesteps": 400_000,
     "minutes": None,
@@ -105,8 +112,8 @@ def main(**kwargs: Any) -> dict[str, Any]:
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
 
-    out = Path(opt["out"])
-    out.mkdir(parents=True, exist_ok=True)
+    # An earlier run in "out" is refused unless overwrite=True (the error names --overwrite).
+    out = prepare_output_dir(opt["out"], overwrite=opt["overwrite"])
     set_random_seed(opt["seed"])
     warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
     torch.set_num_threads(1)
@@ -144,8 +151,10 @@ def main(**kwargs: Any) -> dict[str, Any]:
     t0 = time.perf_counter()
     model.learn(total_timesteps=opt["total_timesteps"], callback=callbacks, tb_log_name="ppo")
     wall = time.perf_counter() - t0
-    model.save(out / "model.zip")
-    vec.save(str(out / "vecnormalize.pkl"))
+    with atomic_path(out / "model.zip") as tmp:
+        model.save(tmp)
+    with atomic_path(out / "vecnormalize.pkl") as tmp:
+        vec.save(str(tmp))
     vec.close()
     summary = {
         "options": {k: (list(v) if isinstance(v, tuple) else v) for k, v in opt.items()},
@@ -154,13 +163,15 @@ def main(**kwargs: Any) -> dict[str, Any]:
         "agent_steps_per_s": model.num_timesteps / wall if wall > 0 else float("nan"),
         "n_agent_slots": n,
     }
-    (out / "train.json").write_text(json.dumps(summary, indent=2))
+    atomic_write_json(out / "train.json", summary, indent=2)
     return summary
 
 
 def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default=DEFAULTS["out"])
+    p.add_argument("--overwrite", action="store_true",
+                   help="train into an --out folder that already holds files (else refused)")
     p.add_argument("--config", default=DEFAULTS["config"], help="TRAIN_CONFIGS name: state | image")
     p.add_argument("--total-timesteps", type=int, default=DEFAULTS["total_timesteps"])
     p.add_argument("--minutes", type=float, default=None, help="stop after this wall-clock time")
@@ -193,5 +204,8 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    summary = main(**_parse())
+    try:
+        summary = main(**_parse())
+    except (OutputExistsError, NotADirectoryError) as err:
+        raise SystemExit(f"train_viewpoint_ppo.py: error: {err}") from None
     print(json.dumps({k: v for k, v in summary.items() if k != "options"}, indent=2))

@@ -15,7 +15,15 @@ commands:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Dispatch to a sub-command; returns the exit status."""
+    """Dispatch to a sub-command; returns the exit status (130 after Ctrl-C, without a traceback)."""
+    try:
+        return _dispatch(argv)
+    except KeyboardInterrupt:
+        print("uav-struct: interrupted", file=sys.stderr)
+        return 130
+
+
+def _dispatch(argv: Sequence[str] | None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     if not args or args[0] in ("-h", "--help"):
         print(USAGE)

@@ -11,6 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from uav_struct_env.outputs import OutputExistsError, StagedOutput, atomic_write_bytes
 from uav_struct_env.site import make_site
 
 __all__ = ["main", "render_views"]
@@ -26,7 +27,11 @@ def render_views(
     image_size: tuple[int, int] = (1280, 720),
     site: str = "paper",
 ) -> list[Path]:
-    """Render every UAV's view at scripted ``viewpoint`` plus the ``rgb_array`` frame; return the paths."""
+    """Render every UAV's view at scripted ``viewpoint`` plus the ``rgb_array`` frame; return the paths.
+
+    Each PNG is written atomically (no truncated file after an interruption). ``uav-struct
+    render`` writes through :class:`uav_struct_env.outputs.StagedOutput` (no earlier run lost).
+    """
     import uav_struct_env
 
     out = Path(out)
@@ -40,14 +45,25 @@ def render_views(
         paths = []
         for agent in env.possible_agents:
             path = out / f"{tag}_{agent}_viewpoint{viewpoint}.png"
-            cv2.imwrite(str(path), cv2.cvtColor(obs[agent]["image"], cv2.COLOR_RGB2BGR))
+            _write_png(path, obs[agent]["image"])
             paths.append(path)
         path = out / f"{tag}_overview_viewpoint{viewpoint}.png"
-        cv2.imwrite(str(path), cv2.cvtColor(env.render(), cv2.COLOR_RGB2BGR))
+        _write_png(path, env.render())
         paths.append(path)
     finally:
         env.close()
     return paths
+
+
+def _write_png(path: Path, rgb) -> None:
+    ok, data = cv2.imencode(".png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise RuntimeError(f"OpenCV could not encode {path.name}")
+    atomic_write_bytes(path, data.tobytes())
+
+
+#: What ``uav-struct render`` writes (the overview images last).
+RENDER_FILES = ("*_overview_viewpoint*.png", "*_viewpoint*.png")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -62,6 +78,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--viewpoint", type=int, default=0, help="scripted viewpoint index (0-9)")
     p.add_argument("--renderer", default="auto", choices=("auto", "tiny", "egl"))
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the images of an earlier run in --out (otherwise refused)")
     args = p.parse_args(argv)
     try:
         if args.stage == "both":
@@ -70,15 +88,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             stages = ["slab", "columns"] if args.site in ("paper", "random") else stages
         else:
             stages = [args.stage]
-    except (ValueError, ImportError, FileNotFoundError) as err:
+        staged = StagedOutput(args.out, overwrite=args.overwrite, owned=RENDER_FILES)
+    except (ValueError, ImportError, FileNotFoundError, OutputExistsError, NotADirectoryError) as err:
         print(f"uav-struct render: error: {err}", file=sys.stderr)
         return 2
-    for stage in stages:
-        for path in render_views(
-            args.out, stage=stage, seed=args.seed, viewpoint=args.viewpoint, renderer=args.renderer,
-            site=args.site,
-        ):
-            print(path.resolve())
+    with staged:
+        for stage in stages:
+            render_views(staged.stage, stage=stage, seed=args.seed, viewpoint=args.viewpoint,
+                         renderer=args.renderer, site=args.site)
+    for path in sorted(staged.out.glob("*_viewpoint*.png")):
+        print(path.resolve())
     return 0
 
 

@@ -208,51 +208,60 @@ def _layout_job(args):
     records = []
     for rgb, record in render_layout(config, layout):
         name = f"images/{layout:05d}_{record['view']:02d}.png"
-        cv2.imwrite(str(Path(out_dir) / name), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+        if not cv2.imwrite(str(Path(out_dir) / name), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
+            raise OSError(f"could not write {Path(out_dir) / name}")
         records.append({"file": name, **record})
     return records
 
 
 def generate(config: DatasetConfig, out_dir: str | Path, workers: int = 1,
-             progress: bool = True) -> Path:
+             progress: bool = True, overwrite: bool = False) -> Path:
     """Render the dataset of ``config`` into ``out_dir`` (see the module docstring).
+
+    ``images/`` and ``labels.json`` appear together when the whole dataset is rendered
+    (:class:`uav_struct_env.outputs.StagedOutput`); an interrupted run leaves ``out_dir`` as it
+    was. A folder that already holds files is refused unless ``overwrite``.
 
     Returns:
         The path of ``labels.json``.
+
+    Raises:
+        uav_struct_env.outputs.OutputExistsError: ``out_dir`` holds files and not ``overwrite``.
+        uav_struct_env.processes.WorkerDied: a worker process died (``workers > 1``).
     """
     from tqdm import tqdm
 
-    out = Path(out_dir)
-    (out / "images").mkdir(parents=True, exist_ok=True)
-    jobs = [(config, k, str(out)) for k in range(config.n_layouts)]
-    records: list[dict] = []
-    bar = tqdm(total=config.n_layouts * config.views_per_layout, unit="img", disable=not progress)
-    if workers == 1:
-        results = map(_layout_job, jobs)
-        pool = None
-    else:
-        import multiprocessing as mp
+    from uav_struct_env.outputs import StagedOutput
+    from uav_struct_env.processes import run_chunks
 
+    with StagedOutput(out_dir, overwrite=overwrite, owned=("labels.json", "images")) as staged:
+        stage = staged.stage
+        (stage / "images").mkdir()
+        jobs = [(config, k, str(stage)) for k in range(config.n_layouts)]
+        records: list[dict] = []
+        bar = tqdm(total=config.n_layouts * config.views_per_layout, unit="img",
+                   disable=not progress)
         # One EGL client per process: each worker renders its layouts one after another.
-        pool = mp.get_context("spawn").Pool(workers)
-        results = pool.imap(_layout_job, jobs)
-    try:
-        for recs in results:
-            records += recs
-            bar.update(len(recs))
-    finally:
-        bar.close()
-        if pool is not None:
-            pool.close()
-            pool.join()
+        results = (map(_layout_job, jobs) if workers == 1
+                   else run_chunks(_layout_job, [[j] for j in jobs], workers, name="dataset-worker"))
+        try:
+            for recs in results:
+                records += recs
+                bar.update(len(recs))
+        finally:
+            bar.close()
+        records.sort(key=lambda r: (r["layout"], r["view"]))
+        _write_labels(stage / "labels.json", config, records)
+    return staged.out / "labels.json"
+
+
+def _write_labels(path: Path, config: DatasetConfig, records: list[dict]) -> None:
     labels = {
         "format": FORMAT, "types": list(LANDMARK_TYPES), "image_size": list(config.image_size),
         "source_size": list(config.source_size), "scale": config.scale,
         "config": asdict(config), "images": records,
     }
-    path = out / "labels.json"
     path.write_text(json.dumps(labels))
-    return path
 
 
 def load_labels(path: str | Path) -> dict:

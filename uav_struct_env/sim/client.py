@@ -210,6 +210,9 @@ class RenderClient:
         if self.client_id < 0:
             raise RendererUnavailableError("pybullet could not create a DIRECT client")
         self._closed = False
+        # The physics server's file cache outlives the client: every mesh and texture loaded
+        # would stay in memory after disconnect (see uav_struct_env.sim.scene, "Memory").
+        p.setPhysicsEngineParameter(enableFileCaching=0, physicsClientId=self.client_id)
         if backend == "egl":
             try:
                 self._load_egl()

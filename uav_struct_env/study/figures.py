@@ -8,6 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from uav_struct_env.outputs import save_figure
 from uav_struct_env.site import Site
 from uav_struct_env.study.protocol import METHODS
 from uav_struct_env.study.run import ImageResult, Overlay
@@ -96,7 +97,7 @@ def plot_fig2(overlays: Sequence[Overlay], path: Path) -> None:
         fontsize=8,
     )
     fig.tight_layout(rect=(0, 0.04, 1, 1))
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -126,7 +127,7 @@ def plot_error_cdfs(rows: Sequence[ImageResult], path: Path) -> None:
         ax.grid(True, which="both", alpha=0.3)
     ax_t.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -162,5 +163,5 @@ def plot_viewpoint_map(site: Site, rows: Sequence[ImageResult], method: str, pat
     ax.legend(loc="upper right", fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -25,6 +24,7 @@ from localization.metrics import (
     recall_at,
     summarize_errors,
 )
+from uav_struct_env.outputs import atomic_path, atomic_write_json
 from uav_struct_env.study.protocol import METHODS, Method, StudyConfig
 from uav_struct_env.study.run import ImageResult
 
@@ -132,13 +132,13 @@ def _clean(obj):
 
 def write_results_json(path: Path, results: dict) -> None:
     """Write ``results.json`` (strict JSON: no NaN)."""
-    path.write_text(json.dumps(results, indent=2, allow_nan=False) + "\n")
+    atomic_write_json(path, results, indent=2, allow_nan=False)
 
 
 def write_csv(path: Path, rows: Sequence[ImageResult]) -> None:
     """Every per-image result, one row each."""
     fields = [f.name for f in dataclasses.fields(ImageResult)]
-    with path.open("w", newline="") as fh:
+    with atomic_path(path) as tmp, tmp.open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=fields)
         writer.writeheader()
         for r in rows:

@@ -10,7 +10,6 @@ each site is loaded at most once per process. Every random draw is seeded from
 
 from __future__ import annotations
 
-import multiprocessing as mp
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -20,10 +19,11 @@ from numpy.typing import NDArray
 from localization import cramer_rao_bound
 from localization.geometry import camera_center, invert, project
 from localization.metrics import pose_errors
+from uav_struct_env.processes import run_chunks
 from uav_struct_env.stack import FrameLocalization, StackSpec, build_stack
 from uav_struct_env.study.protocol import METHODS, Method, Scene, StudyConfig
 
-__all__ = ["Overlay", "ImageResult", "iter_study", "run_units", "stack_spec"]
+__all__ = ["Overlay", "ImageResult", "StudyInterrupted", "iter_study", "run_units", "stack_spec"]
 
 
 @dataclass(frozen=True)
@@ -284,8 +284,21 @@ def _worker(args):
     return run_unit(config, scene, k)
 
 
+class StudyInterrupted(KeyboardInterrupt):
+    """Ctrl-C stopped the study after ``done`` of ``total`` viewpoints (every worker stopped)."""
+
+    def __init__(self, done: int, total: int) -> None:
+        super().__init__(f"stopped after {done} of {total} viewpoints")
+        self.done, self.total = done, total
+
+
 def iter_study(config: StudyConfig) -> Iterator[tuple[list[ImageResult], list[Overlay]]]:
-    """Yield the results of every (scene, viewpoint) unit as it completes."""
+    """Yield the results of every (scene, viewpoint) unit as it completes.
+
+    With ``workers > 1`` the units run in spawned processes (:func:`uav_struct_env.processes.
+    run_chunks`): Ctrl-C stops and reaps them all, and a worker that dies raises
+    :class:`uav_struct_env.processes.WorkerDied` instead of hanging.
+    """
     units = _units(config)
     if config.workers == 1:
         try:
@@ -294,12 +307,12 @@ def iter_study(config: StudyConfig) -> Iterator[tuple[list[ImageResult], list[Ov
         finally:
             _close_envs()
         return
-    ctx = mp.get_context("spawn")
     # Units are ordered by scene; contiguous chunks keep each process on one scene most of the
     # time, so a site is rarely loaded twice in one process.
     chunk = max(1, -(-config.n_viewpoints // config.workers))
-    with ctx.Pool(min(config.workers, len(units))) as pool:
-        yield from pool.imap_unordered(_worker, [(config, s, k) for s, k in units], chunksize=chunk)
+    work = [(config, s, k) for s, k in units]
+    chunks = [work[i:i + chunk] for i in range(0, len(work), chunk)]
+    yield from run_chunks(_worker, chunks, config.workers, name="study-worker")
 
 
 def run_units(
@@ -309,11 +322,16 @@ def run_units(
     total = len(_units(config))
     results: list[ImageResult] = []
     overlays: list[Overlay] = []
-    for done, (res, ovs) in enumerate(iter_study(config), start=1):
-        results += res
-        overlays += ovs
-        if progress is not None:
-            progress(done, total)
+    done = 0
+    try:
+        for res, ovs in iter_study(config):
+            results += res
+            overlays += ovs
+            done += 1
+            if progress is not None:
+                progress(done, total)
+    except KeyboardInterrupt:
+        raise StudyInterrupted(done, total) from None
     order = {m.key: i for i, m in enumerate(METHODS)}
     results.sort(key=lambda r: (order[r.method], r.uav, r.viewpoint))
     return results, overlays

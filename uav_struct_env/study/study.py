@@ -13,6 +13,8 @@ from tqdm import tqdm
 
 from localization.learned import DEFAULT_MODEL
 from localization.refine import DEFAULT_REFINER
+from uav_struct_env.outputs import OutputExistsError, StagedOutput
+from uav_struct_env.processes import WorkerDied
 from uav_struct_env.site import make_site
 from uav_struct_env.study.figures import plot_error_cdfs, plot_fig2, plot_viewpoint_map
 from uav_struct_env.study.protocol import ASSOCIATIONS, DETECTORS, NOISES, StudyConfig
@@ -23,51 +25,71 @@ from uav_struct_env.study.report import (
     write_csv,
     write_results_json,
 )
-from uav_struct_env.study.run import run_units
+from uav_struct_env.study.run import StudyInterrupted, run_units
 
 __all__ = ["main", "run_study"]
 
 QUICK_VIEWPOINTS = 2
 
 
-def run_study(config: StudyConfig, out: str | Path, *, progress: bool = True, figures: bool = True) -> dict:
+#: What the study writes; ``results.json`` (written last) says that a set is complete.
+STUDY_FILES = ("results.json", "table1.md", "table2.md", "per_image.csv", "fig2_associations.png",
+               "error_cdf.png", "viewpoint_map.png")
+
+
+def run_study(
+    config: StudyConfig,
+    out: str | Path,
+    *,
+    progress: bool = True,
+    figures: bool = True,
+    overwrite: bool = False,
+) -> dict:
     """Run the study into ``out`` and return the ``results.json`` document.
 
     Writes ``results.json``, ``table1.md``, ``table2.md``, ``per_image.csv`` and (with
-    ``figures``) ``fig2_associations.png``, ``error_cdf.png`` and ``viewpoint_map.png``.
+    ``figures``) ``fig2_associations.png``, ``error_cdf.png`` and ``viewpoint_map.png``, all at
+    once when the study has finished (:class:`uav_struct_env.outputs.StagedOutput`): an
+    interrupted run leaves ``out`` as it was.
+
+    Raises:
+        uav_struct_env.outputs.OutputExistsError: ``out`` already holds files and ``overwrite``
+            is false (checked before anything runs). With ``overwrite``, the files of an
+            earlier study there are replaced and those this run does not write are removed.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    bar = tqdm(
-        total=len(config.scenes) * config.n_viewpoints,
-        unit="viewpoint",
-        desc="study",
-        disable=not progress,
-        file=sys.stderr,
-    )
+    staged = StagedOutput(out, overwrite=overwrite, owned=STUDY_FILES)
+    with staged:
+        t0 = time.perf_counter()
+        bar = tqdm(
+            total=len(config.scenes) * config.n_viewpoints,
+            unit="viewpoint",
+            desc="study",
+            disable=not progress,
+            file=sys.stderr,
+        )
 
-    def tick(done: int, total: int) -> None:
-        bar.update(done - bar.n)
+        def tick(done: int, total: int) -> None:
+            bar.update(done - bar.n)
 
-    try:
-        rows, overlays = run_units(config, progress=tick)
-    finally:
-        bar.close()
-    elapsed = time.perf_counter() - t0
-    results = results_dict(config, rows, {"elapsed_s": round(elapsed, 1)})
-    write_results_json(out / "results.json", results)
-    (out / "table1.md").write_text(table1_markdown(results))
-    (out / "table2.md").write_text(table2_markdown(results))
-    write_csv(out / "per_image.csv", rows)
-    if figures:
-        plot_fig2(overlays, out / "fig2_associations.png")
-        plot_error_cdfs(rows, out / "error_cdf.png")
-        structural = [m for m in config.selected_methods if m.structural]
-        if structural:
-            site = make_site(config.site, stage=config.scene_stage(structural[0].scene), marker_size=1.0,
-                             rng=np.random.default_rng(config.seed))
-            plot_viewpoint_map(site, rows, structural[0].key, out / "viewpoint_map.png")
+        try:
+            rows, overlays = run_units(config, progress=tick)
+        finally:
+            bar.close()
+        elapsed = time.perf_counter() - t0
+        results = results_dict(config, rows, {"elapsed_s": round(elapsed, 1)})
+        stage = staged.stage
+        write_results_json(stage / "results.json", results)
+        (stage / "table1.md").write_text(table1_markdown(results))
+        (stage / "table2.md").write_text(table2_markdown(results))
+        write_csv(stage / "per_image.csv", rows)
+        if figures:
+            plot_fig2(overlays, stage / "fig2_associations.png")
+            plot_error_cdfs(rows, stage / "error_cdf.png")
+            structural = [m for m in config.selected_methods if m.structural]
+            if structural:
+                site = make_site(config.site, stage=config.scene_stage(structural[0].scene),
+                                 marker_size=1.0, rng=np.random.default_rng(config.seed))
+                plot_viewpoint_map(site, rows, structural[0].key, stage / "viewpoint_map.png")
     return results
 
 
@@ -77,6 +99,11 @@ def _parser() -> argparse.ArgumentParser:
         description="Reproduce the paper's four-UAV study (Tables I and II, Fig. 2).",
     )
     p.add_argument("--out", default="results", help="output folder (default: results)")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the results of an earlier run in --out (otherwise such a folder is refused)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of textures, detector noise and priors")
     p.add_argument("--detector", default="projection", help=f"landmark detector: {', '.join(DETECTORS)}")
     p.add_argument("--association", default="robust", choices=ASSOCIATIONS)
@@ -162,7 +189,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         floor = config.scene_stage(config.selected_methods[0].scene)
         print(f"uav-struct study: note: {', '.join(config.skipped_methods)} left out: the floor of "
               f"stage {floor!r} has no columns stage", file=sys.stderr)
-    results = run_study(config, args.out, progress=not args.no_progress, figures=not args.no_figures)
+    try:
+        results = run_study(config, args.out, progress=not args.no_progress,
+                            figures=not args.no_figures, overwrite=args.overwrite)
+    except (OutputExistsError, NotADirectoryError) as err:
+        print(f"uav-struct study: error: {err}", file=sys.stderr)
+        return 2
+    except StudyInterrupted as stop:
+        print(f"uav-struct study: interrupted: {stop}; nothing written to {args.out}",
+              file=sys.stderr)
+        return 130
+    except WorkerDied as err:
+        print(f"uav-struct study: error: {err}; nothing written to {args.out}", file=sys.stderr)
+        return 1
     out = Path(args.out)
     print(
         f"\nTable II — camera-pose accuracy ({config.association} association, {config.noise} prior, "

@@ -37,6 +37,7 @@ from torch.nn import functional as F
 
 from localization.inference import OnnxNet
 from uav_struct_env.datasets.landmarks import LANDMARK_TYPES, load_labels
+from uav_struct_env.outputs import atomic_path, atomic_write_json, claim_output_dir
 from uav_struct_env.training.train_loop import add_training_arguments, fit, make_loader
 
 __all__ = ["KeypointNet", "conv_bn_relu", "export_checked", "export_onnx", "main", "train"]
@@ -203,9 +204,10 @@ def export_checked(model: nn.Module, example: torch.Tensor, path: str | Path, in
     model = model.eval()
     with warnings.catch_warnings():  # the TorchScript exporter's deprecation notice
         warnings.simplefilter("ignore", DeprecationWarning)
-        torch.onnx.export(model, example, str(path), opset_version=13, dynamo=False,
-                          input_names=[input_name], output_names=[output_name],
-                          do_constant_folding=True, dynamic_axes=dynamic_axes)
+        with atomic_path(path) as tmp:
+            torch.onnx.export(model, example, str(tmp), opset_version=13, dynamo=False,
+                              input_names=[input_name], output_names=[output_name],
+                              do_constant_folding=True, dynamic_axes=dynamic_axes)
     got = OnnxNet(path)(example.numpy())
     with torch.no_grad():
         want = model(example).numpy()
@@ -289,7 +291,7 @@ def train(data: str, out: str, val: str | None = None, minutes: float = 45.0,
     summary.update(params=sum(p.numel() for p in model.parameters()),
                    train_images=len(labels["images"]), onnx=str(onnx_path), seed=seed,
                    batch=batch, crop=list(crop), width=width)
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    atomic_write_json(out_dir / "summary.json", summary, indent=2)
     return summary
 
 
@@ -303,6 +305,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--crop", type=int, nargs=2, default=(256, 192), metavar=("W", "H"))
     add_training_arguments(ap, minutes=45.0, batch=16, lr=3e-3)
     a = ap.parse_args(argv)
+    claim_output_dir(ap, a.out, a.overwrite)
     if a.crop[0] % 16 or a.crop[1] % 16:
         raise SystemExit(f"--crop must be multiples of 16, got {a.crop}")
     summary = train(a.data, a.out, a.val, a.minutes, a.max_steps, a.batch, tuple(a.crop), a.lr,

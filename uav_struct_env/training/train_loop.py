@@ -20,6 +20,8 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from uav_struct_env.outputs import atomic_path
+
 __all__ = ["add_training_arguments", "fit", "make_loader"]
 
 
@@ -38,6 +40,8 @@ def add_training_arguments(ap: argparse.ArgumentParser, *, minutes: float, batch
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--workers", type=int, default=1, help="data-loading processes")
     ap.add_argument("--eval-every", type=int, default=500)
+    ap.add_argument("--overwrite", action="store_true",
+                    help="train into an --out folder that already holds files (else refused)")
 
 
 def make_loader(dataset: torch.utils.data.Dataset, batch: int, workers: int,
@@ -86,7 +90,7 @@ def fit(model: nn.Module, loader: Iterable, step_loss: Callable, out_dir: Path, 
         write({"val": metrics})
         if metrics["f1"] > best or (final and metrics["f1"] >= best):
             best = metrics["f1"]
-            torch.save(model.state_dict(), out_dir / "best.pt")
+            _save(model, out_dir / "best.pt")
             summary["best_val"] = metrics
         model.train()
 
@@ -116,8 +120,8 @@ def fit(model: nn.Module, loader: Iterable, step_loss: Callable, out_dir: Path, 
             if validate is not None and step % eval_every == 0:
                 run_validation(final=False)
             if step % 200 == 0:
-                torch.save(model.state_dict(), out_dir / "last.pt")
-    torch.save(model.state_dict(), out_dir / "last.pt")
+                _save(model, out_dir / "last.pt")
+    _save(model, out_dir / "last.pt")
     if validate is not None:
         run_validation(final=True)
     logf.close()
@@ -125,3 +129,9 @@ def fit(model: nn.Module, loader: Iterable, step_loss: Callable, out_dir: Path, 
     model.load_state_dict(torch.load(chosen))
     summary.update(steps=step, wall_s=round(time.perf_counter() - t0, 1), checkpoint=chosen.name)
     return summary
+
+
+def _save(model: nn.Module, path: Path) -> None:
+    """``torch.save`` of the weights, atomically: a checkpoint on disk is always complete."""
+    with atomic_path(path) as tmp:
+        torch.save(model.state_dict(), tmp)

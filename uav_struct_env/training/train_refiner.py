@@ -44,6 +44,7 @@ from torch.nn import functional as F
 from localization.learned import DEFAULT_MODEL, LANDMARK_TYPES, LearnedDetector, match_detections
 from localization.refine import HALF, PATCH, POSITIVE_RADIUS, extract_patches
 from uav_struct_env.datasets.landmarks import load_labels
+from uav_struct_env.outputs import atomic_path, atomic_write_json, claim_output_dir
 from uav_struct_env.training.train_detector import LandmarkCrops, conv_bn_relu, export_checked
 from uav_struct_env.training.train_loop import add_training_arguments, fit, make_loader
 
@@ -153,8 +154,9 @@ def mine(data: str | Sequence[str], out: str, model: str | None = None, negative
             parts["image"].append(np.full(len(anchors), k, np.int32))
     arrays = {name: np.concatenate(v) for name, v in parts.items()}
     path = Path(out)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(path, **arrays)
+    path = path if path.suffix == ".npz" else path.with_name(path.name + ".npz")  # as np.savez
+    with atomic_path(path) as tmp:
+        np.savez(tmp, **arrays)
     return path
 
 
@@ -284,7 +286,7 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
     summary.update(params=sum(p.numel() for p in model.parameters()), train_windows=len(ds),
                    onnx=str(onnx_path), seed=seed, batch=batch, width=width,
                    detector_model=str(Path(detector_model or DEFAULT_MODEL).resolve()))
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    atomic_write_json(out_dir / "summary.json", summary, indent=2)
     return summary
 
 
@@ -304,6 +306,7 @@ def main(argv: list[str] | None = None) -> dict:
                          "one when retraining both networks")
     add_training_arguments(ap, minutes=15.0, batch=128, lr=2e-3)
     a = ap.parse_args(argv)
+    claim_output_dir(ap, a.out, a.overwrite)
     if a.detector_model is not None and not Path(a.detector_model).is_file():
         ap.error(f"--detector-model: no such file: {a.detector_model!r}")
     windows = Path(a.windows or Path(a.out) / "windows.npz")

@@ -1,0 +1,133 @@
+"""Ctrl-C and dead workers, sent from here to a real ``uav-struct study`` process."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+
+def _children(pid: int) -> list[int]:
+    kids: list[int] = []
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{task}/children") as fh:
+            kids += [int(x) for x in fh.read().split()]
+    return kids
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as fh:
+            return fh.read().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def _running(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _study(out: Path, workers: int, *extra: str) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "uav_struct_env.cli", "study", "--out", str(out), "--workers",
+           str(workers), "--no-progress", "--no-figures", "--detector", "projection", *extra]
+    # A session of its own, so that a signal to the group is what a terminal's Ctrl-C sends.
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, env=os.environ.copy())
+
+
+def _wait_for_workers(proc: subprocess.Popen, n: int, timeout: float = 120) -> list[int]:
+    """Pids of the study's ``n`` worker processes once they are rendering."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()[1][-2000:]
+        workers = [c for c in _children(proc.pid) if "spawn_main" in _cmdline(c)]
+        if len(workers) >= n:
+            time.sleep(3.0)  # past start-up: each has a site loaded
+            return workers
+        time.sleep(0.2)
+    raise AssertionError("the study's workers did not start")
+
+
+def _previous_run(out: Path) -> dict[str, bytes]:
+    out.mkdir()
+    files = {"results.json": b'{"earlier": "run"}\n', "table2.md": b"| earlier |\n",
+             "notes.txt": b"the user's own file\n"}
+    for name, data in files.items():
+        (out / name).write_bytes(data)
+    return files
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_ctrl_c_stops_the_study_quickly_with_one_line_and_status_130(workers, tmp_path):
+    out = tmp_path / "out"
+    before = _previous_run(out)
+    proc = _study(out, workers, "--overwrite")
+    if workers > 1:
+        pids = _wait_for_workers(proc, workers)
+    else:
+        time.sleep(6.0)  # past start-up: rendering the first scene
+        pids = []
+    pids += _children(proc.pid)
+    t0 = time.monotonic()
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    stopped_s = time.monotonic() - t0
+    assert proc.returncode == 130, err[-2000:]
+    assert stopped_s < 5.0
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err[-2000:]
+    ours = [line for line in err.splitlines() if line.startswith("uav-struct")]
+    assert len(ours) == 1 and "interrupted: stopped after" in ours[0], err[-2000:]
+    assert "viewpoints; nothing written" in ours[0]
+    time.sleep(0.5)
+    assert [p for p in pids if _running(p)] == []
+    # the earlier run is untouched and nothing half-written is left
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_a_killed_worker_fails_the_study_naming_it(tmp_path):
+    out = tmp_path / "out"
+    proc = _study(out, 2)
+    workers = _wait_for_workers(proc, 2)
+    others = [p for p in _children(proc.pid) if p not in workers]
+    os.kill(workers[-1], signal.SIGKILL)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1, err[-2000:]
+    assert "Traceback" not in err, err[-2000:]
+    assert f"(pid {workers[-1]}) was killed by SIGKILL" in err
+    assert "nothing written" in err
+    time.sleep(0.5)
+    assert [p for p in workers + others if _running(p)] == []
+    assert list(out.iterdir()) == []
+
+
+def test_an_output_folder_with_results_is_refused_naming_overwrite(tmp_path):
+    out = tmp_path / "out"
+    before = _previous_run(out)
+    proc = _study(out, 1, "--quick")
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 2
+    assert "already holds results" in err and "--overwrite" in err
+    assert "Traceback" not in err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_overwrite_replaces_the_earlier_study_and_removes_its_stale_files(tmp_path):
+    out = tmp_path / "out"
+    _previous_run(out)
+    (out / "fig2_associations.png").write_bytes(b"an earlier figure")
+    proc = _study(out, 1, "--quick", "--overwrite")
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err[-2000:]
+    names = sorted(p.name for p in out.iterdir())
+    # --no-figures: the earlier figure is not left beside the new results; the user's file stays
+    assert names == ["notes.txt", "per_image.csv", "results.json", "table1.md", "table2.md"]
+    assert b"earlier" not in (out / "results.json").read_bytes()
