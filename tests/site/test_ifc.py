@@ -376,3 +376,22 @@ def test_without_ifcopenshell_the_error_names_the_extra(monkeypatch):
         load_ifc(DUPLEX)
     with pytest.raises(ImportError, match=r"\[ifc\]"):
         paper_site().to_ifc("never.ifc")
+
+
+def test_georeference_is_recorded_not_applied(tmp_path):
+    site = paper_site("slab", None)
+    f = ifcopenshell.open(str(site.to_ifc(tmp_path / "plain.ifc")))
+    context = next(c for c in f.by_type("IfcGeometricRepresentationContext", include_subtypes=False)
+                   if c.ContextType == "Model")
+    context.TrueNorth = f.createIfcDirection((-0.5, 0.8660254))  # north 30 deg counter-clockwise of +y
+    crs = f.createIfcProjectedCRS("EPSG:25832", None, None, None, None, None, None)
+    f.createIfcMapConversion(context, crs, 500000.0, 5400000.0, 120.0, 1.0, 0.0, 1.0)
+    path = tmp_path / "geo.ifc"
+    f.write(str(path))
+    geo = load_ifc(path, stage="Level 1/slab")
+    mc = geo.source["map_conversion"]
+    assert mc["eastings"] == 500000.0 and mc["northings"] == 5400000.0 and mc["target_crs"] == "EPSG:25832"
+    assert geo.source["true_north"]["direction"] == pytest.approx((-0.5, 0.8660254))
+    assert geo.source["true_north"]["angle_from_y_deg"] == pytest.approx(30.0)
+    want = site.landmarks("slab_corners").xyz
+    np.testing.assert_allclose(geo.landmarks("slab_corners").xyz, want, atol=1e-6)

@@ -386,7 +386,12 @@ def _matrix_m(placement: Any, scale: float) -> NDArray[np.float64]:
 
 
 def _georeference(f: Any, scale: float) -> dict[str, Any]:
-    """IfcSite placement, TrueNorth and IfcMapConversion, as plain data (recorded, not applied)."""
+    """IfcSite placement, TrueNorth and IfcMapConversion, as plain data (recorded, not applied).
+
+    ``true_north``: the model context's TrueNorth direction in the IFC plan and its angle from +y,
+    counter-clockwise, degrees. ``map_conversion`` (IFC4 and later): IfcMapConversion's fields
+    and the target CRS name. ``site_placement``: the IfcSite's 4x4 world placement in metres.
+    """
     out: dict[str, Any] = {"site_placement": None, "true_north": None, "map_conversion": None,
                            "site_reference": None}
     sites = f.by_type("IfcSite")
