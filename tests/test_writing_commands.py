@@ -64,7 +64,7 @@ def test_an_interrupted_dataset_leaves_no_labels_and_no_images(tmp_path):
 
 def test_training_refuses_an_earlier_run(tmp_path, capsys):
     pytest.importorskip("torch")
-    from uav_struct_env.train_detector import main as train_main
+    from uav_struct_env.training.train_detector import main as train_main
 
     out = tmp_path / "run"
     before = _earlier_run(out, "summary.json")
