@@ -9,6 +9,8 @@ from pathlib import Path
 
 import cv2
 
+from localization.synthetic import PAPER_IMAGE_SIZE
+
 __all__ = ["main", "render_views"]
 
 
@@ -19,7 +21,7 @@ def render_views(
     seed: int = 0,
     viewpoint: int = 0,
     renderer: str = "auto",
-    image_size: tuple[int, int] = (1280, 720),
+    image_size: tuple[int, int] = PAPER_IMAGE_SIZE,
 ) -> list[Path]:
     """Render every UAV's view at scripted ``viewpoint`` plus the ``rgb_array`` frame; return the paths."""
     import uav_struct_env

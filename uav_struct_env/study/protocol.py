@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from localization.checks import check_choice, check_number
+from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS
 
@@ -178,7 +179,7 @@ class StudyConfig:
     site: str = "paper"
     n_viewpoints: int = 10
     n_agents: int = 4
-    image_size: tuple[int, int] = (1280, 720)
+    image_size: tuple[int, int] = PAPER_IMAGE_SIZE
     pixel_sigma: float = 1.0
     miss_rate: float = 0.0
     false_positives: float = 0.0
