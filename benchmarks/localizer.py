@@ -3,7 +3,7 @@
 Prints three tables:
 
 1. the Cramér-Rao bound per landmark set (median over the viewpoints of several per-image
-   scalars), beside DESIGN.md's quoted figures;
+   scalars), beside docs/design.md's quoted figures;
 2. accuracy, association quality and latency of ``paper`` and ``robust`` association, for known
    correct detections (1 px noise) and for 10 % missed detections + one false positive per image
    (Poisson mean 1); the last condition repeats that with Gaussian prior errors of the same
@@ -11,7 +11,7 @@ Prints three tables:
 3. the ArUco baseline (0.5 m and 1.0 m markers; ``average`` and ``joint``) on synthetic marker
    images rendered from the same kind of viewpoints.
 
-Protocol (DESIGN.md): camera 1280x720, fx = fy = 1108.5; viewpoints 15-35 m horizontally from the
+Protocol (docs/design.md): camera 1280x720, fx = fy = 1108.5; viewpoints 15-35 m horizontally from the
 building centre, 10-25 m up, one per side in turn, aimed at the building; prior = truth + 3 m per
 axis, 2 deg roll and pitch, 5 deg yaw with alternating signs (attitude convention of
 ``uav_struct_env.sim.attitude``). Latency is the CPU time of ``Localizer.localize`` (association +
@@ -36,8 +36,6 @@ import numpy as np
 
 from localization import (
     ArucoLocalizer,
-    Localizer,
-    ProjectionDetector,
     cramer_rao_bound,
     pose_errors,
     recall_at,
@@ -56,9 +54,10 @@ from uav_struct_env.sim.attitude import (
     world_from_cam_from_attitude,
 )
 from uav_struct_env.site import paper_site
+from uav_struct_env.stack import StackSpec, build_stack
 
 SETS = ("slab_corners", "opening_corners", "column_tops", "all")
-#: DESIGN.md, "Facts measured": median Cramér-Rao bound, position m / rotation deg.
+#: docs/design.md, "Facts measured": median Cramér-Rao bound, position m / rotation deg.
 DESIGN_CRB = {
     "slab_corners": (0.14, 0.28),
     "opening_corners": (0.55, 1.07),
@@ -121,9 +120,13 @@ def crb_table(views, site) -> list[dict]:
 
 def run_structural(views, site, name, mode, miss, fp, seed, prior_law="paper") -> dict:
     ls = site.landmarks(name)
-    detector = ProjectionDetector(name, 1.0, miss, fp, rng=np.random.default_rng(seed))
+    # The stack the study and the wrapper use (at the paper's width their gate policies agree).
+    spec = StackSpec(landmarks=name, association=mode, pixel_sigma=1.0, miss_rate=miss, false_positives=fp)
+    stack = build_stack(
+        spec, PAPER_K, PAPER_IMAGE_SIZE, model_xyz=ls.xyz, model_ids=ls.ids, rng=np.random.default_rng(seed)
+    )
+    detector, loc = stack.detector, stack.localizer
     prior_rng = np.random.default_rng(seed + 100)
-    loc = Localizer(ls.xyz, PAPER_K, association=mode, image_size=PAPER_IMAGE_SIZE)
     te, re, ok, crb, cpu = [], [], [], [], []
     correct = assigned = true_det = found = visible = 0
     for k, T in enumerate(views):
@@ -190,7 +193,7 @@ def main(images: int = 200, aruco_images: int = 40, seed: int = 0, json_out: str
     print(f"Cramér-Rao bound, 1 px, median over {images} viewpoints (15-35 m out, 10-25 m up)")
     print(
         f"{'set':16s} {'pos RMS':>8s} {'pos med|e|':>10s} {'pos maxstd':>10s}   "
-        f"{'rot RMS':>8s} {'rot med|e|':>10s} {'rot maxstd':>10s}   DESIGN.md"
+        f"{'rot RMS':>8s} {'rot med|e|':>10s} {'rot maxstd':>10s}   docs/design.md"
     )
     results["crb"] = crb_table(views, site)
     for row in results["crb"]:

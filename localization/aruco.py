@@ -8,7 +8,7 @@ Two modes:
 
 ``average`` (the paper's)
     One IPPE_SQUARE pose per marker. IPPE returns two solutions; at UAV distances the wrong one
-    wins on reprojection error in a fifth to nearly half of the views (DESIGN.md), so the solution
+    wins on reprojection error in a fifth to nearly half of the views (docs/design.md), so the solution
     is chosen by ``n rmse^2 / sigma^2 + prior Mahalanobis^2`` when a prior is given. The camera
     centres are averaged arithmetically and the rotations by their chordal L2 mean
     (``scipy.spatial.transform.Rotation.mean``), never by Euler angles.

@@ -10,9 +10,9 @@ Cramér-Rao bound scalar. :func:`cramer_rao_bound` returns the full 6x6 covarian
 3:])))`` -- the root expected squared error of an efficient estimator -- are the headline ones.
 Median of that per-image scalar over 1,000 viewpoints of the benchmark's law (15-35 m
 horizontally from the building centre, uniform azimuth, 10-25 m up, aimed at the centre, every
-in-frame landmark, 1 px), against DESIGN.md's quoted medians::
+in-frame landmark, 1 px), against docs/design.md's quoted medians::
 
-                     RMS (this scalar)    median |e| (Gaussian)   DESIGN.md
+                     RMS (this scalar)    median |e| (Gaussian)   docs/design.md
     slab_corners     0.165 m / 0.33 deg   0.142 m / 0.28 deg      0.14 m / 0.28 deg
     opening_corners  0.550 m / 1.07 deg   0.476 m / 0.93 deg      0.55 m / 1.07 deg
     column_tops      0.108 m / 0.23 deg   0.094 m / 0.20 deg      0.11 m / 0.22 deg
@@ -21,7 +21,7 @@ in-frame landmark, 1 px), against DESIGN.md's quoted medians::
 The RMS reproduces opening corners and column tops to 2 %; the quoted slab / all figures are
 15-18 % below it (they match the median of the error norm instead, which in turn undershoots the
 other two by 13-15 %). No single per-image scalar reproduces all four under this viewpoint law,
-so the quoted table most likely used a somewhat different law for the slab views; DESIGN.md does
+so the quoted table most likely used a somewhat different law for the slab views; docs/design.md does
 not say. ``benchmarks/localizer.py`` prints all three scalars (RMS, median |e|, largest-axis
 std) beside the quoted numbers.
 """
@@ -104,7 +104,7 @@ class ErrorSummary:
     rotation_p90_deg: float
 
     def as_dict(self) -> dict:
-        """The results.json layout of DESIGN.md."""
+        """The results.json layout of docs/design.md."""
         return {
             "successful": self.successful,
             "total": self.total,
@@ -187,7 +187,7 @@ class CramerRaoBound:
     Attributes:
         covariance: (6, 6) in ``(C [m], dtheta [rad])`` (see :mod:`localization.pnp`).
         position_rms_m: ``sqrt(trace(cov[:3, :3]))``, the RMS position error bound (the scalar
-            behind DESIGN.md's quoted medians).
+            behind docs/design.md's quoted medians).
         rotation_rms_deg: ``degrees(sqrt(trace(cov[3:, 3:])))``.
         position_std_m: (3,) per-axis position std.
         position_max_std_m: largest principal std of the position block.

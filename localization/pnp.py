@@ -1,7 +1,7 @@
 """Stage 3, pose: 2D-3D correspondences in, ``cam_from_world`` out.
 
 * Coplanar landmark sets go through IPPE (``cv2.SOLVEPNP_IPPE``). OpenCV 5.0.0 returns a wrong
-  pose for about half of all point orderings when the plane is not z = 0 (DESIGN.md, "Facts
+  pose for about half of all point orderings when the plane is not z = 0 (docs/design.md, "Facts
   measured"), so the points are first expressed in their own plane frame (z = 0 there) and the
   pose is mapped back: ``cam_from_world = cam_from_plane @ plane_from_world``.
 * Other sets go through SQPnP (``cv2.SOLVEPNP_SQPNP``).

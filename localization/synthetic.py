@@ -70,7 +70,7 @@ def sample_viewpoints(
     as the paper's four UAVs, one per side. Its height is uniform in ``height_m``. Its horizontal
     distance, uniform in ``distance_m``, is measured from ``target`` (the building centre) along
     an azimuth uniform within the side's 90 degree sector when ``footprint`` is None -- the
-    distribution that reproduces DESIGN.md's Cramér-Rao figures (see :mod:`localization.metrics`);
+    distribution that reproduces docs/design.md's Cramér-Rao figures (see :mod:`localization.metrics`);
     with ``footprint = (xmin, ymin, xmax, ymax)`` it is measured outwards from that side of the
     footprint instead, at a uniform position along the side.
     """

@@ -11,6 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.outputs import OutputExistsError, StagedOutput, atomic_write_bytes
 from uav_struct_env.site import make_site
 
@@ -24,7 +25,7 @@ def render_views(
     seed: int = 0,
     viewpoint: int = 0,
     renderer: str = "auto",
-    image_size: tuple[int, int] = (1280, 720),
+    image_size: tuple[int, int] = PAPER_IMAGE_SIZE,
     site: str = "paper",
 ) -> list[Path]:
     """Render every UAV's view at scripted ``viewpoint`` plus the ``rgb_array`` frame; return the paths.

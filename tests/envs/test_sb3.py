@@ -1,4 +1,4 @@
-"""Smoke test: SB3 PPO trains through SuperSuit's vector-env conversion (DESIGN.md)."""
+"""Smoke test: SB3 PPO trains through SuperSuit's vector-env conversion (docs/design.md)."""
 
 import numpy as np
 import pytest

@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from localization.geometry import look_at
+from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.site import Site, random_site
 
@@ -72,7 +73,7 @@ class DatasetConfig:
     distance: tuple[float, float] = (10.0, 40.0)
     height: tuple[float, float] = (8.0, 30.0)
     renderer: str = "auto"
-    source_size: tuple[int, int] = (1280, 720)
+    source_size: tuple[int, int] = PAPER_IMAGE_SIZE
 
     def __post_init__(self) -> None:
         for name in ("n_layouts", "views_per_layout", "seed"):

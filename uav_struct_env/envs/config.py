@@ -10,7 +10,7 @@ Build one with :func:`make_config` (``preset`` plus keyword overrides), which is
   landmark truth in ``info`` (saves the per-step projections), 200 cycles, and a crash ends the
   episode for everyone (``on_crash="all"``, for SuperSuit/SB3), for RL training.
 
-Keys with a stable meaning (DESIGN.md): ``stage``, ``image_size``, ``marker_size``, ``noise``,
+Keys with a stable meaning (docs/design.md): ``stage``, ``image_size``, ``marker_size``, ``noise``,
 ``renderer``, ``max_cycles``, ``render_mode``. The rest may grow.
 """
 
@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.imaging import ImagingModel, make_imaging
 from uav_struct_env.sim.schedule import ScheduleSpec
@@ -90,7 +91,7 @@ class EnvConfig:
     stage: str | None = None
     site: str | Site = "paper"
     marker_size: float | None = 1.0
-    image_size: tuple[int, int] = (1280, 720)
+    image_size: tuple[int, int] = PAPER_IMAGE_SIZE
     noise: str | SensorModel = "paper"
     imaging: str | ImagingModel = "ideal"
     renderer: str = "auto"

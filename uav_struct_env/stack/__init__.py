@@ -19,6 +19,7 @@ from uav_struct_env.stack.spec import (
     LocalizationStack,
     StackSpec,
     build_stack,
+    check_weights,
 )
 
 __all__ = [
@@ -30,6 +31,7 @@ __all__ = [
     "LocalizationStack",
     "StackSpec",
     "build_stack",
+    "check_weights",
     "localize_aruco_frame",
     "localize_frame",
 ]

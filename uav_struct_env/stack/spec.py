@@ -46,6 +46,7 @@ __all__ = [
     "LocalizationStack",
     "StackSpec",
     "build_stack",
+    "check_weights",
 ]
 
 #: Detectors of structural landmarks, by name (any :class:`localization.Detector` object works too).
@@ -58,6 +59,21 @@ ASSOCIATIONS: tuple[str, ...] = tuple(ASSOCIATION_METHODS)
 PAPER_WIDTH_PX: int = PAPER_IMAGE_SIZE[0]
 #: ArUco pose modes of :class:`localization.aruco.ArucoLocalizer`.
 _ARUCO_MODES = ("average", "joint")
+
+
+def check_weights(name: str, path: Any, detector: Any) -> str | Path | None:
+    """Return ``path`` (None allowed) if it is an existing file and ``detector`` is ``"learned"``.
+
+    Raises:
+        ConfigError: naming ``name``, for weights given to another detector or a missing file.
+    """
+    if path is None:
+        return None
+    if detector != "learned":
+        raise ConfigError(f"{name} applies to detector='learned' only, got detector={detector!r}")
+    if not isinstance(path, (str, Path)) or not Path(path).is_file():
+        raise ConfigError(f"{name} must be an existing ONNX file, got {path!r}")
+    return path
 
 
 @dataclass(frozen=True)
@@ -124,15 +140,7 @@ class StackSpec:
         check_choice("association", self.association, ASSOCIATIONS, error=ConfigError)
         check_choice("aruco_mode", self.aruco_mode, _ARUCO_MODES, error=ConfigError)
         for name in ("detector_model", "refiner_model"):
-            path = getattr(self, name)
-            if path is None:
-                continue
-            if self.detector != "learned":
-                raise ConfigError(
-                    f"{name} applies to detector='learned' only, got detector={self.detector!r}"
-                )
-            if not isinstance(path, (str, Path)) or not Path(path).is_file():
-                raise ConfigError(f"{name} must be an existing ONNX file, got {path!r}")
+            check_weights(name, getattr(self, name), self.detector)
         if self.pixel_sigma is not None:
             check_number("pixel_sigma", self.pixel_sigma, 0.0, error=ConfigError, type_error=ConfigError)
         for name, hi in (

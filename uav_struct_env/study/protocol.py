@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from localization.checks import check_choice, check_number
+from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.site import make_site
-from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS
+from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS, check_weights
 
 __all__ = [
     "ASSOCIATIONS",
@@ -186,7 +187,7 @@ class StudyConfig:
     site: str = "paper"
     n_viewpoints: int = 10
     n_agents: int = 4
-    image_size: tuple[int, int] = (1280, 720)
+    image_size: tuple[int, int] = PAPER_IMAGE_SIZE
     pixel_sigma: float = 1.0
     miss_rate: float = 0.0
     false_positives: float = 0.0
@@ -227,16 +228,8 @@ class StudyConfig:
         ):
             check_number(name, getattr(self, name), lo, hi, error=ConfigError, type_error=ConfigError)
         for name in ("detector_model", "refiner_model"):
-            v = getattr(self, name)
-            if v is None:
-                continue
-            if self.detector != "learned":
-                raise ConfigError(
-                    f"{name} applies to detector='learned' only, got detector={self.detector!r}"
-                )
-            if not isinstance(v, (str, Path)) or not Path(v).is_file():
-                raise ConfigError(f"{name} must be an existing ONNX file, got {v!r}")
-            object.__setattr__(self, name, str(Path(v).resolve()))
+            v = check_weights(name, getattr(self, name), self.detector)
+            object.__setattr__(self, name, None if v is None else str(Path(v).resolve()))
         keys = [m.key for m in METHODS]
         unknown = [k for k in self.methods if k not in keys]
         if unknown or not self.methods:
