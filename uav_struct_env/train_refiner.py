@@ -306,9 +306,9 @@ def main(argv: list[str] | None = None) -> dict:
                          "one when retraining both networks")
     add_training_arguments(ap, minutes=15.0, batch=128, lr=2e-3)
     a = ap.parse_args(argv)
-    claim_output_dir(ap, a.out, a.overwrite)
     if a.detector_model is not None and not Path(a.detector_model).is_file():
         ap.error(f"--detector-model: no such file: {a.detector_model!r}")
+    claim_output_dir(ap, a.out, a.overwrite)
     windows = Path(a.windows or Path(a.out) / "windows.npz")
     if not windows.exists():
         mine(a.data, str(windows), model=a.detector_model, seed=a.seed)
