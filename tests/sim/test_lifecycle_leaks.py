@@ -57,10 +57,12 @@ def _growth(make, renderer: str, cycles: int, warmup: int, tmp: str, monkeypatch
     monkeypatch.setattr(tempfile, "tempdir", tmp)  # every temporary file of this process goes here
     for k in range(warmup):
         _cycle(make, renderer, k)
-    rss0, res0 = _rss_mib(), _resources()
+    rss, res0 = [_rss_mib()], _resources()
     for k in range(cycles):
         _cycle(make, renderer, warmup + k)
-    return {"mib": _rss_mib() - rss0, "resources": (res0, _resources()), "tmp": os.listdir(tmp)}
+        rss.append(_rss_mib())
+    return {"mib": rss[-1] - rss[0], "per_cycle": float(np.median(np.diff(rss))),
+            "resources": (res0, _resources()), "tmp": os.listdir(tmp)}
 
 
 RENDERERS = ["tiny", pytest.param("egl", marks=pytest.mark.skipif(
@@ -70,9 +72,15 @@ RENDERERS = ["tiny", pytest.param("egl", marks=pytest.mark.skipif(
 @pytest.mark.parametrize("renderer", RENDERERS)
 @pytest.mark.parametrize("make", [_make_env, _make_wrapped], ids=["env", "wrapped"])
 def test_create_close_cycles_leak_nothing(make, renderer, tmp_path, monkeypatch):
+    # The leak was 11 (tiny) and 23 (egl) MiB every cycle: 110-230 MiB over these ten. The
+    # median step is robust to a one-off allocator jump on a loaded machine (seen: +50 MiB once).
     got = _growth(make, renderer, cycles=10, warmup=3, tmp=str(tmp_path), monkeypatch=monkeypatch)
-    # The leak was 11 (tiny) and 23 (egl) MiB a cycle: 110-230 MiB over these ten.
-    assert got["mib"] < 15, f"{got['mib']:.1f} MiB over 10 cycles"
+    assert got["per_cycle"] < 2.0, f"median {got['per_cycle']:.1f} MiB a cycle"
+    _check(got, max_mib=80)
+
+
+def _check(got: dict, max_mib: float) -> None:
+    assert got["mib"] < max_mib, f"{got['mib']:.1f} MiB"
     before, after = got["resources"]
     assert after == before, f"(fds, python threads, os threads) {before} -> {after}"
     assert got["tmp"] == []
@@ -82,8 +90,5 @@ def test_create_close_cycles_leak_nothing(make, renderer, tmp_path, monkeypatch)
 @pytest.mark.parametrize("renderer", RENDERERS)
 @pytest.mark.parametrize("make", [_make_env, _make_wrapped], ids=["env", "wrapped"])
 def test_a_hundred_create_close_cycles_grow_less_than_50_mib(make, renderer, tmp_path, monkeypatch):
-    got = _growth(make, renderer, cycles=100, warmup=2, tmp=str(tmp_path), monkeypatch=monkeypatch)
-    assert got["mib"] < 50, f"{got['mib']:.1f} MiB over 100 cycles"
-    before, after = got["resources"]
-    assert after == before
-    assert got["tmp"] == []
+    _check(_growth(make, renderer, cycles=100, warmup=2, tmp=str(tmp_path), monkeypatch=monkeypatch),
+           max_mib=50)

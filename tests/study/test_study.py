@@ -42,6 +42,8 @@ def quick_study(tmp_path_factory):
             "-m",
             "uav_struct_env.study",
             "--quick",
+            "--detector",
+            "projection",
             "--out",
             str(out),
             "--no-progress",
@@ -147,7 +149,7 @@ def test_learned_detector_weights_by_path(tmp_path, monkeypatch):
 def test_cli_reports_bad_options_without_a_traceback(capsys):
     assert main(["--detector", "magic", "--out", "unused"]) == 2
     assert "detector must be one of ('projection', 'learned'), got 'magic'" in capsys.readouterr().err
-    assert main(["--detector-model", "kp.onnx", "--out", "unused"]) == 2
+    assert main(["--detector", "projection", "--detector-model", "kp.onnx", "--out", "unused"]) == 2
     assert "detector_model applies to detector='learned' only" in capsys.readouterr().err
 
 

@@ -105,7 +105,13 @@ def _parser() -> argparse.ArgumentParser:
         help="replace the results of an earlier run in --out (otherwise such a folder is refused)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of textures, detector noise and priors")
-    p.add_argument("--detector", default="projection", help=f"landmark detector: {', '.join(DETECTORS)}")
+    p.add_argument(
+        "--detector",
+        default="learned",
+        help=f"landmark detector: {', '.join(DETECTORS)} (default learned: the method from the "
+        "rendered pixels; projection: ground truth + noise, an ablation isolating association "
+        "and pose)",
+    )
     p.add_argument("--association", default="robust", choices=ASSOCIATIONS)
     p.add_argument("--noise", default="paper", choices=NOISES, help="onboard prior model")
     p.add_argument(
@@ -165,6 +171,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     args = _parser().parse_args(argv)
     try:
+        # The command's default is the full method from pixels (StudyConfig keeps "projection").
         config = StudyConfig(
             seed=args.seed,
             detector=args.detector,
