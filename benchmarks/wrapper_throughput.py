@@ -5,6 +5,8 @@ the wrapped env, under the same seeded actions (``hold``: hover; ``random``: uni
 ends the episode and the next one starts). One agent-step is one agent's observation.
 
     .venv/bin/python benchmarks/wrapper_throughput.py --config state --steps 400
+    .venv/bin/python benchmarks/wrapper_throughput.py --config state --render-images  # as before
+                                                 # ray-cast visibility: frames rendered and dropped
 
 Other processes sharing the machine's 2 cores lower the figure; ``uptime``'s load is printed.
 """
@@ -39,11 +41,12 @@ def measure(env, steps: int, policy: str, seed: int) -> tuple[float, int]:
     return n / (time.perf_counter() - t0), n
 
 
-def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: int = 0) -> dict:
+def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: int = 0,
+         render_images: bool = False) -> dict:
     warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
     from uav_struct_env.wrappers import make_train_env
 
-    wrapped = make_train_env(config)
+    wrapped = make_train_env(config, **({"observe_image": True} if render_images else {}))
     bare = wrapped.env
     measure(wrapped, 40, policy, seed)  # build the world, warm caches
     bare_rate, _ = measure(bare, steps, policy, seed)
@@ -52,6 +55,7 @@ def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: in
     out = {
         "config": config,
         "policy": policy,
+        "observe_image": wrapped.unwrapped.config.observe_image,
         "agent_steps": n,
         "env_agent_steps_per_s": bare_rate,
         "wrapped_agent_steps_per_s": rate,
@@ -70,4 +74,6 @@ if __name__ == "__main__":
     p.add_argument("--steps", type=int, default=400)
     p.add_argument("--policy", default="hold", choices=("hold", "random"))
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--render-images", action="store_true",
+                   help="render every frame even if the config drops it (the depth-tested truth)")
     main(**vars(p.parse_args()))

@@ -74,6 +74,11 @@ class EnvConfig:
         schedule: the scripted viewpoint schedule's parameters (its ``seed`` fixes it per env).
         landmark_sets: landmark sets whose ground truth goes in ``info["landmarks"]``; ``()``
             skips the projections.
+        observe_image: render ``obs["image"]``. False: no image in the observation and no
+            render in ``step`` (unless ``observe_depth``): the landmark truth in ``info`` comes
+            from ray casting against the same triangles (:mod:`uav_struct_env.sim.raycast`;
+            agrees with the depth test on 99.98-100 % of landmark-views), for state-only
+            training on simulated detections. ``render()`` still draws the views, on demand.
         observe_depth: add ``obs["depth"]`` (float32 (H, W), metres along the optical axis).
         texture_seed: seed of the per-env concrete textures (and of ``site="random"``).
         on_crash: ``"agent"`` (a crash terminates only that agent, PettingZoo's usual
@@ -110,6 +115,7 @@ class EnvConfig:
     uav_radius: float = 0.5
     schedule: ScheduleSpec = field(default_factory=ScheduleSpec)
     landmark_sets: tuple[str, ...] = LANDMARK_SETS
+    observe_image: bool = True
     observe_depth: bool = False
     texture_seed: int = 0
     on_crash: str = "agent"
@@ -185,6 +191,9 @@ class EnvConfig:
                 f"landmark_sets must be drawn from {LANDMARK_SETS}, got unknown {unknown}"
             )
         object.__setattr__(self, "landmark_sets", sets)
+        for name in ("observe_image", "observe_depth"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ConfigError(f"{name} must be a bool, got {getattr(self, name)!r}")
         try:
             object.__setattr__(self, "as_built", make_as_built(self.as_built))
         except SiteGeometryError as exc:

@@ -9,9 +9,10 @@ sensor models (:mod:`uav_struct_env.sim.sensors`) and the scripted viewpoint sch
 Per agent and step:
 
 * observation ``{"image": uint8 (H, W, 3), "gnss": float32 (3,), "attitude": float32 (3,)}``
-  (+ ``"depth"`` float32 (H, W) with ``observe_depth``); attitude is (roll, pitch, yaw) rad in
-  the convention of :mod:`uav_struct_env.sim.attitude` (ZYX, body FLU, positive pitch looks
-  down), each wrapped to [-pi, pi);
+  (+ ``"depth"`` float32 (H, W) with ``observe_depth``; no ``"image"`` with
+  ``observe_image=False``, whose landmark truth is ray-cast instead of rendered); attitude is
+  (roll, pitch, yaw) rad in the convention of :mod:`uav_struct_env.sim.attitude` (ZYX, body
+  FLU, positive pitch looks down), each wrapped to [-pi, pi);
 * info ``world_from_cam`` (ground truth), ``prior_world_from_cam`` (exactly
   ``world_from_cam_from_attitude(obs["gnss"], obs["attitude"])`` in float64), ``intrinsics``
   (3x3 K of the observed image), ``landmarks`` (per configured set: ids, xyz, uv, in_frame,
@@ -123,6 +124,8 @@ class UavStructParallelEnv(ParallelEnv):
             "gnss": spaces.Box(-GNSS_BOUND, GNSS_BOUND, (3,), np.float32),
             "attitude": spaces.Box(-np.pi, np.pi, (3,), np.float32),
         }
+        if not cfg.observe_image:
+            del obs["image"]
         if cfg.observe_depth:
             obs["depth"] = spaces.Box(0.0, np.float32(self.camera.far), (h, w), np.float32)
         self._observation_space = spaces.Dict(obs)
@@ -334,7 +337,9 @@ class UavStructParallelEnv(ParallelEnv):
     def _observe(self, agents: list[str], dt: float, reasons: dict[str, str | None]):
         cfg = self.config
         world = self.world
-        need_depth = cfg.observe_depth or bool(cfg.landmark_sets)
+        # Without an observed image (or depth) nothing is rendered: visibility by ray casting.
+        render = cfg.observe_image or cfg.observe_depth
+        need_depth = cfg.observe_depth or (render and bool(cfg.landmark_sets))
         K = self.camera.K
         observations: dict[str, dict[str, NDArray]] = {}
         infos: dict[str, dict[str, Any]] = {}
@@ -357,20 +362,29 @@ class UavStructParallelEnv(ParallelEnv):
             cam_from_world = invert(world_from_cam)
             if airframes is not None:  # a camera does not see its own airframe
                 airframes.set(agent, None)
-            result = world.render(cam_from_world, self.camera, depth=need_depth)
+            obs = {"gnss": gnss32, "attitude": att32}
+            if render:
+                result = world.render(cam_from_world, self.camera, depth=need_depth)
+                image = cfg.imaging.apply(result.rgb, self._rng)
+                if cfg.observe_image:
+                    obs = {"image": image, **obs}
+                    self._last_images[agent] = image
+                if cfg.observe_depth:
+                    obs["depth"] = np.asarray(result.depth, dtype=np.float32)
+                landmarks = {
+                    name: world.landmark_truth(name, cam_from_world, self.camera, result.depth)
+                    for name in cfg.landmark_sets
+                }
+            else:
+                landmarks = {
+                    name: world.landmark_truth_raycast(name, cam_from_world, self.camera)
+                    for name in cfg.landmark_sets
+                }
             if airframes is not None:
                 airframes.set(agent, state)
-            image = cfg.imaging.apply(result.rgb, self._rng)
-            obs = {"image": image, "gnss": gnss32, "attitude": att32}
-            if cfg.observe_depth:
-                obs["depth"] = np.asarray(result.depth, dtype=np.float32)
             prior = world_from_cam_from_attitude(
                 gnss32.astype(np.float64), att32.astype(np.float64)
             )
-            landmarks = {
-                name: world.landmark_truth(name, cam_from_world, self.camera, result.depth)
-                for name in cfg.landmark_sets
-            }
             observations[agent] = obs
             infos[agent] = {
                 "world_from_cam": world_from_cam,
@@ -383,7 +397,6 @@ class UavStructParallelEnv(ParallelEnv):
                 "truncation_reason": None,
                 "reward_terms": {},
             }
-            self._last_images[agent] = image
             self._priors[agent] = prior
         return observations, infos
 
@@ -416,9 +429,23 @@ class UavStructParallelEnv(ParallelEnv):
             if a in self._states
         ]
         site_map = draw_site_map(self.site, markers, self._map_view)
-        views = {a: self._last_images.get(a) for a in self.possible_agents}
+        if cfg.observe_image:
+            views = {a: self._last_images.get(a) for a in self.possible_agents}
+        else:  # nothing was rendered in step: render the live agents' views now
+            views = {a: self._view(a) if self._alive.get(a, False) else None for a in self.possible_agents}
         w, h = cfg.image_size
         return compose_frame(views, site_map, cfg.render_view_height, w / h)
+
+    def _view(self, agent: str) -> NDArray[np.uint8]:
+        """``agent``'s camera image now (its own airframe hidden), for :meth:`render`."""
+        airframes = self._airframes
+        if airframes is not None:
+            airframes.set(agent, None)
+        cam_from_world = invert(self._states[agent].world_from_cam)
+        rgb = self.world.render(cam_from_world, self.camera).rgb
+        if airframes is not None:
+            airframes.set(agent, self._states[agent])
+        return rgb
 
     def _check_open(self) -> None:
         if self._closed:

@@ -33,6 +33,7 @@ from localization.geometry import check_transform, quat_wxyz_from_matrix
 from uav_struct_env.errors import RendererUnavailableError
 from uav_struct_env.sim.camera import Camera, depth_from_buffer, view_matrix
 from uav_struct_env.sim.client import RenderClient, resolve_renderer
+from uav_struct_env.sim.raycast import RayScene, raycast_visibility
 from uav_struct_env.sim.scene import LoadedScene, load_elements
 from uav_struct_env.sim.visibility import landmark_visibility
 from uav_struct_env.site.mesh import site_elements
@@ -137,6 +138,9 @@ class SiteWorld:
             self.close()
             raise
         self._extra_bodies: set[int] = set()
+        self._half_extents: dict[int, NDArray[np.float64]] = {}
+        #: The rendered triangles, for landmark visibility without rendering (:mod:`.raycast`).
+        self._rays = RayScene([(e.mesh.vertices, e.mesh.faces) for e in elements])
         self._depth_meta: dict[int, tuple[weakref.ref, float, float, int]] = {}
         # Bounding-box corners of the solid elements, for the per-view near plane.
         self._box_corners = np.stack([
@@ -306,6 +310,28 @@ class SiteWorld:
             self.site.landmarks(name), cam_from_world, camera, depth, depth_bits=bits
         )
 
+    def landmark_truth_raycast(
+        self, name: str, cam_from_world: ArrayLike, camera: Camera | None = None
+    ) -> dict[str, NDArray]:
+        """:meth:`landmark_truth` without a render: the same depth test on ray-cast depths.
+
+        Casts rays through the pixel centres around each landmark's projection against the
+        triangles this world renders and the bodies added with :meth:`add_body` (at their
+        current poses); see :mod:`uav_struct_env.sim.raycast` for how closely it agrees.
+        """
+        self._check_open()
+        camera = self.camera if camera is None else camera
+        boxes = []
+        for body in self._extra_bodies:
+            position, quat = p.getBasePositionAndOrientation(body, physicsClientId=self.client_id)
+            T = np.eye(4)
+            T[:3, :3] = np.reshape(p.getMatrixFromQuaternion(quat), (3, 3))
+            T[:3, 3] = position
+            boxes.append((T, self._half_extents[body]))
+        self._rays.boxes = boxes
+        points = self.site.landmarks(name)
+        return raycast_visibility(self._rays, points.xyz, points.ids, cam_from_world, camera)
+
     # ------------------------------------------------------------------------------ extra bodies
     def add_body(
         self,
@@ -327,6 +353,7 @@ class SiteWorld:
             physicsClientId=self.client_id,
         )
         self._extra_bodies.add(body)
+        self._half_extents[body] = np.asarray(half_extents, dtype=np.float64)
         if world_from_body is not None:
             self.move_body(body, world_from_body)
         return body
@@ -353,6 +380,7 @@ class SiteWorld:
         self._client.activate()
         p.removeBody(body_id, physicsClientId=self.client_id)
         self._extra_bodies.discard(body_id)
+        self._half_extents.pop(body_id, None)
 
     # ------------------------------------------------------------------------------ lifetime
     def close(self) -> None:

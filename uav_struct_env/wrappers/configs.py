@@ -3,11 +3,12 @@
 ``TRAIN_CONFIGS`` (frozen :class:`TrainConfig`) are the documented observation configs that train
 on 2 CPU cores (docs/training.md):
 
-* ``"state"``: state-only. 128 x 72 frames are rendered for the landmark visibility and then
-  dropped; the policy sees ``gnss``, ``attitude``, ``pose``, ``pose_std``, ``localized`` and
-  ``layout``. Column tops, paper association on a clean projection detector (1 px noise at the
-  paper's resolution), ``error`` reward, 30-step episodes, random starts 15-35 m out turned by up
-  to +-60 deg of heading (some start views miss part of the structure).
+* ``"state"``: state-only. No frame is rendered (``observe_image=False``): landmark visibility is
+  ray-cast (:mod:`uav_struct_env.sim.raycast`); the policy sees ``gnss``, ``attitude``, ``pose``,
+  ``pose_std``, ``localized`` and ``layout``. Column tops, paper association on a clean projection
+  detector (1 px noise at the paper's resolution), ``error`` reward, 30-step episodes, random
+  starts 15-35 m out turned by up to +-60 deg of heading (some start views miss part of the
+  structure).
 * ``"image"``: the same plus a low-resolution 64 x 36 RGB ``image`` (``MultiInputPolicy`` with
   SB3's NatureCNN, several times slower per step to learn from).
 """
@@ -57,7 +58,9 @@ _WRAPPER = {
 }
 
 TRAIN_CONFIGS: dict[str, TrainConfig] = {
-    "state": TrainConfig("state", env=_STATE_ENV, wrapper={**_WRAPPER, "drop_image": True}),
+    "state": TrainConfig(
+        "state", env={**_STATE_ENV, "observe_image": False}, wrapper={**_WRAPPER, "drop_image": True}
+    ),
     "image": TrainConfig(
         "image",
         env={**_STATE_ENV, "image_size": (64, 36)},

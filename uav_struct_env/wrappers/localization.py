@@ -58,7 +58,8 @@ class LocalizationWrapper(BaseParallelWrapper):
             low-resolution env scores poses as the paper's camera would.
         miss_rate: probability that a visible landmark is not detected.
         false_positives: mean clutter detections per image.
-        drop_image: remove ``image`` from the observation after localizing.
+        drop_image: remove ``image`` from the observation after localizing (nothing to drop
+            when the env renders none, ``observe_image=False``).
         rotation_weight: metres of reward per degree of rotation error (``error`` reward).
         failure_penalty: reward term of a failed localization (>= 0, subtracted).
         error_cap: cap (m) on the translation, rotation and uncertainty terms; default
@@ -126,7 +127,7 @@ class LocalizationWrapper(BaseParallelWrapper):
         chain = LayoutObservation(chain, privileged=privileged)
         chain = RewardWrapper(chain, reward_obj)
         self.drop_image = bool(drop_image)
-        if self.drop_image:
+        if self.drop_image and "image" in env.observation_space(env.possible_agents[0]).spaces:
             chain = DropKeys(chain, ("image",))
         super().__init__(env)
         self._chain = chain

@@ -78,6 +78,12 @@ class LocalizePoses(BaseParallelWrapper):
                 f"landmark_sets=({landmarks!r},) (the 'train' preset sets ()), e.g. "
                 f"uav_struct_env.wrappers.make_localization_env(landmarks={landmarks!r})"
             )
+        if not config.observe_image and (spec.detector != "projection" or not spec.structural):
+            raise ConfigError(
+                f"detector {spec.detector if spec.structural else 'aruco'!r} reads the image, but "
+                "the env renders none (observe_image=False): use detector='projection' or an "
+                "env with observe_image=True"
+            )
         self.spec = spec
         self.landmarks = landmarks
         w, h = config.image_size
@@ -141,7 +147,7 @@ class LocalizePoses(BaseParallelWrapper):
         prior = invert(info["prior_world_from_cam"])
         truth_sets = info.get("landmarks", {})
         truth = truth_sets.get(self.landmarks)
-        frame = self.stack.localize(obs["image"], truth_sets, prior, gt)
+        frame = self.stack.localize(obs.get("image"), truth_sets, prior, gt)
         est = frame.estimate
         world_from_cam = invert(est.cam_from_world)
         pose = np.concatenate([world_from_cam[:3, 3], quat_wxyz_from_matrix(world_from_cam[:3, :3])])

@@ -1,0 +1,187 @@
+"""Landmark visibility from geometry: the depth test without rendering a pixel.
+
+When nothing reads the image (a state-only policy on simulated detections), rendering a frame
+only to depth-test the landmarks is most of an env step. :class:`RayScene` holds the triangles
+that a :class:`~uav_struct_env.sim.world.SiteWorld` renders (site elements, ground, markers) and
+the oriented boxes it adds (UAV airframes), and casts rays through pixel centres against them:
+pure numpy, each mesh culled by its bounding box first, Möller–Trumbore on the triangles left.
+
+:func:`raycast_visibility` makes the same decision as
+:func:`~uav_struct_env.sim.visibility.landmark_visibility` on a rendered depth image: a ray
+through each pixel centre of the ``(2r+1) x (2r+1)`` window around the rounded projection gives
+that pixel's depth (the hit's distance along the optical axis: the ray direction is
+``K^-1 (u, v, 1)`` in the camera frame, whose z is 1), and the landmark is visible if any of them
+is at least ``z - tolerance(z)``. The depth is exact here instead of a rasterized, quantized
+buffer, so the two disagree only where a triangle edge crosses a window pixel's centre within
+rasterization precision: at grazing angles and silhouette edges (measured in
+``tests/sim/test_raycast.py``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from localization.geometry import as_points, check_transform, project
+from uav_struct_env.sim.camera import Camera
+from uav_struct_env.sim.visibility import depth_tolerance
+
+__all__ = ["RayScene", "raycast_visibility"]
+
+
+class RayScene:
+    """Static triangle meshes plus movable oriented boxes, for first-hit ray queries.
+
+    A horizontal flat mesh that fills its bounding rectangle (the ground; holes of at most 1 %
+    of its area, which the markers lying in them cover) is intersected as that rectangle.
+
+    Args:
+        meshes: ``(vertices (V, 3), faces (F, 3))`` per mesh, project frame, metres.
+    """
+
+    def __init__(self, meshes: Sequence[tuple[ArrayLike, ArrayLike]]) -> None:
+        tris, lo, hi, rects = [], [], [], []
+        for vertices, faces in meshes:
+            v = np.asarray(vertices, dtype=np.float64)
+            tri = v[np.asarray(faces, dtype=np.int64)]
+            vlo, vhi = v.min(axis=0), v.max(axis=0)
+            if vhi[2] - vlo[2] < 1e-9 and _area(tri) >= 0.99 * (vhi[0] - vlo[0]) * (vhi[1] - vlo[1]):
+                rects.append((vlo[0], vhi[0], vlo[1], vhi[1], vlo[2]))
+                continue
+            tris.append(tri)
+            lo.append(vlo)
+            hi.append(vhi)
+        counts = np.array([len(t) for t in tris], dtype=np.int64)
+        allt = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
+        self._v0, self._e1, self._e2 = allt[:, 0], allt[:, 1] - allt[:, 0], allt[:, 2] - allt[:, 0]
+        self._start, self._count = np.cumsum(counts) - counts, counts
+        pad = 1e-6  # boxes of flat meshes get a non-zero thickness
+        self._lo = np.array(lo).reshape(-1, 3) - pad
+        self._hi = np.array(hi).reshape(-1, 3) + pad
+        self._rects = np.array(rects, dtype=np.float64).reshape(-1, 5)
+        #: Oriented boxes: ``(world_from_box (4, 4), half_extents (3,))``; set before each query.
+        self.boxes: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+
+    @property
+    def n_triangles(self) -> int:
+        """Triangles tested one by one (flat rectangles excluded)."""
+        return len(self._v0)
+
+    def first_hit(self, origin: ArrayLike, directions: ArrayLike, t_min: float = 0.0) -> NDArray[np.float64]:
+        """Ray parameter ``t`` of the first surface hit at ``t >= t_min`` (``inf`` for none).
+
+        The rays are ``origin + t * directions[i]``; ``t`` is in units of each direction's length.
+        """
+        o = np.asarray(origin, dtype=np.float64).reshape(3)
+        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        best = np.full(len(d), np.inf)
+        if len(d) == 0:
+            return best
+        for x0, x1, y0, y1, z in self._rects:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (z - o[2]) / d[:, 2]
+                x, y = o[0] + t * d[:, 0], o[1] + t * d[:, 1]
+                hit = (t >= t_min) & (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+            best = np.where(hit & (t < best), t, best)
+        near, far = _slab(o, d, self._lo, self._hi)  # (R, G)
+        rays, groups = np.nonzero((far >= np.maximum(near, t_min)) & (near < best[:, None]))
+        if len(rays):
+            n = self._count[groups]
+            ray = np.repeat(rays, n)
+            first = np.repeat(self._start[groups] - (np.cumsum(n) - n), n)
+            tri = first + np.arange(len(ray))
+            t = _moller_trumbore(o, d[ray], self._v0[tri], self._e1[tri], self._e2[tri], t_min)
+            np.minimum.at(best, ray, t)
+        for world_from_box, half in self.boxes:
+            R, c = world_from_box[:3, :3], world_from_box[:3, 3]
+            ob, db = R.T @ (o - c), d @ R  # origin and directions in the box frame
+            lo, hi = _slab(ob, db, -half[None], half[None])
+            entry = np.where(lo[:, 0] >= t_min, lo[:, 0], np.inf)
+            hit = (hi[:, 0] >= lo[:, 0]) & (entry < best)
+            best[hit] = entry[hit]
+        return best
+
+
+def _area(tri: NDArray[np.float64]) -> float:
+    return float(0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
+
+
+def _slab(o: NDArray, d: NDArray, lo: NDArray, hi: NDArray) -> tuple[NDArray, NDArray]:
+    """Entry and exit ray parameters of rays ``(R,)`` through axis-aligned boxes ``(G,)``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d  # (R, 3); +-inf along an axis the ray does not move on
+        t1 = (lo[None] - o) * inv[:, None]
+        t2 = (hi[None] - o) * inv[:, None]
+    # A ray parallel to a slab: inside it (0 * inf = nan) never limits, outside it misses.
+    parallel = (d == 0)[:, None, :]
+    inside = (o >= lo) & (o <= hi)  # (G, 3)
+    t_lo = np.where(parallel, np.where(inside[None], -np.inf, np.inf), np.minimum(t1, t2))
+    t_hi = np.where(parallel, np.where(inside[None], np.inf, -np.inf), np.maximum(t1, t2))
+    return t_lo.max(axis=2), t_hi.min(axis=2)
+
+
+def _cross(a: NDArray, b: NDArray) -> NDArray:
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+
+
+def _moller_trumbore(o, d, v0, e1, e2, t_min) -> NDArray[np.float64]:
+    """Hit ``t`` of ray ``d[i]`` with triangle ``i`` (pairs, all ``(P, 3)``); inf: no hit >= t_min."""
+    p = _cross(d, e2)
+    det = (p * e1).sum(axis=1)
+    s = o - v0
+    q = _cross(s, e1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / det
+        u = (p * s).sum(axis=1) * inv
+        v = (d * q).sum(axis=1) * inv
+        t = (e2 * q).sum(axis=1) * inv
+        ok = (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= t_min)
+    return np.where(ok, t, np.inf)
+
+
+def raycast_visibility(
+    scene: RayScene,
+    landmarks_xyz: ArrayLike,
+    ids: ArrayLike,
+    cam_from_world: ArrayLike,
+    camera: Camera,
+    *,
+    radius: int = 1,
+    abs_tol: float = 0.03,
+    rel_tol: float = 0.004,
+) -> dict[str, NDArray]:
+    """:func:`~uav_struct_env.sim.visibility.landmark_visibility` by ray casting (no depth image).
+
+    Returns the same dict: ``ids``, ``xyz``, ``uv``, ``in_frame``, ``visible``.
+    """
+    xyz = as_points("landmarks_xyz", landmarks_xyz, 3)
+    ids_arr = np.asarray(ids, dtype=np.int64).reshape(-1)
+    if ids_arr.shape != (len(xyz),):
+        raise ValueError(f"ids must be ({len(xyz)},) integers, got shape {ids_arr.shape}")
+    T = check_transform("cam_from_world", cam_from_world)
+    if not isinstance(camera, Camera):
+        raise TypeError(f"camera must be a uav_struct_env.sim.camera.Camera, got {type(camera).__name__}")
+    uv, z = project(camera.K, T, xyz)
+    uv[z <= 0] = np.nan
+    W, H = camera.width, camera.height
+    with np.errstate(invalid="ignore"):
+        in_frame = ((z > camera.near) & (uv[:, 0] >= -0.5) & (uv[:, 0] < W - 0.5)
+                    & (uv[:, 1] >= -0.5) & (uv[:, 1] < H - 0.5))
+    visible = np.zeros(len(xyz), dtype=bool)
+    idx = np.flatnonzero(in_frame)
+    if len(idx):
+        offsets = np.arange(-radius, radius + 1)
+        col = np.clip(np.rint(uv[idx, 0]).astype(np.intp)[:, None, None] + offsets[None, None, :], 0, W - 1)
+        row = np.clip(np.rint(uv[idx, 1]).astype(np.intp)[:, None, None] + offsets[None, :, None], 0, H - 1)
+        col, row = np.broadcast_arrays(col, row)
+        pixels = np.stack([col.ravel(), row.ravel(), np.ones(col.size)], axis=1).astype(np.float64)
+        rays_cam = pixels @ np.linalg.inv(camera.K).T  # z = 1: t is the depth
+        R, t = T[:3, :3], T[:3, 3]
+        depth = scene.first_hit(-R.T @ t, rays_cam @ R, t_min=camera.near)
+        samples = np.minimum(depth, camera.far).reshape(len(idx), -1)
+        tol = depth_tolerance(z[idx], camera, abs_tol=abs_tol, rel_tol=rel_tol, depth_bits=24)
+        visible[idx] = np.any(samples >= (z[idx] - tol)[:, None], axis=1)
+    return {"ids": ids_arr.copy(), "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}
