@@ -277,3 +277,26 @@ def test_closed_env_raises_a_clear_closed_error():
         with pytest.raises(ClosedError, match="environment is closed.*create a new one"):
             call()
     assert issubclass(ClosedError, RuntimeError)
+
+
+def test_random_lighting_draws_a_sun_per_episode_from_the_seed():
+    env = uav_struct_env.parallel_env(lighting="random", renderer="tiny", image_size=(64, 36))
+    fixed = uav_struct_env.parallel_env(renderer="tiny", image_size=(64, 36))
+    try:
+        env.reset(seed=1)
+        first = env.world.light
+        env.reset(seed=2)
+        assert env.world.light != first
+        env.reset(seed=1)
+        assert env.world.light == first
+        elevation = np.degrees(np.arcsin(first["lightDirection"][2]))
+        assert 25 <= elevation <= 85
+        fixed.reset(seed=1)
+        from uav_struct_env.sim.world import DEFAULT_LIGHT
+
+        assert fixed.world.light == DEFAULT_LIGHT
+    finally:
+        env.close()
+        fixed.close()
+    with pytest.raises(ConfigError, match=r"lighting must be one of \('fixed', 'random'\), got 'sunny'"):
+        uav_struct_env.parallel_env(lighting="sunny")

@@ -150,16 +150,6 @@ def _add_clutter(world, site: Site, rng: np.random.Generator) -> None:
         world.add_body(he, (*rgb, 1.0), _yaw_pose(x, y, top + he[2], rng.uniform(0, math.pi)))
 
 
-def _random_light(rng: np.random.Generator) -> dict:
-    az, el = rng.uniform(0, 2 * math.pi), math.radians(rng.uniform(25, 85))
-    return {
-        "lightDirection": (math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)),
-        "lightAmbientCoeff": float(rng.uniform(0.35, 0.7)),
-        "lightDiffuseCoeff": float(rng.uniform(0.3, 0.6)),
-        "lightSpecularCoeff": 0.0,
-    }
-
-
 def _random_view(
     site: Site, rng: np.random.Generator, config: DatasetConfig
 ) -> NDArray[np.float64]:
@@ -181,7 +171,7 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
     given nothing is returned in memory (images are written as ``layout_view.png`` there).
     """
     from uav_struct_env.sim.camera import Camera
-    from uav_struct_env.sim.world import SiteWorld
+    from uav_struct_env.sim.world import SiteWorld, random_light
 
     rng = np.random.default_rng([config.seed, layout])
     if config.site == "random":
@@ -204,7 +194,7 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
         _add_clutter(world, site, rng)
         for view in range(config.views_per_layout):
             cam_from_world = _random_view(site, rng, config)
-            world.light = _random_light(rng)
+            world.light = random_light(rng)
             result = world.render(cam_from_world, camera, depth=True)
             keypoints = []
             for t, name in enumerate(LANDMARK_TYPES):

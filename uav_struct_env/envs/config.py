@@ -41,6 +41,7 @@ def _is_site_file(site: object) -> bool:
 
 RENDER_MODES = ("rgb_array",)
 RENDERERS = ("auto", "tiny", "egl")
+LIGHTINGS = ("fixed", "random")
 
 
 @dataclass(frozen=True)
@@ -92,6 +93,10 @@ class EnvConfig:
             UAV's heading by a uniform angle in ``[-start_yaw_jitter, start_yaw_jitter]`` rad
             after the in-view check, so some start views miss part of the structure (a
             viewpoint-planning task); ``0`` (default) keeps the aimed views and draws nothing.
+        lighting: ``"fixed"`` (the default sun, :data:`uav_struct_env.sim.world.DEFAULT_LIGHT`)
+            or ``"random"``: each ``reset`` draws a sun direction and intensity
+            (:func:`uav_struct_env.sim.world.random_light`; EGL uses the direction only) from the
+            episode's generator, so a seed fixes it; ``env.world.light`` holds it.
         as_built: None (the building stands as designed) or an as-built deviation model
             (:class:`~uav_struct_env.site.as_built.AsBuilt`, or a tolerance model name such as
             ``"aci117"``): the rendered building, the collision obstacles and the landmark truth
@@ -123,6 +128,7 @@ class EnvConfig:
     render_view_height: int = 180
     render_fps: int = 2
     start_yaw_jitter: float = 0.0
+    lighting: str = "fixed"
     as_built: AsBuilt | str | None = None
 
     def __post_init__(self) -> None:
@@ -191,6 +197,8 @@ class EnvConfig:
                 f"landmark_sets must be drawn from {LANDMARK_SETS}, got unknown {unknown}"
             )
         object.__setattr__(self, "landmark_sets", sets)
+        if self.lighting not in LIGHTINGS:
+            raise ConfigError(f"lighting must be one of {LIGHTINGS}, got {self.lighting!r}")
         for name in ("observe_image", "observe_depth"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ConfigError(f"{name} must be a bool, got {getattr(self, name)!r}")

@@ -230,6 +230,10 @@ class UavStructParallelEnv(ParallelEnv):
             self._viewpoint_base = 0
             self._scripted_viewpoint = -1
         self._sensor_state = self.config.noise.start(self._rng, n)
+        if self.config.lighting == "random":  # a new sun for the episode
+            from uav_struct_env.sim.world import random_light
+
+            self.world.light = random_light(self._rng)
         self.agents = list(self.possible_agents)
         self._alive = dict.fromkeys(self.agents, True)
         self.num_cycles = 0
