@@ -26,13 +26,12 @@ import weakref
 from dataclasses import dataclass, replace
 
 import numpy as np
-import pybullet as p
 from numpy.typing import ArrayLike, NDArray
 
 from localization.geometry import check_transform, quat_wxyz_from_matrix
 from uav_struct_env.errors import RendererUnavailableError
 from uav_struct_env.sim.camera import Camera, depth_from_buffer, view_matrix
-from uav_struct_env.sim.client import RenderClient, resolve_renderer
+from uav_struct_env.sim.client import RenderClient, p, resolve_renderer  # p: pybullet, imported quietly
 from uav_struct_env.sim.scene import LoadedScene, load_elements
 from uav_struct_env.sim.visibility import landmark_visibility
 from uav_struct_env.site.mesh import site_elements
