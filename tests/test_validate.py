@@ -139,7 +139,8 @@ def test_check_site_names_the_option_and_the_file(tmp_path):
 def test_render_viewpoint_out_of_range_is_one_line_and_status_2(tmp_path):
     done = _run("-m", "uav_struct_env.cli", "render", "--viewpoint", "12", "--out", str(tmp_path / "r"))
     assert done.returncode == 2
-    assert done.stderr.splitlines() == ["uav-struct render: error: --viewpoint must be an int in [0, 9], got 12"]
+    expected = "uav-struct render: error: --viewpoint must be an int in [0, 9], got 12"
+    assert done.stderr.splitlines() == [expected]
     assert not (tmp_path / "r").exists()
 
 
