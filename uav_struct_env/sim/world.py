@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.geometry import check_transform, quat_wxyz_from_matrix
-from uav_struct_env.errors import RendererUnavailableError
+from uav_struct_env.errors import ClosedError, RendererUnavailableError
 from uav_struct_env.sim.camera import Camera, depth_from_buffer, view_matrix
 from uav_struct_env.sim.client import RenderClient, p, resolve_renderer  # p: pybullet, imported quietly
 from uav_struct_env.sim.scene import LoadedScene, load_elements
@@ -181,7 +181,7 @@ class SiteWorld:
 
     def _check_open(self) -> None:
         if self.closed:
-            raise RuntimeError("this SiteWorld is closed")
+            raise ClosedError("this SiteWorld is closed (close() released its pybullet client)")
 
     # ------------------------------------------------------------------------------ rendering
     def render(
