@@ -14,14 +14,22 @@ Metric definitions (the same for every policy):
 * all steps: the same over every agent-step after the first action;
 * mean reward: the agents' episode returns, averaged.
 
-    .venv/bin/python examples/evaluate_policy.py --model runs/ppo_state --episodes 20
+    .venv/bin/python examples/evaluate_policy.py --model runs/ppo_state --episodes 20 \
+        --plot runs/ppo_state/evaluation.png --json-out runs/ppo_state/evaluation.json
+
+Nothing is written unless asked: ``--plot`` and ``--json-out`` name the files (no default path).
+
+A model folder is read without unpickling anything from it (unpickling runs whatever code the
+file names): ``model.zip`` through :func:`uav_struct_env.training.policy_files.load_ppo` and the
+observation statistics from ``normalization.npz``. A folder from before ``normalization.npz``
+holds only SB3's ``vecnormalize.pkl``; it is read only with ``--trust-pickle``.
 """
 
 from __future__ import annotations
 
-import argparse
 import math
 import pickle
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -29,7 +37,16 @@ from typing import Any
 
 import numpy as np
 
-from uav_struct_env.outputs import OutputExistsError, atomic_write_json, save_figure
+from uav_struct_env.errors import UsageError
+from uav_struct_env.outputs import atomic_write_json, save_figure
+from uav_struct_env.validate import (
+    INPUT_ERRORS,
+    CommandParser,
+    check_input_file,
+    check_option,
+    check_output_file,
+    refuse,
+)
 
 POLICIES = ("ppo", "random", "hold", "orbit")
 DEFAULTS: dict[str, Any] = {
@@ -38,32 +55,47 @@ DEFAULTS: dict[str, Any] = {
     "episodes": 20,
     "seed": 10_000,
     "policies": POLICIES,
-    "plot": "docs/figures/policy_evaluation.png",
+    "plot": None,
     "json_out": None,
     "overwrite": False,
     "max_cycles": None,
+    "trust_pickle": False,
 }
 
 
 class PpoPolicy:
-    """A saved SB3 PPO model plus its VecNormalize observation statistics."""
+    """A saved SB3 PPO model plus its observation normalization, read without unpickling.
 
-    def __init__(self, model_dir: str | Path) -> None:
-        from stable_baselines3 import PPO
+    ``trust_pickle``: for a folder without ``normalization.npz``, unpickle SB3's
+    ``vecnormalize.pkl`` (only for a folder whose source you trust).
+    """
+
+    def __init__(self, model_dir: str | Path, env, *, trust_pickle: bool = False) -> None:
+        from uav_struct_env.training.policy_files import NORMALIZATION_FILE, load_normalization, load_ppo
 
         d = Path(model_dir)
-        self.model = PPO.load(d / "model.zip", device="cpu")
-        self.norm = None
-        if (d / "vecnormalize.pkl").exists():
-            with open(d / "vecnormalize.pkl", "rb") as f:
-                self.norm = pickle.load(f)  # VecNormalize without its venv: normalize_obs works
-            self.norm.training = False
+        agent = env.possible_agents[0]
+        stats, pickled = d / NORMALIZATION_FILE, d / "vecnormalize.pkl"
+        try:
+            self.model = load_ppo(d / "model.zip", env.observation_space(agent), env.action_space(agent))
+            self.norm = load_normalization(stats) if stats.exists() else None
+        except (ValueError, OSError) as err:  # not a model folder of train_viewpoint_ppo.py
+            raise UsageError(f"--model {str(d)!r}: {err}") from None
+        if self.norm is None and pickled.exists():
+            if not trust_pickle:
+                raise UsageError(
+                    f"--model {str(d)!r} has vecnormalize.pkl but no {NORMALIZATION_FILE}; loading it "
+                    "would unpickle (run code from) that file: pass --trust-pickle if you trust its "
+                    "source, or retrain to get normalization.npz"
+                )
+            with open(pickled, "rb") as f:
+                self.norm = pickle.load(f).normalize_obs  # asked for by --trust-pickle
 
     def __call__(self, obs: dict[str, dict[str, np.ndarray]], env) -> dict[str, np.ndarray]:
         agents = list(obs)
         batch = {k: np.stack([obs[a][k] for a in agents]) for k in obs[agents[0]]}
         if self.norm is not None:
-            batch = self.norm.normalize_obs(batch)
+            batch = self.norm(batch)
         actions, _ = self.model.predict(batch, deterministic=True)
         return {a: actions[i].astype(np.float32) for i, a in enumerate(agents)}
 
@@ -167,31 +199,56 @@ def table(results: dict[str, dict]) -> str:
     return "\n".join(rows)
 
 
+def check_options(opt: dict[str, Any]) -> None:
+    """Every option (the model folder and the output files too), before any work.
+
+    Raises:
+        UsageError / OutputExistsError / ConfigError: naming the option and what was expected.
+    """
+    from uav_struct_env.errors import ConfigError
+    from uav_struct_env.wrappers import TRAIN_CONFIGS
+
+    bad = [p for p in opt["policies"] if p not in POLICIES]
+    if bad:
+        raise ValueError(f"unknown policies {bad}; valid: {POLICIES}")
+    if opt["config"] not in TRAIN_CONFIGS:
+        raise ConfigError(f"config must be one of {sorted(TRAIN_CONFIGS)}, got {opt['config']!r}")
+    check_option("episodes", opt["episodes"], 1, integer=True)
+    check_option("seed", opt["seed"], 0, integer=True)
+    if opt["max_cycles"] is not None:
+        check_option("max_cycles", opt["max_cycles"], 1, integer=True)
+    if "ppo" in opt["policies"]:
+        if opt["model"] is None:
+            raise ValueError("policy 'ppo' needs model=<directory with model.zip>")
+        check_input_file(Path(opt["model"]) / "model.zip", option="--model", what="model.zip")
+    for option, path in (("--plot", opt["plot"]), ("--json-out", opt["json_out"])):
+        if path:
+            check_output_file(path, overwrite=opt["overwrite"], option=option)
+
+
 def main(**kwargs: Any) -> dict[str, Any]:
     """Evaluate; returns ``{policy: summary}``. Keys: see :data:`DEFAULTS`."""
     unknown = sorted(set(kwargs) - set(DEFAULTS))
     if unknown:
         raise ValueError(f"unknown options {unknown}; valid: {sorted(DEFAULTS)}")
     opt = {**DEFAULTS, **kwargs}
+    policies = list(opt["policies"])
+    check_options({**opt, "policies": policies})
     warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
     from uav_struct_env.wrappers import make_train_env
 
-    policies = list(opt["policies"])
-    bad = [p for p in policies if p not in POLICIES]
-    if bad:
-        raise ValueError(f"unknown policies {bad}; valid: {POLICIES}")
-    if "ppo" in policies and opt["model"] is None:
-        raise ValueError("policy 'ppo' needs model=<directory with model.zip>")
-    for path in (opt["plot"], opt["json_out"]):  # checked before the evaluation runs
-        if path and Path(path).exists() and not opt["overwrite"]:
-            raise OutputExistsError(f"{path!r} exists; pass --overwrite to replace it")
     overrides = {} if opt["max_cycles"] is None else {"max_cycles": opt["max_cycles"]}
     env = make_train_env(opt["config"], **overrides)
     seeds = [opt["seed"] + i for i in range(opt["episodes"])]
     results: dict[str, dict] = {}
+    try:  # the model folder is read (and refused) before any episode runs
+        ppo = PpoPolicy(opt["model"], env, trust_pickle=opt["trust_pickle"]) if "ppo" in policies else None
+    except BaseException:
+        env.close()
+        raise
     for name in policies:
         policy = {
-            "ppo": lambda: PpoPolicy(opt["model"]),
+            "ppo": lambda: ppo,
             "random": lambda: RandomPolicy(opt["seed"]),
             "hold": lambda: hold_policy,
             "orbit": lambda: orbit_policy,
@@ -218,16 +275,19 @@ def main(**kwargs: Any) -> dict[str, Any]:
 
 
 def _parse(argv: list[str] | None = None) -> dict[str, Any]:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--model", default=None, help="directory with model.zip (+ vecnormalize.pkl)")
-    p.add_argument("--config", default=DEFAULTS["config"])
-    p.add_argument("--episodes", type=int, default=DEFAULTS["episodes"])
-    p.add_argument("--seed", type=int, default=DEFAULTS["seed"])
+    p = CommandParser(prog="evaluate_policy.py", description=__doc__.split("\n\n")[0])
+    p.add_argument("--model", default=None, help="folder with model.zip and normalization.npz")
+    p.add_argument("--config", default=DEFAULTS["config"], help="TRAIN_CONFIGS name: state | image")
+    p.add_argument("--episodes", type=int, default=DEFAULTS["episodes"], help="episodes per policy")
+    p.add_argument("--seed", type=int, default=DEFAULTS["seed"], help="seed of the first episode")
     p.add_argument("--policies", nargs="+", default=list(POLICIES), choices=POLICIES)
-    p.add_argument("--plot", default=DEFAULTS["plot"])
-    p.add_argument("--json-out", default=None)
+    p.add_argument("--plot", default=None, help="write the comparison figure (PNG) to this file")
+    p.add_argument("--json-out", default=None, help="write the summary (JSON) to this file")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --plot / --json-out")
-    p.add_argument("--max-cycles", type=int, default=None)
+    p.add_argument("--max-cycles", type=int, default=None, help="episode length (default: the config's)")
+    p.add_argument("--trust-pickle", action="store_true",
+                   help="read a model folder's vecnormalize.pkl when it has no normalization.npz "
+                   "(unpickling runs code from the file: only for folders you trust)")
     return vars(p.parse_args(argv))
 
 
@@ -235,7 +295,13 @@ if __name__ == "__main__":
     args = _parse()
     if args["model"] is None and "ppo" in args["policies"]:
         args["policies"] = [p for p in args["policies"] if p != "ppo"]
+    try:  # every input before any work
+        check_options(args)
+    except INPUT_ERRORS as err:
+        sys.exit(refuse("evaluate_policy.py", err))
     try:
         main(**args)
-    except OutputExistsError as err:
-        raise SystemExit(f"evaluate_policy.py: error: {err}") from None
+    except UsageError as err:  # the model folder, read before the first episode
+        sys.exit(refuse("evaluate_policy.py", err))
+    except OSError as err:  # e.g. the disk filled up
+        sys.exit(refuse("evaluate_policy.py", err, status=1))

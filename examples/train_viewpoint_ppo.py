@@ -5,29 +5,28 @@ The env is a documented training config of :data:`uav_struct_env.wrappers.TRAIN_
 random starts 15-35 m out with up to +-60 deg of heading error). SuperSuit turns the four agents
 into four slots of one vector env (``pettingzoo_env_to_vec_env_v1``) and stacks ``n_envs`` copies,
 ``num_cpus`` subprocesses (``concat_vec_envs_v1``); observations and rewards are normalized
-(``VecNormalize``, saved beside the model).
+(``VecNormalize``, saved beside the model: ``normalization.npz`` holds the observation statistics
+as plain arrays, which ``evaluate_policy.py`` reads without unpickling anything; SB3's own
+``vecnormalize.pkl`` is kept for resuming training with ``VecNormalize.load``).
 
     .venv/bin/python examples/train_viewpoint_ppo.py --out runs/ppo_state --minutes 30
     .venv/bin/tensorboard --logdir runs/ppo_state/tb
 
-Writes ``model.zip``, ``vecnormalize.pkl``, ``train.json`` (options, steps, wall clock,
-agent-steps per second), ``checkpoints/`` and ``tb/`` under ``--out``.
+Writes ``model.zip``, ``normalization.npz``, ``vecnormalize.pkl``, ``train.json`` (options, steps,
+wall clock, agent-steps per second), ``checkpoints/`` and ``tb/`` under ``--out`` only (every option
+is checked, and ``--out`` too, before training starts).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
+import sys
 import time
 import warnings
 from typing import Any
 
-from uav_struct_env.outputs import (
-    OutputExistsError,
-    atomic_path,
-    atomic_write_json,
-    prepare_output_dir,
-)
+from uav_struct_env.outputs import atomic_path, atomic_write_json, prepare_output_dir, real_folder
+from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_option, check_output_dir, refuse
 
 DEFAULTS: dict[str, Any] = {
     "out": "runs/ppo_state",
@@ -100,17 +99,47 @@ class _Progress:
         return Progress()
 
 
+def check_options(opt: dict[str, Any]) -> None:
+    """Every option and ``out``, before anything is imported, trained or written.
+
+    Raises:
+        UsageError / OutputExistsError: naming the option and what was expected.
+    """
+    from uav_struct_env.errors import ConfigError
+    from uav_struct_env.wrappers import TRAIN_CONFIGS
+
+    if opt["config"] not in TRAIN_CONFIGS:
+        raise ConfigError(f"config must be one of {sorted(TRAIN_CONFIGS)}, got {opt['config']!r}")
+    for name, lo in (("total_timesteps", 1), ("n_envs", 1), ("num_cpus", 0), ("n_steps", 2),
+                     ("batch_size", 2), ("n_epochs", 1), ("checkpoint_every", 1), ("seed", 0)):
+        check_option(name, opt[name], lo, integer=True)
+    if opt["max_cycles"] is not None:
+        check_option("max_cycles", opt["max_cycles"], 1, integer=True)
+    if opt["minutes"] is not None:
+        check_option("minutes", opt["minutes"], 0, lo_open=True)
+    check_option("learning_rate", opt["learning_rate"], 0, lo_open=True)
+    check_option("gamma", opt["gamma"], 0, 1)
+    check_option("ent_coef", opt["ent_coef"], 0)
+    check_option("log_std_init", opt["log_std_init"])
+    for k, width in enumerate(opt["net_arch"]):
+        check_option(f"net_arch[{k}]", width, 1, integer=True)
+    check_output_dir(opt["out"], overwrite=opt["overwrite"])
+
+
 def main(**kwargs: Any) -> dict[str, Any]:
     """Train and save; returns the ``train.json`` summary. Keys: see :data:`DEFAULTS`."""
     unknown = sorted(set(kwargs) - set(DEFAULTS) - {"max_cycles"})
     if unknown:
         raise ValueError(f"unknown options {unknown}; valid: {sorted(DEFAULTS)}")
     opt = {**DEFAULTS, "max_cycles": None, **kwargs}
+    check_options(opt)
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
+
+    from uav_struct_env.training.policy_files import NORMALIZATION_FILE, save_normalization
 
     # An earlier run in "out" is refused unless overwrite=True (the error names --overwrite).
     out = prepare_output_dir(opt["out"], overwrite=opt["overwrite"])
@@ -132,7 +161,7 @@ def main(**kwargs: Any) -> dict[str, Any]:
         gamma=opt["gamma"],
         ent_coef=opt["ent_coef"],
         policy_kwargs={"net_arch": list(opt["net_arch"]), "log_std_init": opt["log_std_init"]},
-        tensorboard_log=str(out / "tb"),
+        tensorboard_log=str(real_folder(out / "tb")),  # written inside --out, never through a link
         device="cpu",
         verbose=0,
     )
@@ -141,7 +170,7 @@ def main(**kwargs: Any) -> dict[str, Any]:
         [
             CheckpointCallback(
                 max(opt["checkpoint_every"] // n, 1),
-                str(out / "checkpoints"),
+                str(real_folder(out / "checkpoints")),
                 name_prefix="ppo",
                 save_vecnormalize=True,
             ),
@@ -155,6 +184,7 @@ def main(**kwargs: Any) -> dict[str, Any]:
         model.save(tmp)
     with atomic_path(out / "vecnormalize.pkl") as tmp:
         vec.save(str(tmp))
+    save_normalization(vec, out / NORMALIZATION_FILE)
     vec.close()
     summary = {
         "options": {k: (list(v) if isinstance(v, tuple) else v) for k, v in opt.items()},
@@ -168,8 +198,8 @@ def main(**kwargs: Any) -> dict[str, Any]:
 
 
 def _parse(argv: list[str] | None = None) -> dict[str, Any]:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", default=DEFAULTS["out"])
+    p = CommandParser(prog="train_viewpoint_ppo.py", description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", default=DEFAULTS["out"], help="output folder")
     p.add_argument("--overwrite", action="store_true",
                    help="train into an --out folder that already holds files (else refused)")
     p.add_argument("--config", default=DEFAULTS["config"], help="TRAIN_CONFIGS name: state | image")
@@ -204,8 +234,13 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
+    options = _parse()
+    try:  # every input before any work
+        check_options({**DEFAULTS, "max_cycles": None, **options})
+    except INPUT_ERRORS as err:
+        sys.exit(refuse("train_viewpoint_ppo.py", err))
     try:
-        summary = main(**_parse())
-    except (OutputExistsError, NotADirectoryError) as err:
-        raise SystemExit(f"train_viewpoint_ppo.py: error: {err}") from None
+        summary = main(**options)
+    except OSError as err:  # e.g. the disk filled up
+        sys.exit(refuse("train_viewpoint_ppo.py", err, status=1))
     print(json.dumps({k: v for k, v in summary.items() if k != "options"}, indent=2))

@@ -11,7 +11,8 @@ commands:
   study    reproduce the paper's four-UAV study (Tables I and II, Fig. 2)
   render   render the four UAV views of a site to PNG files
 
-`uav-struct <command> --help` describes each command's options."""
+`uav-struct <command> --help` describes each command's options and their defaults;
+`uav-struct --version` prints the version."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -28,6 +29,11 @@ def _dispatch(argv: Sequence[str] | None) -> int:
     if not args or args[0] in ("-h", "--help"):
         print(USAGE)
         return 0 if args else 2
+    if args[0] in ("-V", "--version"):
+        from uav_struct_env import __version__
+
+        print(f"uav-struct {__version__}")
+        return 0
     command, rest = args[0], args[1:]
     if command == "study":
         from uav_struct_env.study import main as study_main

@@ -2,18 +2,25 @@
 
 from __future__ import annotations
 
-import argparse
 import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 import cv2
-import numpy as np
 
 from localization.synthetic import PAPER_IMAGE_SIZE
-from uav_struct_env.outputs import OutputExistsError, StagedOutput, atomic_write_bytes
-from uav_struct_env.site import make_site
+from uav_struct_env.errors import RendererUnavailableError
+from uav_struct_env.outputs import StagedOutput, atomic_write_bytes
+from uav_struct_env.sim.schedule import ScheduleSpec
+from uav_struct_env.validate import (
+    INPUT_ERRORS,
+    CommandParser,
+    check_option,
+    check_output_dir,
+    check_site,
+    refuse,
+)
 
 __all__ = ["main", "render_views"]
 
@@ -68,35 +75,42 @@ RENDER_FILES = ("*_overview_viewpoint*.png", "*_viewpoint*.png")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Command-line entry point."""
-    p = argparse.ArgumentParser(prog="uav-struct render", description=__doc__)
-    p.add_argument("--out", default="renders", help="output folder (default: renders)")
+    """Command-line entry point; every input is checked before anything renders or is written."""
+    p = CommandParser(prog="uav-struct render", description=__doc__)
+    p.add_argument("--out", default="renders", help="output folder")
     p.add_argument("--site", default="paper",
-                   help="paper, random, a site file (*.json) or an IFC file (*.ifc) (default: paper)")
+                   help="paper, random, a site file (*.json) or an IFC file (*.ifc)")
     p.add_argument("--stage", default="both",
                    help="a stage name of the site, or 'both': its floor's slab and columns stages "
-                   "(default: both; the paper's first floor, an IFC file's last floor)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--viewpoint", type=int, default=0, help="scripted viewpoint index (0-9)")
+                   "(the paper's first floor, an IFC file's last floor)")
+    p.add_argument("--seed", type=int, default=0, help="seed of textures (and of --site random)")
+    n_viewpoints = ScheduleSpec().n_viewpoints
+    p.add_argument("--viewpoint", type=int, default=0,
+                   help=f"scripted viewpoint index, 0 to {n_viewpoints - 1}")
     p.add_argument("--renderer", default="auto", choices=("auto", "tiny", "egl"))
     p.add_argument("--overwrite", action="store_true",
                    help="replace the images of an earlier run in --out (otherwise refused)")
     args = p.parse_args(argv)
     try:
+        check_option("--seed", args.seed, 0, integer=True)
+        check_option("--viewpoint", args.viewpoint, 0, n_viewpoints - 1, integer=True)
+        site = check_site(args.site, None if args.stage == "both" else args.stage, seed=args.seed)
         if args.stage == "both":
-            site = make_site(args.site, stage=None, marker_size=None, rng=np.random.default_rng(args.seed))
             stages = [s for s in (site.floor_stage("slab"), site.floor_stage("columns")) if s]
             stages = ["slab", "columns"] if args.site in ("paper", "random") else stages
         else:
             stages = [args.stage]
+        check_output_dir(args.out, overwrite=args.overwrite)
         staged = StagedOutput(args.out, overwrite=args.overwrite, owned=RENDER_FILES)
-    except (ValueError, ImportError, FileNotFoundError, OutputExistsError, NotADirectoryError) as err:
-        print(f"uav-struct render: error: {err}", file=sys.stderr)
-        return 2
-    with staged:
-        for stage in stages:
-            render_views(staged.stage, stage=stage, seed=args.seed, viewpoint=args.viewpoint,
-                         renderer=args.renderer, site=args.site)
+    except INPUT_ERRORS as err:
+        return refuse(p.prog, err)
+    try:
+        with staged:
+            for stage in stages:
+                render_views(staged.stage, stage=stage, seed=args.seed, viewpoint=args.viewpoint,
+                             renderer=args.renderer, site=args.site)
+    except (OSError, RendererUnavailableError) as err:
+        return refuse(p.prog, f"{err}; nothing written to {args.out}", status=1)
     for path in sorted(staged.out.glob("*_viewpoint*.png")):
         print(path.resolve())
     return 0

@@ -25,3 +25,11 @@ class IfcImportError(SiteGeometryError):
 
 class ClosedError(UavStructError, RuntimeError):
     """An environment (or its world) was used after ``close()``: make a new one instead."""
+
+
+class UsageError(UavStructError, ValueError):
+    """A command-line input that cannot work: the message names the option and what was expected."""
+
+
+class ResetNeededError(UavStructError, RuntimeError):
+    """An environment was stepped before its first ``reset()``."""

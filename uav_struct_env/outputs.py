@@ -38,8 +38,10 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_json",
     "atomic_write_text",
-    "claim_output_dir",
+    "check_no_earlier_run",
+    "open_append",
     "prepare_output_dir",
+    "real_folder",
     "save_figure",
 ]
 
@@ -87,26 +89,22 @@ def prepare_output_dir(path: str | Path, *, overwrite: bool = False, flag: str =
     out.mkdir(parents=True, exist_ok=True)
     _remove_leftovers(out)
     if not overwrite:
-        entries = sorted(e for e in os.listdir(out) if not _leftover(e))
-        if entries:
-            shown = ", ".join(entries[:4]) + (f" and {len(entries) - 4} more" if len(entries) > 4 else "")
-            raise OutputExistsError(
-                f"{str(out)!r} already holds results ({shown}); pass {flag} to replace them, "
-                "or choose another output folder"
-            )
+        check_no_earlier_run(out, flag)
     return out
 
 
-def claim_output_dir(parser: Any, path: str | Path, overwrite: bool) -> Path:
-    """:func:`prepare_output_dir` for a command line: a refusal is ``parser.error`` (status 2).
+def check_no_earlier_run(out: Path, flag: str = "--overwrite") -> None:
+    """Raise :class:`OutputExistsError` if the existing folder ``out`` holds files of a run.
 
-    ``parser`` is the command's ``argparse.ArgumentParser``; its ``--overwrite`` is named.
+    Leftovers of an interrupted run of this module do not count.
     """
-    try:
-        return prepare_output_dir(path, overwrite=overwrite)
-    except (OutputExistsError, NotADirectoryError) as err:
-        parser.error(str(err))
-        raise  # parser.error exits; for parsers that do not
+    entries = sorted(e for e in os.listdir(out) if not _leftover(e))
+    if entries:
+        shown = ", ".join(entries[:4]) + (f" and {len(entries) - 4} more" if len(entries) > 4 else "")
+        raise OutputExistsError(
+            f"{str(out)!r} already holds results ({shown}); pass {flag} to replace them, "
+            "or choose another output folder"
+        )
 
 
 def _remove_leftovers(out: Path) -> None:
@@ -193,6 +191,31 @@ def save_figure(fig: Any, path: str | Path, **kwargs: Any) -> Path:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, **kwargs)
     return path
+
+
+def _unlink_symlink(path: Path) -> Path:
+    path = _check_inside(Path(path))
+    if path.is_symlink():  # replaced, never followed out of the output folder
+        path.unlink()
+    return path
+
+
+def real_folder(path: str | Path) -> Path:
+    """The folder ``path`` (created), with a symlink there replaced by a real folder.
+
+    For folders a library writes into by itself (SB3 checkpoints, TensorBoard logs): what it
+    writes stays inside the output folder even if an earlier run left a link there.
+    """
+    path = _unlink_symlink(Path(path))
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def open_append(path: str | Path):
+    """Open the text file ``path`` for appending (a log); a symlink there is replaced, not followed."""
+    path = _unlink_symlink(Path(path))
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, _FILE_MODE)
+    return os.fdopen(fd, "a", encoding="utf-8")
 
 
 @contextlib.contextmanager

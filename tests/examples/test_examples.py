@@ -2,6 +2,11 @@
 
 import importlib.util
 import json
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -42,7 +47,7 @@ def trained(tmp_path_factory):
 def test_train_writes_model_normalization_logs_and_checkpoints(trained):
     out, summary = trained
     assert summary["agent_steps"] >= 256 and summary["n_agent_slots"] == 4
-    for name in ("model.zip", "vecnormalize.pkl", "train.json"):
+    for name in ("model.zip", "normalization.npz", "vecnormalize.pkl", "train.json"):
         assert (out / name).is_file(), name
     assert json.loads((out / "train.json").read_text())["options"]["seed"] == 3
     assert any((out / "checkpoints").glob("ppo_*_steps.zip"))
@@ -75,3 +80,79 @@ def test_bad_options_are_named():
         load("evaluate_policy").main(policies=("ppo",))
     with pytest.raises(ValueError, match="unknown options \\['lr'\\]"):
         load("train_viewpoint_ppo").main(lr=1e-3)
+
+
+def test_evaluate_reads_the_model_folder_without_unpickling(trained, tmp_path):
+    import pickle
+
+    import numpy as np
+
+    from uav_struct_env.training.policy_files import load_normalization
+
+    out, _ = trained
+    with open(out / "vecnormalize.pkl", "rb") as f:  # the test's own file: trusted
+        vec_normalize = pickle.load(f)
+    norm = load_normalization(out / "normalization.npz")
+    rng = np.random.default_rng(0)
+    batch = {k: rng.normal(size=(4, *v.shape)).astype(np.float32) for k, v in norm.mean.items()}
+    expected, got = vec_normalize.normalize_obs(batch), norm(batch)
+    for k in expected:
+        assert got[k].dtype == expected[k].dtype and np.array_equal(got[k], expected[k]), k
+
+    legacy = tmp_path / "legacy"  # a folder from before normalization.npz: pickle only on request
+    legacy.mkdir()
+    for name in ("model.zip", "vecnormalize.pkl"):
+        shutil.copy(out / name, legacy / name)
+    evaluate = load("evaluate_policy")
+    with pytest.raises(ValueError, match="has vecnormalize.pkl but no normalization.npz.*--trust-pickle"):
+        evaluate.main(model=str(legacy), policies=("ppo",), episodes=1, max_cycles=2)
+    summary = evaluate.main(model=str(legacy), policies=("ppo",), episodes=1, max_cycles=2,
+                            trust_pickle=True)
+    assert summary["results"]["ppo"]["final_step"]["n"] == 4
+
+
+def test_a_model_with_an_unknown_pickled_entry_is_refused(trained, tmp_path):
+    from uav_struct_env.training.policy_files import load_ppo
+    from uav_struct_env.wrappers import make_train_env
+
+    out, _ = trained
+    with zipfile.ZipFile(out / "model.zip") as src:
+        entries = {n: src.read(n) for n in src.namelist()}
+    data = json.loads(entries["data"])
+    data["payload"] = {":type:": "<class 'object'>", ":serialized:": "gARLAS4="}
+    entries["data"] = json.dumps(data).encode()
+    bad = tmp_path / "model.zip"
+    with zipfile.ZipFile(bad, "w") as dst:
+        for n, b in entries.items():
+            dst.writestr(n, b)
+    env = make_train_env("state")
+    agent = env.possible_agents[0]
+    with pytest.raises(ValueError, match=r"pickled entries \['payload'\] that cannot be read safely"):
+        load_ppo(bad, env.observation_space(agent), env.action_space(agent))
+    env.close()
+
+
+def _run(script, *args):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    return subprocess.run([sys.executable, str(EXAMPLES / script), *args], capture_output=True,
+                          text=True, timeout=120, env=env)
+
+
+def test_example_mistakes_are_one_line_and_status_2(tmp_path):
+    done = _run("evaluate_policy.py", "--model", str(tmp_path / "missing"), "--policies", "ppo")
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        f"evaluate_policy.py: error: --model '{tmp_path / 'missing' / 'model.zip'}' does not exist; "
+        "expected an existing model.zip"
+    ]
+    (tmp_path / "file").write_text("x")
+    done = _run("train_viewpoint_ppo.py", "--out", str(tmp_path / "file" / "run"))
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert f"--out '{tmp_path / 'file' / 'run'}' cannot be created: '{tmp_path / 'file'}' is not a folder" \
+        in done.stderr
+    assert list(tmp_path.iterdir()) == [tmp_path / "file"]
+
+
+def test_evaluate_writes_nothing_unless_asked():
+    evaluate = load("evaluate_policy")
+    assert evaluate.DEFAULTS["plot"] is None and evaluate.DEFAULTS["json_out"] is None

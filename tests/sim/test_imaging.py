@@ -49,9 +49,9 @@ def test_blur_scales_with_image_width():
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        (dict(blur_sigma_px=-1.0), r"imaging blur_sigma_px must be a finite number >= 0, got -1\.0"),
-        (dict(jpeg_quality=0), r"imaging jpeg_quality must be an int in \[1, 100\] or None, got 0"),
-        (dict(read_noise_dn=float("nan")), r"imaging read_noise_dn must be a finite number"),
+        (dict(blur_sigma_px=-1.0), r"imaging blur_sigma_px must be finite and >= 0, got -1\.0"),
+        (dict(jpeg_quality=0), r"imaging jpeg_quality \(or None\) must be an int in \[1, 100\], got 0"),
+        (dict(read_noise_dn=float("nan")), r"imaging read_noise_dn must be finite and >= 0, got nan"),
     ],
 )
 def test_bad_imaging_parameters_raise(kwargs, match):

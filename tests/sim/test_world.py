@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from localization.geometry import invert, look_at, project
-from uav_struct_env.errors import ConfigError, RendererUnavailableError
+from uav_struct_env.errors import ClosedError, ConfigError, RendererUnavailableError
 from uav_struct_env.sim import client as client_module
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.client import resolve_renderer
@@ -149,7 +149,7 @@ def test_same_seed_same_textures_and_no_files_outlive_the_load(tmp_path, monkeyp
         pass
     assert a.closed
     a.close()  # idempotent
-    with pytest.raises(RuntimeError, match="closed"):
+    with pytest.raises(ClosedError, match="this SiteWorld is closed"):
         a.render(pose, SMALL)
 
 

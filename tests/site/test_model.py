@@ -99,7 +99,7 @@ def test_marker_pose_with_yaw_rotates_corners():
             r"opening 'hole' .* outside the slab",
         ),
         (dict(column_section=(4.5, 0.4)), r"columns overlap: spans_x\[0\] = 4\.0 m"),
-        (dict(slab_thickness=-0.1), r"slab_thickness must be a positive finite length.*-0\.1"),
+        (dict(slab_thickness=-0.1), r"slab_thickness \(m\) must be a number in \(0, 5\], got -0\.1"),
         (
             dict(storey_heights=(3.5, 0.2)),
             r"storey_heights\[1\] = 0\.2 m must exceed slab_thickness",
@@ -115,14 +115,15 @@ def test_impossible_buildings_raise_naming_the_value(kwargs, match):
 
 def test_impossible_grid_and_opening_sizes_raise():
     with pytest.raises(
-        SiteGeometryError, match=r"spans_y\[1\] must be a positive finite length.*0"
+        SiteGeometryError, match=r"spans_y\[1\] \(m\) must be a number in \(0, 200\], got 0"
     ):
         ColumnGrid((4.0,), (4.0, 0.0))
     with pytest.raises(SiteGeometryError, match=r"spans_x must be a non-empty"):
         ColumnGrid((), (4.0,))
-    with pytest.raises(SiteGeometryError, match=r"opening 'o' size\[1\] must be a positive.*-2"):
+    with pytest.raises(SiteGeometryError,
+                       match=r"opening 'o' size\[1\] \(m\) must be a number in \(0, 2000\], got -2"):
         Opening("o", (1.0, 1.0), (1.0, -2.0))
-    with pytest.raises(TypeError, match=r"spans_x\[0\] must be a number, got '4'"):
+    with pytest.raises(TypeError, match=r"spans_x\[0\] \(m\) must be a number, got '4'"):
         ColumnGrid(("4",), (4.0,))
 
 
@@ -139,7 +140,8 @@ def test_sites_with_bad_markers_or_stage_raise():
         building_site(b, markers=(m, ArucoMarker(id=5, side=1.0, center=(-4.2, 0.5, 0.01))))
     with pytest.raises(SiteGeometryError, match=r"marker id must be an int in \[0, 50\).*got 50"):
         ArucoMarker(id=50, side=1.0, center=(0, 0, 0))
-    with pytest.raises(SiteGeometryError, match=r"marker 0 side must be a positive.*0\.0"):
+    with pytest.raises(SiteGeometryError,
+                       match=r"marker 0 side \(m\) must be a number in \(0, 10\], got 0\.0"):
         ArucoMarker(id=0, side=0.0, center=(0, 0, 0))
     with pytest.raises(
         SiteGeometryError,

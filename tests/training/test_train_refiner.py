@@ -80,5 +80,6 @@ def test_missing_keypoint_network_is_a_usage_error(tmp_path, capsys):
         main(["--data", str(tmp_path), "--out", str(tmp_path / "run"),
               "--detector-model", str(tmp_path / "nope.onnx")])
     assert exc.value.code == 2
-    assert "--detector-model: no such file" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--detector-model" in err and "nope.onnx' does not exist; expected an existing ONNX file" in err
     assert not (tmp_path / "run").exists()

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from localization.checks import check_choice, check_number
 from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError, SiteGeometryError
 from uav_struct_env.sim.imaging import ImagingModel, make_imaging
@@ -34,6 +35,21 @@ from uav_struct_env.site import LANDMARK_SETS, Site, paper_site
 from uav_struct_env.site.as_built import AsBuilt, make_as_built
 
 __all__ = ["PRESETS", "RENDER_MODES", "RENDERERS", "EnvConfig", "make_config"]
+
+
+#: Upper bounds where memory or physics follows from a value: an image side and its pixels (a
+#: Mavic 2 Pro still is 5472 x 3648), agents, seconds an action is held, a UAV's radius (m), a
+#: marker's side (m).
+MAX_IMAGE_SIDE = 8192
+MAX_IMAGE_PIXELS = 5472 * 3648
+MAX_AGENTS = 64
+MAX_CONTROL_PERIOD = 60.0
+MAX_UAV_RADIUS = 10.0
+MAX_MARKER_SIDE = 10.0
+
+
+def _number(name: str, value: Any, lo: float | None, hi: float | None, **kwargs: Any) -> Any:
+    return check_number(name, value, lo, hi, error=ConfigError, type_error=ConfigError, **kwargs)
 
 
 def _is_site_file(site: object) -> bool:
@@ -144,52 +160,39 @@ class EnvConfig:
         if self.stage is not None and names is not None and self.stage not in names:
             raise ConfigError(f"stage must be one of {names}, got {self.stage!r}")
         if self.marker_size is not None:
-            if (
-                isinstance(self.marker_size, bool)
-                or not isinstance(self.marker_size, (int, float))
-                or not math.isfinite(self.marker_size)
-                or self.marker_size <= 0
-            ):
-                raise ConfigError(
-                    "marker_size must be a positive side length in metres or None, "
-                    f"got {self.marker_size!r}"
-                )
+            _number("marker_size", self.marker_size, 0, MAX_MARKER_SIDE, lo_open=True)
         size = self.image_size
-        if (
-            not isinstance(size, (tuple, list))
-            or len(size) != 2
-            or any(
-                isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 16 for v in size
+        if isinstance(size, (str, bytes)) or not isinstance(size, (tuple, list)) or len(size) != 2:
+            raise ConfigError(f"image_size must be (width, height) in pixels, got {size!r}")
+        w = _number("image_size[0] (width)", size[0], 16, MAX_IMAGE_SIDE, integer=True)
+        h = _number("image_size[1] (height)", size[1], 16, MAX_IMAGE_SIDE, integer=True)
+        if w * h > MAX_IMAGE_PIXELS:
+            raise ConfigError(
+                f"image_size {w} x {h} has {w * h} pixels, more than the {MAX_IMAGE_PIXELS} supported "
+                "(a 20 MP still; every agent renders one per step)"
             )
-        ):
-            raise ConfigError(f"image_size must be (width, height) ints >= 16, got {size!r}")
-        object.__setattr__(self, "image_size", (int(size[0]), int(size[1])))
+        object.__setattr__(self, "image_size", (w, h))
         object.__setattr__(self, "noise", make_noise(self.noise))
         object.__setattr__(self, "imaging", make_imaging(self.imaging))
-        if self.renderer not in RENDERERS:
-            raise ConfigError(f"renderer must be one of {RENDERERS}, got {self.renderer!r}")
-        for name in ("max_cycles", "n_agents", "render_view_height", "render_fps"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ConfigError(f"{name} must be a positive int, got {v!r}")
+        check_choice("renderer", self.renderer, RENDERERS, error=ConfigError)
+        for name, lo, hi in (("max_cycles", 1, None), ("n_agents", 1, MAX_AGENTS),
+                             ("render_view_height", 16, MAX_IMAGE_SIDE), ("render_fps", 1, 1000),
+                             ("texture_seed", 0, None)):
+            _number(name, getattr(self, name), lo, hi, integer=True)
+        for name in ("observe_image", "observe_depth", "show_uavs"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ConfigError(f"{name} must be True or False, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, bool(getattr(self, name)))
         if self.render_mode is not None and self.render_mode not in (*RENDER_MODES, "human"):
             raise ConfigError(
                 f"render_mode must be None or one of {list(RENDER_MODES)}, got {self.render_mode!r}"
             )
-        for name in ("control_period", "uav_radius"):
-            v = getattr(self, name)
-            if (
-                isinstance(v, bool)
-                or not isinstance(v, (int, float))
-                or not math.isfinite(v)
-                or v <= 0
-            ):
-                raise ConfigError(f"{name} must be a positive number, got {v!r}")
-        j = self.start_yaw_jitter
-        if isinstance(j, bool) or not isinstance(j, (int, float)) or not 0 <= j <= math.pi:
-            raise ConfigError(f"start_yaw_jitter must be a number in [0, pi] rad, got {j!r}")
-        if self.on_crash not in ("agent", "all"):
-            raise ConfigError(f"on_crash must be 'agent' or 'all', got {self.on_crash!r}")
+        _number("control_period", self.control_period, 0, MAX_CONTROL_PERIOD, lo_open=True)
+        _number("uav_radius", self.uav_radius, 0, MAX_UAV_RADIUS, lo_open=True)
+        _number("start_yaw_jitter", self.start_yaw_jitter, 0, math.pi)
+        check_choice("on_crash", self.on_crash, ("agent", "all"), error=ConfigError)
+        if isinstance(self.landmark_sets, str):
+            raise ConfigError(f"landmark_sets must be a tuple of set names, got {self.landmark_sets!r}")
         sets = tuple(self.landmark_sets)
         unknown = [s for s in sets if s not in LANDMARK_SETS]
         if unknown:
@@ -197,11 +200,7 @@ class EnvConfig:
                 f"landmark_sets must be drawn from {LANDMARK_SETS}, got unknown {unknown}"
             )
         object.__setattr__(self, "landmark_sets", sets)
-        if self.lighting not in LIGHTINGS:
-            raise ConfigError(f"lighting must be one of {LIGHTINGS}, got {self.lighting!r}")
-        for name in ("observe_image", "observe_depth"):
-            if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise ConfigError(f"{name} must be a bool, got {getattr(self, name)!r}")
+        check_choice("lighting", self.lighting, LIGHTINGS, error=ConfigError)
         try:
             object.__setattr__(self, "as_built", make_as_built(self.as_built))
         except SiteGeometryError as exc:

@@ -46,10 +46,11 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 
+from localization.checks import check_number
 from localization.geometry import invert
 from uav_struct_env.envs.config import EnvConfig, make_config
 from uav_struct_env.envs.render import MapView, UavMarker, compose_frame, draw_site_map
-from uav_struct_env.errors import ClosedError
+from uav_struct_env.errors import ClosedError, ResetNeededError
 from uav_struct_env.sim.airframes import Airframes
 from uav_struct_env.sim.attitude import world_from_cam_from_attitude
 from uav_struct_env.sim.camera import Camera
@@ -63,7 +64,10 @@ from uav_struct_env.sim.sensors import Reading
 from uav_struct_env.sim.uav import ACTION_COMPONENTS, Obstacles, UavState, step_uav
 from uav_struct_env.site import Site, make_site
 
-__all__ = ["ACTION_COMPONENTS", "UavStructParallelEnv"]
+__all__ = ["ACTION_COMPONENTS", "RESET_OPTIONS", "UavStructParallelEnv"]
+
+#: The keys ``reset(options=...)`` accepts.
+RESET_OPTIONS = ("viewpoint",)
 
 #: Bound on the gnss observation box (m); far outside any reachable geofence.
 GNSS_BOUND = 1.0e4
@@ -118,6 +122,7 @@ class UavStructParallelEnv(ParallelEnv):
         self._targets = _ViewTargets.from_site(self.site)
         self._world = None
         self._closed = False
+        self._was_reset = False
 
         obs = {
             "image": spaces.Box(0, 255, (h, w, 3), np.uint8),
@@ -189,15 +194,22 @@ class UavStructParallelEnv(ParallelEnv):
             options: ``{"viewpoint": k}`` places every UAV at viewpoint ``k`` of
                 ``env.viewpoint_schedule`` (and the paper noise uses ``k`` as its viewpoint
                 index). Without it each UAV starts at a random viewpoint on its own side drawn
-                from the schedule's ranges. Other keys are ignored (PettingZoo's API test
-                passes arbitrary options).
+                from the schedule's ranges. Other keys (:data:`RESET_OPTIONS`) are refused,
+                except ``"options"``, which PettingZoo's API tests pass to probe the signature.
 
         Raises:
-            ValueError: if ``viewpoint`` is not an int in ``[0, n_viewpoints)``.
+            ValueError: if ``seed`` is not None or an int >= 0, ``options`` is not a dict or
+                names an unknown key, or ``viewpoint`` is not an int in ``[0, n_viewpoints)``.
         """
         self._check_open()
         if seed is not None:
+            check_number("seed", seed, 0, integer=True, type_error=ValueError)
             self._rng = np.random.default_rng(seed)
+        if options is not None and not isinstance(options, dict):
+            raise ValueError(f"options must be a dict (keys {RESET_OPTIONS}) or None, got {options!r}")
+        unknown = sorted(set(options or ()) - set(RESET_OPTIONS) - {"options"}, key=str)
+        if unknown:
+            raise ValueError(f"unknown reset options {unknown}; valid keys are {list(RESET_OPTIONS)}")
         viewpoint = None if options is None else options.get("viewpoint")
         n = self.config.n_agents
         if viewpoint is not None:
@@ -234,6 +246,7 @@ class UavStructParallelEnv(ParallelEnv):
             from uav_struct_env.sim.world import random_light
 
             self.world.light = random_light(self._rng)
+        self._was_reset = True
         self.agents = list(self.possible_agents)
         self._alive = dict.fromkeys(self.agents, True)
         self.num_cycles = 0
@@ -273,10 +286,13 @@ class UavStructParallelEnv(ParallelEnv):
         Actions are validated before anything moves; values outside [-1, 1] are clipped.
 
         Raises:
+            ResetNeededError: before the first :meth:`reset`.
             ValueError: for an action to an unknown or finished agent, or one that is NaN/inf,
                 of the wrong shape or of a non-numeric dtype (message names agent and value).
         """
         self._check_open()
+        if not self._was_reset:
+            raise ResetNeededError("step() before reset(): call env.reset(seed=...) first")
         if not isinstance(actions, dict):
             raise ValueError(
                 "actions must be a dict mapping agent names to actions, "

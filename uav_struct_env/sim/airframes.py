@@ -13,8 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-import pybullet as p
-
+from uav_struct_env.sim.client import p  # imported quietly there
 from uav_struct_env.sim.uav import UavState
 
 __all__ = ["UAV_HALF_EXTENTS", "UAV_RGBA", "Airframes"]

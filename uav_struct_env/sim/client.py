@@ -32,8 +32,11 @@ number of EGL clients coexist and each renders exactly what a fresh process rend
 If libEGL cannot be reached through ctypes, at most one EGL client is allowed per process and a
 second raises :class:`RendererUnavailableError` (``"auto"`` then falls back to TinyRenderer).
 
-The plugin prints its OpenGL banner and per-frame chatter on the C-level stdout; those calls run
-with file descriptor 1 redirected to ``/dev/null``.
+pybullet prints "pybullet build time: ..." on the C-level stderr when it is imported, and the EGL
+plugin its device choice (stderr), OpenGL banner and per-frame chatter (stdout). None of it may
+reach a user's terminal between progress bars: pybullet is imported here, once, with file
+descriptors 1 and 2 pointed at ``/dev/null`` (the other ``sim`` modules take ``pybullet`` from
+this module), and the plugin's calls run the same way (:func:`quiet_c_output`).
 """
 
 from __future__ import annotations
@@ -47,7 +50,6 @@ from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
-import pybullet as p
 from numpy.typing import NDArray
 
 from uav_struct_env.errors import ConfigError, RendererUnavailableError
@@ -61,6 +63,7 @@ __all__ = [
     "RawImage",
     "RenderClient",
     "egl_plugin_path",
+    "quiet_c_output",
     "resolve_renderer",
 ]
 
@@ -141,20 +144,33 @@ _DEVNULL: list[int] = []  # one descriptor on /dev/null, opened on first use
 
 
 @contextlib.contextmanager
-def _quiet_stdout() -> Iterator[None]:
-    """Silence C-level writes to stdout (file descriptor 1) for the duration."""
-    fd = 1  # C code writes to fd 1 whatever Python's sys.stdout is (pytest swaps it)
-    with contextlib.suppress(Exception):
-        sys.stdout.flush()
+def quiet_c_output(fds: tuple[int, ...] = (1, 2)) -> Iterator[None]:
+    """Silence C-level writes to the file descriptors ``fds`` (stdout, stderr) for the duration.
+
+    C code writes to descriptors 1 and 2 whatever Python's ``sys.stdout`` / ``sys.stderr`` are
+    (pytest swaps them), so the descriptors themselves are pointed at ``/dev/null`` and restored.
+    Python's own buffered output is flushed first, so nothing of it is lost.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
     if not _DEVNULL:
         _DEVNULL.append(os.open(os.devnull, os.O_WRONLY))
-    saved = os.dup(fd)
+    saved = [os.dup(fd) for fd in fds]
     try:
-        os.dup2(_DEVNULL[0], fd)
+        for fd in fds:
+            os.dup2(_DEVNULL[0], fd)
         yield
     finally:
-        os.dup2(saved, fd)
-        os.close(saved)
+        for fd, copy in zip(fds, saved, strict=True):
+            os.dup2(copy, fd)
+            os.close(copy)
+
+
+with quiet_c_output():  # "pybullet build time: ..." on import
+    import pybullet
+
+p = pybullet
 
 
 def resolve_renderer(renderer: str, image_size: tuple[int, int]) -> str:
@@ -227,7 +243,7 @@ class RenderClient:
                 "this pybullet build has no eglRenderer plugin; use renderer='tiny'"
             )
         os.environ.setdefault("EGL_PLATFORM", "surfaceless")
-        with _quiet_stdout():
+        with quiet_c_output():
             plugin = p.loadPlugin(path, "_eglRendererPlugin", physicsClientId=self.client_id)
         if plugin < 0:
             raise RendererUnavailableError(
@@ -320,7 +336,7 @@ class RenderClient:
     ) -> RawImage:
         flags = 0 if segmentation else p.ER_NO_SEGMENTATION_MASK
         w, h = camera.width, camera.height
-        quiet = _quiet_stdout() if self.backend == "egl" else contextlib.nullcontext()
+        quiet = quiet_c_output() if self.backend == "egl" else contextlib.nullcontext()
         with quiet:
             _, _, rgba, depth, seg = p.getCameraImage(
                 w, h, viewMatrix=view, projectionMatrix=projection_matrix(camera),
@@ -346,7 +362,7 @@ class RenderClient:
             with contextlib.suppress(RendererUnavailableError):
                 self.activate()
         self._closed = True
-        quiet = _quiet_stdout() if self.backend == "egl" else contextlib.nullcontext()
+        quiet = quiet_c_output() if self.backend == "egl" else contextlib.nullcontext()
         with quiet, contextlib.suppress(p.error):
             p.disconnect(physicsClientId=self.client_id)
         if _CURRENT_EGL[0] == self.client_id:

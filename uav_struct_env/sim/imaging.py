@@ -17,13 +17,13 @@ compression. Blur is specified at 1280 px width and scaled with the image width.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from localization.checks import check_number
 from uav_struct_env.errors import ConfigError
 
 __all__ = ["IMAGING_PRESETS", "ImagingModel", "make_imaging"]
@@ -51,12 +51,11 @@ class ImagingModel:
 
     def __post_init__(self) -> None:
         for field in ("blur_sigma_px", "read_noise_dn", "shot_noise_gain"):
-            v = getattr(self, field)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-                raise ConfigError(f"imaging {field} must be a finite number >= 0, got {v!r}")
-        q = self.jpeg_quality
-        if q is not None and (isinstance(q, bool) or not isinstance(q, int) or not 1 <= q <= 100):
-            raise ConfigError(f"imaging jpeg_quality must be an int in [1, 100] or None, got {q!r}")
+            check_number(f"imaging {field}", getattr(self, field), 0,
+                         error=ConfigError, type_error=ConfigError)
+        if self.jpeg_quality is not None:
+            check_number("imaging jpeg_quality (or None)", self.jpeg_quality, 1, 100, integer=True,
+                         error=ConfigError, type_error=ConfigError)
 
     @property
     def is_ideal(self) -> bool:

@@ -30,8 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import pybullet as p
-
+from uav_struct_env.sim.client import p  # imported quietly there
 from uav_struct_env.site.mesh import SiteElement, write_obj
 
 __all__ = ["LoadedScene", "load_elements"]

@@ -24,6 +24,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
+from localization.checks import check_number
 from uav_struct_env.errors import ConfigError
 
 __all__ = [
@@ -223,19 +224,16 @@ class GnssInsNoise:
             "attitude_white_sigma",
         ):
             v = getattr(self, pname)
-            if len(v) != 3 or any(not math.isfinite(x) or x < 0 for x in v):
-                raise ConfigError(
-                    f"GnssInsNoise.{pname} must be three non-negative numbers, got {v!r}"
-                )
-            object.__setattr__(self, pname, tuple(float(x) for x in v))
+            if isinstance(v, (str, bytes)) or not hasattr(v, "__len__") or len(v) != 3:
+                raise ConfigError(f"GnssInsNoise.{pname} must be three non-negative numbers, got {v!r}")
+            object.__setattr__(self, pname, tuple(
+                check_number(f"GnssInsNoise.{pname}[{k}]", x, 0, error=ConfigError, type_error=ConfigError)
+                for k, x in enumerate(v)))
         for pname in ("gnss_bias_tau", "near_structure_scale"):
-            v = getattr(self, pname)
-            if not math.isfinite(v) or v <= 0:
-                raise ConfigError(f"GnssInsNoise.{pname} must be positive, got {v!r}")
-        if not math.isfinite(self.near_structure_gain) or self.near_structure_gain < 0:
-            raise ConfigError(
-                f"GnssInsNoise.near_structure_gain must be >= 0, got {self.near_structure_gain!r}"
-            )
+            check_number(f"GnssInsNoise.{pname}", getattr(self, pname), 0, lo_open=True,
+                         error=ConfigError, type_error=ConfigError)
+        check_number("GnssInsNoise.near_structure_gain", self.near_structure_gain, 0,
+                     error=ConfigError, type_error=ConfigError)
 
     def multipath_factor(self, clearance: float) -> float:
         """Error multiplier ``m(c)`` at clearance ``c`` m from the structure."""

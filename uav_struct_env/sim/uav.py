@@ -31,6 +31,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization.checks import check_number
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.attitude import world_from_cam_from_attitude
 from uav_struct_env.site import Site
@@ -56,10 +57,7 @@ def wrap_angle(a: ArrayLike) -> NDArray[np.float64] | float:
 
 
 def _check_positive(owner: str, name: str, value: float) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ConfigError(f"{owner}.{name} must be a number, got {value!r}")
-    if not math.isfinite(value) or value <= 0:
-        raise ConfigError(f"{owner}.{name} must be positive and finite, got {value!r}")
+    check_number(f"{owner}.{name}", value, 0, lo_open=True, error=ConfigError, type_error=ConfigError)
 
 
 @dataclass(frozen=True)

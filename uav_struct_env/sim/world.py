@@ -27,13 +27,12 @@ import weakref
 from dataclasses import dataclass, replace
 
 import numpy as np
-import pybullet as p
 from numpy.typing import ArrayLike, NDArray
 
 from localization.geometry import check_transform, quat_wxyz_from_matrix
-from uav_struct_env.errors import RendererUnavailableError
+from uav_struct_env.errors import ClosedError, RendererUnavailableError
 from uav_struct_env.sim.camera import Camera, depth_from_buffer, view_matrix
-from uav_struct_env.sim.client import RenderClient, resolve_renderer
+from uav_struct_env.sim.client import RenderClient, p, resolve_renderer  # p: pybullet, imported quietly
 from uav_struct_env.sim.raycast import RayScene, raycast_visibility
 from uav_struct_env.sim.scene import LoadedScene, load_elements
 from uav_struct_env.sim.visibility import landmark_visibility
@@ -206,7 +205,7 @@ class SiteWorld:
 
     def _check_open(self) -> None:
         if self.closed:
-            raise RuntimeError("this SiteWorld is closed")
+            raise ClosedError("this SiteWorld is closed (close() released its pybullet client)")
 
     # ------------------------------------------------------------------------------ rendering
     def render(

@@ -16,13 +16,13 @@ ids are allocated.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from localization.checks import check_number
 from uav_struct_env.errors import SiteGeometryError
 from uav_struct_env.site.polygons import (
     canonical_outline,
@@ -33,6 +33,7 @@ from uav_struct_env.site.polygons import (
 
 __all__ = [
     "ELEMENT_TYPES",
+    "MAX_COORDINATE",
     "Beam",
     "Column",
     "Element",
@@ -42,16 +43,49 @@ __all__ = [
     "Storey",
     "TriangleMesh",
     "Wall",
+    "check_coordinate",
+    "check_length",
+    "check_points",
     "element_boxes",
 ]
 
 
-def _finite(where: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise SiteGeometryError(f"{where} must be a number in metres, got {value!r}")
-    if not math.isfinite(value):
-        raise SiteGeometryError(f"{where} must be finite, got {value!r}")
-    return float(value)
+#: Bound on every plan coordinate and elevation of a site, m: a building site fits in a few km.
+MAX_COORDINATE = 10_000.0
+
+
+def check_coordinate(where: str, value: object, bound: float | None = MAX_COORDINATE) -> float:
+    """A coordinate or elevation in metres, finite and within ``bound`` of the origin.
+
+    Parametric buildings and site files are held to :data:`MAX_COORDINATE`; elements as such
+    (an imported IFC file keeps its own world frame) only to being finite (``bound=None``).
+
+    Raises:
+        SiteGeometryError: naming ``where`` (a non-number too: site data comes from files).
+    """
+    lo, hi = (None, None) if bound is None else (-bound, bound)
+    return check_number(f"{where} (m)", value, lo, hi, error=SiteGeometryError, type_error=SiteGeometryError)
+
+
+def check_length(where: str, value: object, hi: float, *, lo: float = 0.0, lo_open: bool = True,
+                 type_error: type[Exception] = TypeError) -> float:
+    """A length in metres in ``(lo, hi]`` (``[lo, hi]`` without ``lo_open``).
+
+    Raises:
+        SiteGeometryError: out of range, NaN or infinite, naming ``where``.
+        ``type_error``: not a number.
+    """
+    return check_number(f"{where} (m)", value, lo, hi, lo_open=lo_open, error=SiteGeometryError,
+                        type_error=type_error)
+
+
+def check_points(
+    where: str, value: object, dim: int, bound: float | None = MAX_COORDINATE
+) -> tuple[float, ...]:
+    """A point of ``dim`` coordinates (a JSON list or tuple), each by :func:`check_coordinate`."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != dim:
+        raise SiteGeometryError(f"{where} must be {dim} numbers, got {value!r}")
+    return tuple(check_coordinate(f"{where}[{k}]", v, bound) for k, v in enumerate(value))
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,7 +165,8 @@ class Element:
         if isinstance(self.storey, bool) or not isinstance(self.storey, (int, np.integer)) or self.storey < 0:
             raise SiteGeometryError(f"{where} storey must be an int >= 0, got {self.storey!r}")
         object.__setattr__(self, "outline", canonical_outline(self.outline, f"{where} outline"))
-        z0, z1 = _finite(f"{where} z_bottom", self.z_bottom), _finite(f"{where} z_top", self.z_top)
+        z0 = check_coordinate(f"{where} z_bottom", self.z_bottom, None)
+        z1 = check_coordinate(f"{where} z_top", self.z_top, None)
         if not z1 > z0:
             raise SiteGeometryError(f"{where} z_top = {z1} m must exceed z_bottom = {z0} m")
         object.__setattr__(self, "z_bottom", z0)
@@ -166,10 +201,7 @@ class Column(Element):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        ax = tuple(_finite(f"column {self.name!r} axis", float(c)) for c in self.axis)
-        if len(ax) != 2:
-            raise SiteGeometryError(f"column {self.name!r} axis must be (x, y), got {self.axis!r}")
-        object.__setattr__(self, "axis", ax)
+        object.__setattr__(self, "axis", check_points(f"column {self.name!r} axis", self.axis, 2, None))
 
     @property
     def x(self) -> float:

@@ -10,7 +10,10 @@ Example (the paper's building without markers)::
      "markers": [{"id": 0, "side": 1.0, "center": [2.0, -3.3, 0.01]}]}
 
 Every value is validated by the dataclasses themselves, so a file describing impossible geometry
-raises the same :class:`~uav_struct_env.errors.SiteGeometryError` as code would.
+raises the same :class:`~uav_struct_env.errors.SiteGeometryError` as code would, naming the field:
+every number finite and within the physical bounds of :mod:`uav_struct_env.site.parametric`
+(``MAX_SPAN``, ``MAX_STOREY_HEIGHT``, ...), every field of the right type and length, and sizes
+that would take long to build (``MAX_COLUMNS``, ``MAX_OPENINGS``) refused before anything is built.
 """
 
 from __future__ import annotations
@@ -21,13 +24,15 @@ from pathlib import Path
 from typing import Any
 
 from uav_struct_env.errors import SiteGeometryError
-from uav_struct_env.site.model import ArucoMarker, Site
-from uav_struct_env.site.parametric import Building, ColumnGrid, Opening, building_site
+from uav_struct_env.site.model import ARUCO_DICTIONARY_SIZES, ArucoMarker, Site
+from uav_struct_env.site.parametric import MAX_OPENINGS, Building, ColumnGrid, Opening, building_site
 
 __all__ = ["load_site", "save_site", "site_from_dict", "site_to_dict"]
 
 
 _SITE_KEYS = ("building", "stage", "markers", "ground_size", "name")
+#: Markers have unique ids in one dictionary: never more than the largest dictionary holds.
+MAX_MARKERS = max(ARUCO_DICTIONARY_SIZES.values())
 
 
 def site_to_dict(site: Site) -> dict[str, Any]:
@@ -75,6 +80,14 @@ def _build(cls, data: Any, where: str, **nested):
         raise SiteGeometryError(f"{where}: {err}") from None
 
 
+def _list(value: Any, where: str, limit: int) -> list:
+    if not isinstance(value, list):
+        raise SiteGeometryError(f"{where} must be a JSON list, got {value!r}"[:300])
+    if len(value) > limit:
+        raise SiteGeometryError(f"{where} has {len(value)} entries, more than the {limit} supported")
+    return value
+
+
 def site_from_dict(data: dict[str, Any]) -> Site:
     """Build a :class:`Site` from a dict as written by :func:`site_to_dict`.
 
@@ -86,10 +99,11 @@ def site_from_dict(data: dict[str, Any]) -> Site:
         return _build(ColumnGrid, v, where)
 
     def openings(v, where):
-        return tuple(_build(Opening, o, f"{where}[{i}]") for i, o in enumerate(v))
+        return tuple(_build(Opening, o, f"{where}[{i}]") for i, o in enumerate(_list(v, where, MAX_OPENINGS)))
 
     def markers(v, where):
-        return tuple(_build(ArucoMarker, m, f"{where}[{i}]") for i, m in enumerate(v))
+        items = _list(v, where, MAX_MARKERS)
+        return tuple(_build(ArucoMarker, m, f"{where}[{i}]") for i, m in enumerate(items))
 
     def building(v, where):
         return _build(Building, v, where, grid=grid, openings=openings)
@@ -115,8 +129,10 @@ def load_site(path: str | Path) -> Site:
         data = json.loads(path.read_text())
     except FileNotFoundError:
         raise FileNotFoundError(f"site file {str(path)!r} does not exist") from None
-    except json.JSONDecodeError as err:
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise SiteGeometryError(f"site file {str(path)!r} is not valid JSON: {err}") from None
+    except RecursionError:
+        raise SiteGeometryError(f"site file {str(path)!r} is nested too deeply to be a site") from None
     return site_from_dict(data)
 
 

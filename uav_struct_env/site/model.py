@@ -26,8 +26,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from localization.checks import check_number
 from uav_struct_env.errors import SiteGeometryError
-from uav_struct_env.site.elements import Column, Element, Slab, Stage, Storey
+from uav_struct_env.site.elements import Column, Element, Slab, Stage, Storey, check_length, check_points
 from uav_struct_env.site.landmarks import (
     LANDMARK_SETS,
     STRUCTURAL_SETS,
@@ -35,7 +36,7 @@ from uav_struct_env.site.landmarks import (
     LandmarkSet,
     exposed_landmarks,
 )
-from uav_struct_env.site.parametric import STAGES, Building, ColumnGrid, Opening, _positive
+from uav_struct_env.site.parametric import STAGES, Building, ColumnGrid, Opening
 
 __all__ = [
     "ARUCO_DICTIONARY_SIZES",
@@ -51,6 +52,11 @@ __all__ = [
     "Site",
     "Slab",
 ]
+
+#: Bounds of a marker's side (m), of its quiet zone (times the side) and of the ground (m).
+MAX_MARKER_SIDE = 10.0
+MAX_QUIET_ZONE = 10.0
+MAX_GROUND_SIZE = 20_000.0
 
 #: Number of markers in each supported OpenCV ArUco dictionary.
 ARUCO_DICTIONARY_SIZES = {"DICT_4X4_50": 50, "DICT_4X4_100": 100, "DICT_5X5_50": 50}
@@ -73,8 +79,8 @@ class ArucoMarker:
     quiet_zone: float = 0.25
 
     def __post_init__(self) -> None:
-        _positive(f"marker {self.id} side", self.side)
-        if self.dictionary not in ARUCO_DICTIONARY_SIZES:
+        check_length(f"marker {self.id} side", self.side, MAX_MARKER_SIDE)
+        if not isinstance(self.dictionary, str) or self.dictionary not in ARUCO_DICTIONARY_SIZES:
             raise SiteGeometryError(
                 f"marker {self.id} dictionary must be one of {sorted(ARUCO_DICTIONARY_SIZES)}, "
                 f"got {self.dictionary!r}"
@@ -84,9 +90,11 @@ class ArucoMarker:
             raise SiteGeometryError(
                 f"marker id must be an int in [0, {n}) for {self.dictionary}, got {self.id!r}"
             )
-        if self.quiet_zone < 0:
-            raise SiteGeometryError(f"marker {self.id} quiet_zone must be >= 0, got {self.quiet_zone!r}")
-        object.__setattr__(self, "center", tuple(float(c) for c in self.center))
+        check_number(f"marker {self.id} quiet_zone", self.quiet_zone, 0.0, MAX_QUIET_ZONE,
+                     error=SiteGeometryError, type_error=SiteGeometryError)
+        check_number(f"marker {self.id} yaw (rad)", self.yaw, error=SiteGeometryError,
+                     type_error=SiteGeometryError)
+        object.__setattr__(self, "center", check_points(f"marker {self.id} center", self.center, 3))
 
     @property
     def world_from_marker(self) -> NDArray[np.float64]:
@@ -169,7 +177,9 @@ class Site:
             missing = sorted((st.built | set(st.floor)) - known)
             if missing:
                 raise SiteGeometryError(f"stage {st.name!r} names unknown elements {missing[:5]}")
-        _positive("ground_size", self.ground_size)
+        check_length("ground_size", self.ground_size, MAX_GROUND_SIZE, type_error=SiteGeometryError)
+        if not isinstance(self.name, str):
+            raise SiteGeometryError(f"site name must be a string, got {self.name!r}")
         ids = [m.id for m in self.markers]
         dupes = sorted({i for i in ids if ids.count(i) > 1})
         if dupes:

@@ -15,7 +15,6 @@ their short names ``"slab"`` and ``"columns"`` as aliases.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -23,7 +22,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uav_struct_env.errors import SiteGeometryError
-from uav_struct_env.site.elements import Column, Element, Hole, Slab, Stage, Storey
+from uav_struct_env.site.elements import (
+    Column,
+    Element,
+    Hole,
+    Slab,
+    Stage,
+    Storey,
+    check_length,
+    check_points,
+)
 from uav_struct_env.site.polygons import rectangle
 
 __all__ = ["STAGES", "Building", "ColumnGrid", "Opening", "building_site"]
@@ -33,14 +41,28 @@ STAGES = ("slab", "columns")
 
 #: Upper bound on columns, floors and openings of a parametric building (memory and time).
 MAX_COLUMNS = 10_000
+#: Upper bound on slab openings (each is checked against every column and every other opening).
+MAX_OPENINGS = 200
+#: Physical bounds, m: a span between grid lines, the building's plan extent along each axis, a
+#: storey height, the column section, the slab thickness and its overhang past the grid.
+MAX_SPAN = 200.0
+MAX_EXTENT = 2_000.0
+MAX_STOREY_HEIGHT = 50.0
+MAX_SECTION = 10.0
+MAX_SLAB_THICKNESS = 5.0
+MAX_OVERHANG = 50.0
 
 
-def _positive(name: str, value: float) -> float:
-    if not isinstance(value, (int, float, np.floating, np.integer)) or isinstance(value, bool):
-        raise TypeError(f"{name} must be a number, got {value!r}")
-    if not math.isfinite(value) or value <= 0:
-        raise SiteGeometryError(f"{name} must be a positive finite length in metres, got {value!r}")
-    return float(value)
+def _sequence(where: str, value: object, n: int | None = None, *, limit: int | None = None) -> tuple:
+    """``value`` as a tuple: a list or tuple of exactly ``n`` entries (else non-empty, at most ``limit``)."""
+    what = f"{n} numbers" if n is not None else "a non-empty list"
+    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list)):
+        raise SiteGeometryError(f"{where} must be {what}, got {value!r}"[:300])
+    if (n is not None and len(value) != n) or (n is None and len(value) == 0):
+        raise SiteGeometryError(f"{where} must be {what}, got {len(value)} entries: {value!r}"[:300])
+    if limit is not None and len(value) > limit:
+        raise SiteGeometryError(f"{where} has {len(value)} entries, more than the {limit} supported")
+    return tuple(value)
 
 
 @dataclass(frozen=True)
@@ -54,18 +76,18 @@ class ColumnGrid:
     spans_y: tuple[float, ...]
 
     def __post_init__(self) -> None:
-        for axis in ("x", "y"):
-            spans = getattr(self, f"spans_{axis}")
-            if isinstance(spans, (int, float)) or len(spans) == 0:
-                raise SiteGeometryError(
-                    f"spans_{axis} must be a non-empty sequence of span lengths, got {spans!r}"
-                )
-            for k, s in enumerate(spans):
-                _positive(f"spans_{axis}[{k}]", s)
-            object.__setattr__(self, f"spans_{axis}", tuple(float(s) for s in spans))
-        nx, ny = self.shape
-        if nx * ny > MAX_COLUMNS:
+        spans_x = _sequence("spans_x", self.spans_x)
+        spans_y = _sequence("spans_y", self.spans_y)
+        nx, ny = len(spans_x) + 1, len(spans_y) + 1
+        if nx * ny > MAX_COLUMNS:  # before looking at the values: refused in microseconds
             raise SiteGeometryError(f"a grid of {nx} x {ny} columns exceeds the {MAX_COLUMNS} supported")
+        for axis, spans in (("x", spans_x), ("y", spans_y)):
+            spans = tuple(check_length(f"spans_{axis}[{k}]", s, MAX_SPAN) for k, s in enumerate(spans))
+            if sum(spans) > MAX_EXTENT:
+                raise SiteGeometryError(
+                    f"spans_{axis} add up to {sum(spans)} m, more than the {MAX_EXTENT} m supported"
+                )
+            object.__setattr__(self, f"spans_{axis}", spans)
 
     @property
     def xs(self) -> NDArray[np.float64]:
@@ -95,10 +117,13 @@ class Opening:
     size: tuple[float, float]  # (along x, along y)
 
     def __post_init__(self) -> None:
-        _positive(f"opening {self.name!r} size[0]", self.size[0])
-        _positive(f"opening {self.name!r} size[1]", self.size[1])
-        object.__setattr__(self, "center", (float(self.center[0]), float(self.center[1])))
-        object.__setattr__(self, "size", (float(self.size[0]), float(self.size[1])))
+        if not isinstance(self.name, str) or not self.name:
+            raise SiteGeometryError(f"opening name must be a non-empty string, got {self.name!r}")
+        where = f"opening {self.name!r}"
+        object.__setattr__(self, "center", check_points(f"{where} center", self.center, 2))
+        size = _sequence(f"{where} size", self.size, 2)
+        object.__setattr__(self, "size", tuple(check_length(f"{where} size[{k}]", v, MAX_EXTENT)
+                                               for k, v in enumerate(size)))
 
     @property
     def bounds(self) -> tuple[float, float, float, float]:
@@ -124,19 +149,30 @@ class Building:
     openings: tuple[Opening, ...] = ()
 
     def __post_init__(self) -> None:
-        if len(self.storey_heights) < 1:
-            raise SiteGeometryError(f"storey_heights needs at least one storey, got {self.storey_heights!r}")
-        if len(self.storey_heights) * self.grid.shape[0] * self.grid.shape[1] > MAX_COLUMNS:
+        if not isinstance(self.grid, ColumnGrid):
+            raise SiteGeometryError(f"grid must be a ColumnGrid, got {self.grid!r}")
+        heights = _sequence("storey_heights", self.storey_heights)
+        if len(heights) * self.grid.shape[0] * self.grid.shape[1] > MAX_COLUMNS:
             raise SiteGeometryError(
-                f"{len(self.storey_heights)} storeys of {self.grid.shape[0]} x {self.grid.shape[1]} "
+                f"{len(heights)} storeys of {self.grid.shape[0]} x {self.grid.shape[1]} "
                 f"columns exceed the {MAX_COLUMNS} supported"
             )
-        t = _positive("slab_thickness", self.slab_thickness)
-        for k, h in enumerate(self.storey_heights):
-            if _positive(f"storey_heights[{k}]", h) <= t:
+        openings = () if self.openings == () else _sequence("openings", self.openings, limit=MAX_OPENINGS)
+        for k, op in enumerate(openings):
+            if not isinstance(op, Opening):
+                raise SiteGeometryError(f"openings[{k}] must be an Opening, got {op!r}")
+        object.__setattr__(self, "openings", openings)
+        t = check_length("slab_thickness", self.slab_thickness, MAX_SLAB_THICKNESS)
+        heights = tuple(check_length(f"storey_heights[{k}]", h, MAX_STOREY_HEIGHT)
+                        for k, h in enumerate(heights))
+        for k, h in enumerate(heights):
+            if h <= t:
                 raise SiteGeometryError(f"storey_heights[{k}] = {h} m must exceed slab_thickness = {t} m")
-        sx = _positive("column_section[0]", self.column_section[0])
-        sy = _positive("column_section[1]", self.column_section[1])
+        object.__setattr__(self, "storey_heights", heights)
+        section = _sequence("column_section", self.column_section, 2)
+        sx, sy = (check_length(f"column_section[{k}]", v, MAX_SECTION) for k, v in enumerate(section))
+        object.__setattr__(self, "column_section", (sx, sy))
+        object.__setattr__(self, "slab_thickness", t)
         for axis, spans, sec in (("x", self.grid.spans_x, sx), ("y", self.grid.spans_y, sy)):
             for k, span in enumerate(spans):
                 if span <= sec:
@@ -144,7 +180,9 @@ class Building:
                         f"columns overlap: spans_{axis}[{k}] = {span} m is not larger than the "
                         f"column section {sec} m"
                     )
-        if not math.isfinite(self.slab_overhang) or self.slab_overhang < max(sx, sy) / 2:
+        overhang = check_length("slab_overhang", self.slab_overhang, MAX_OVERHANG, lo_open=False)
+        object.__setattr__(self, "slab_overhang", overhang)
+        if overhang < max(sx, sy) / 2:
             raise SiteGeometryError(
                 f"slab_overhang = {self.slab_overhang} m must cover the columns' half section "
                 f"{max(sx, sy) / 2} m"

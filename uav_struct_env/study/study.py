@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from collections.abc import Sequence
@@ -27,6 +26,7 @@ from uav_struct_env.study.report import (
     write_results_json,
 )
 from uav_struct_env.study.run import StudyInterrupted, run_units
+from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_output_dir, check_site, refuse
 
 __all__ = ["main", "run_study"]
 
@@ -94,8 +94,8 @@ def run_study(
     return results
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+def _parser() -> CommandParser:
+    p = CommandParser(
         prog="uav-struct study",
         description="Reproduce the paper's four-UAV study (Tables I and II, Fig. 2).",
     )
@@ -206,9 +206,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             as_built=args.as_built,
             as_built_scale=args.as_built_scale,
         )
-    except (ValueError, ImportError) as err:
-        print(f"uav-struct study: error: {err}", file=sys.stderr)
-        return 2
+        check_site(args.site, args.stage, seed=args.seed)
+        check_output_dir(args.out, overwrite=args.overwrite)
+    except INPUT_ERRORS as err:
+        return refuse("uav-struct study", err)
     if config.skipped_methods:
         floor = config.scene_stage(config.selected_methods[0].scene)
         print(f"uav-struct study: note: {', '.join(config.skipped_methods)} left out: the floor of "
@@ -217,8 +218,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         results = run_study(config, args.out, progress=not args.no_progress,
                             figures=not args.no_figures, overwrite=args.overwrite)
     except (OutputExistsError, NotADirectoryError) as err:
-        print(f"uav-struct study: error: {err}", file=sys.stderr)
-        return 2
+        return refuse("uav-struct study", err)
+    except OSError as err:  # e.g. the disk filled up while the results were written
+        return refuse("uav-struct study", f"{err}; nothing written to {args.out}", status=1)
     except StudyInterrupted as stop:
         print(f"uav-struct study: interrupted: {stop}; nothing written to {args.out}",
               file=sys.stderr)

@@ -24,7 +24,6 @@ Example (the committed model, see ``localization/models/MODEL_CARD.md``)::
 
 from __future__ import annotations
 
-import argparse
 import json
 import warnings
 from pathlib import Path
@@ -37,8 +36,15 @@ from torch.nn import functional as F
 
 from localization.inference import OnnxNet
 from uav_struct_env.datasets.landmarks import LANDMARK_TYPES, load_labels
-from uav_struct_env.outputs import atomic_path, atomic_write_json, claim_output_dir
-from uav_struct_env.training.train_loop import add_training_arguments, fit, make_loader
+from uav_struct_env.errors import UsageError
+from uav_struct_env.outputs import atomic_path, atomic_write_json, prepare_output_dir
+from uav_struct_env.training.train_loop import (
+    add_training_arguments,
+    check_training_arguments,
+    fit,
+    make_loader,
+)
+from uav_struct_env.validate import INPUT_ERRORS, CommandParser, refuse
 
 __all__ = ["KeypointNet", "conv_bn_relu", "export_checked", "export_onnx", "main", "train"]
 
@@ -297,7 +303,7 @@ def train(data: str, out: str, val: str | None = None, minutes: float = 45.0,
 
 def main(argv: list[str] | None = None) -> dict:
     """Command line: ``python -m uav_struct_env.training.train_detector --data DIR --out DIR``."""
-    ap = argparse.ArgumentParser(prog="python -m uav_struct_env.training.train_detector",
+    ap = CommandParser(prog="python -m uav_struct_env.training.train_detector",
                                  description="Train the learned landmark detector.")
     ap.add_argument("--data", required=True, help="training dataset (labels.json or its folder)")
     ap.add_argument("--val", default=None, help="validation dataset (checkpoint selection)")
@@ -305,9 +311,13 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--crop", type=int, nargs=2, default=(256, 192), metavar=("W", "H"))
     add_training_arguments(ap, minutes=45.0, batch=16, lr=3e-3)
     a = ap.parse_args(argv)
-    claim_output_dir(ap, a.out, a.overwrite)
-    if a.crop[0] % 16 or a.crop[1] % 16:
-        raise SystemExit(f"--crop must be multiples of 16, got {a.crop}")
+    try:  # every input before any work or any file
+        check_training_arguments(a)
+        if a.crop[0] % 16 or a.crop[1] % 16 or min(a.crop) < 16:
+            raise UsageError(f"--crop must be positive multiples of 16, got {a.crop}")
+    except INPUT_ERRORS as err:
+        raise SystemExit(refuse(ap.prog, err)) from None
+    prepare_output_dir(a.out, overwrite=a.overwrite)
     summary = train(a.data, a.out, a.val, a.minutes, a.max_steps, a.batch, tuple(a.crop), a.lr,
                     a.width, a.seed, a.threads, a.eval_every, a.workers)
     print(json.dumps(summary, indent=2))

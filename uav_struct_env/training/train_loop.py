@@ -20,9 +20,11 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from uav_struct_env.outputs import atomic_path
+from uav_struct_env.errors import UsageError
+from uav_struct_env.outputs import atomic_path, open_append
+from uav_struct_env.validate import check_option, check_output_dir
 
-__all__ = ["add_training_arguments", "fit", "make_loader"]
+__all__ = ["add_training_arguments", "check_training_arguments", "fit", "make_loader"]
 
 
 def add_training_arguments(ap: argparse.ArgumentParser, *, minutes: float, batch: int,
@@ -31,17 +33,48 @@ def add_training_arguments(ap: argparse.ArgumentParser, *, minutes: float, batch
 
     ``--minutes --max-steps --batch --lr --width --seed --threads --workers --eval-every``.
     """
-    ap.add_argument("--minutes", type=float, default=minutes)
-    ap.add_argument("--max-steps", type=int, default=None)
-    ap.add_argument("--batch", type=int, default=batch)
-    ap.add_argument("--lr", type=float, default=lr)
-    ap.add_argument("--width", type=int, default=16)
+    ap.add_argument("--minutes", type=float, default=minutes, help="wall-time budget")
+    ap.add_argument("--max-steps", type=int, default=None, help="step budget (none: time only)")
+    ap.add_argument("--batch", type=int, default=batch, help="batch size")
+    ap.add_argument("--lr", type=float, default=lr, help="peak learning rate")
+    ap.add_argument("--width", type=int, default=16, help="network width (channels)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=2, help="torch threads")
     ap.add_argument("--workers", type=int, default=1, help="data-loading processes")
-    ap.add_argument("--eval-every", type=int, default=500)
+    ap.add_argument("--eval-every", type=int, default=500, help="validation period, steps")
     ap.add_argument("--overwrite", action="store_true",
                     help="train into an --out folder that already holds files (else refused)")
+
+
+def check_training_arguments(a: argparse.Namespace) -> None:
+    """Check the options of :func:`add_training_arguments` and ``--data`` / ``--val`` / ``--out``.
+
+    Every dataset is read (:func:`~uav_struct_env.datasets.landmarks.load_labels`) and the output
+    folder checked (:func:`uav_struct_env.validate.check_output_dir`) before training starts.
+
+    Raises:
+        UsageError (or OutputExistsError): naming the option and what was expected.
+    """
+    from uav_struct_env.datasets.landmarks import load_labels
+
+    check_option("--minutes", a.minutes, 0, lo_open=True)
+    if a.max_steps is not None:
+        check_option("--max-steps", a.max_steps, 1, integer=True)
+    check_option("--batch", a.batch, 1, integer=True)
+    check_option("--lr", a.lr, 0, lo_open=True)
+    check_option("--width", a.width, 1, integer=True)
+    check_option("--seed", a.seed, 0, integer=True)
+    check_option("--threads", a.threads, 1, integer=True)
+    check_option("--workers", a.workers, 0, integer=True)
+    check_option("--eval-every", a.eval_every, 1, integer=True)
+    check_output_dir(a.out, overwrite=a.overwrite)
+    data = a.data if isinstance(a.data, list) else [a.data]
+    for option, paths in (("--data", data), ("--val", [a.val] if a.val else [])):
+        for path in paths:
+            try:
+                load_labels(path)
+            except (OSError, ValueError) as err:
+                raise UsageError(f"{option} {path!r} is not a landmark dataset: {err}") from None
 
 
 def make_loader(dataset: torch.utils.data.Dataset, batch: int, workers: int,
@@ -76,7 +109,7 @@ def fit(model: nn.Module, loader: Iterable, step_loss: Callable, out_dir: Path, 
     budget = minutes * 60.0
     t0 = time.perf_counter()
     step, best, summary, ema = 0, -1.0, {}, None
-    logf = open(out_dir / "log.jsonl", "a")
+    logf = open_append(out_dir / "log.jsonl")  # a link left there is replaced, not followed
 
     def write(rec: dict) -> None:
         logf.write(json.dumps(rec) + "\n")

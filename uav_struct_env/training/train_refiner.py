@@ -29,7 +29,6 @@ Example (the committed refiner, see ``localization/models/MODEL_CARD.md``)::
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 from collections.abc import Sequence
@@ -44,9 +43,15 @@ from torch.nn import functional as F
 from localization.learned import DEFAULT_MODEL, LANDMARK_TYPES, LearnedDetector, match_detections
 from localization.refine import HALF, PATCH, POSITIVE_RADIUS, extract_patches
 from uav_struct_env.datasets.landmarks import load_labels
-from uav_struct_env.outputs import atomic_path, atomic_write_json, claim_output_dir
+from uav_struct_env.outputs import atomic_path, atomic_write_json, prepare_output_dir
 from uav_struct_env.training.train_detector import LandmarkCrops, conv_bn_relu, export_checked
-from uav_struct_env.training.train_loop import add_training_arguments, fit, make_loader
+from uav_struct_env.training.train_loop import (
+    add_training_arguments,
+    check_training_arguments,
+    fit,
+    make_loader,
+)
+from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_input_file, refuse
 
 __all__ = ["MAX_SHIFT", "PatchNet", "PatchSamples", "export_refiner", "main", "mine", "train"]
 
@@ -292,7 +297,7 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
 
 def main(argv: list[str] | None = None) -> dict:
     """Command line: ``python -m uav_struct_env.training.train_refiner --data DIR --out DIR``."""
-    ap = argparse.ArgumentParser(prog="python -m uav_struct_env.training.train_refiner",
+    ap = CommandParser(prog="python -m uav_struct_env.training.train_refiner",
                                  description="Train the learned detector's patch refiner.")
     ap.add_argument("--data", required=True, nargs="+",
                     help="full-resolution training dataset(s)")
@@ -306,9 +311,13 @@ def main(argv: list[str] | None = None) -> dict:
                          "one when retraining both networks")
     add_training_arguments(ap, minutes=15.0, batch=128, lr=2e-3)
     a = ap.parse_args(argv)
-    if a.detector_model is not None and not Path(a.detector_model).is_file():
-        ap.error(f"--detector-model: no such file: {a.detector_model!r}")
-    claim_output_dir(ap, a.out, a.overwrite)
+    try:  # every input before any work or any file
+        if a.detector_model is not None:
+            check_input_file(a.detector_model, option="--detector-model", what="ONNX file")
+        check_training_arguments(a)
+    except INPUT_ERRORS as err:
+        raise SystemExit(refuse(ap.prog, err)) from None
+    prepare_output_dir(a.out, overwrite=a.overwrite)
     windows = Path(a.windows or Path(a.out) / "windows.npz")
     if not windows.exists():
         mine(a.data, str(windows), model=a.detector_model, seed=a.seed)

@@ -1,0 +1,140 @@
+"""A trained viewpoint policy's files, read back without unpickling anything from them.
+
+``examples/train_viewpoint_ppo.py`` saves SB3's ``model.zip`` and ``vecnormalize.pkl`` (what SB3
+itself reloads to resume training) and, beside them, ``normalization.npz``: the observation
+statistics of ``VecNormalize`` as plain arrays (:func:`save_normalization`). Unpickling a file
+runs whatever code it names, so a model folder from someone else must not be unpickled silently:
+
+* :func:`load_normalization` reads ``normalization.npz`` with ``allow_pickle=False``;
+* :func:`load_ppo` loads ``model.zip`` with every cloudpickled entry of its ``data`` replaced
+  by an object built here (SB3's ``custom_objects``); the weights are read by ``torch.load``
+  with ``weights_only=True`` (SB3's own default). An entry this module does not know is refused.
+
+``vecnormalize.pkl`` is read only when the caller asks for it by name
+(``examples/evaluate_policy.py --trust-pickle``, for folders written before ``normalization.npz``).
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from uav_struct_env.outputs import atomic_path
+
+__all__ = ["NORMALIZATION_FILE", "ObsNormalizer", "load_normalization", "load_ppo", "save_normalization"]
+
+#: File name of the observation statistics beside ``model.zip``.
+NORMALIZATION_FILE = "normalization.npz"
+
+
+@dataclass(frozen=True, eq=False)
+class ObsNormalizer:
+    """``VecNormalize.normalize_obs`` from its statistics: ``clip((x - mean) / sqrt(var + eps))``.
+
+    Attributes:
+        mean: per observation key, the running mean (the key's shape).
+        var: per observation key, the running variance.
+        clip_obs: normalized values are clipped to ``[-clip_obs, clip_obs]``.
+        epsilon: added to the variance.
+    """
+
+    mean: dict[str, np.ndarray]
+    var: dict[str, np.ndarray]
+    clip_obs: float
+    epsilon: float
+
+    def __call__(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The normalized copy of a batch of dict observations (other keys unchanged)."""
+        out = dict(obs)
+        for key, mean in self.mean.items():
+            z = (np.asarray(obs[key]) - mean) / np.sqrt(self.var[key] + self.epsilon)
+            out[key] = np.clip(z, -self.clip_obs, self.clip_obs).astype(np.float32)
+        return out
+
+
+def save_normalization(vec_normalize: Any, path: str | Path) -> Path:
+    """Write the observation statistics of an SB3 ``VecNormalize`` (dict observations) as npz."""
+    rms = vec_normalize.obs_rms
+    if not isinstance(rms, dict):
+        raise TypeError(f"expected VecNormalize over dict observations, got obs_rms {type(rms).__name__}")
+    arrays: dict[str, np.ndarray] = {
+        "clip_obs": np.float64(vec_normalize.clip_obs),
+        "epsilon": np.float64(vec_normalize.epsilon),
+    }
+    for key, stats in rms.items():
+        arrays[f"mean/{key}"] = np.asarray(stats.mean, dtype=np.float64)
+        arrays[f"var/{key}"] = np.asarray(stats.var, dtype=np.float64)
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        np.savez(tmp, **arrays)
+    return path
+
+
+def load_normalization(path: str | Path) -> ObsNormalizer:
+    """Read :func:`save_normalization`'s file (no pickle).
+
+    Raises:
+        ValueError: the file is not such a file (names what is missing or malformed).
+    """
+    with np.load(path, allow_pickle=False) as z:
+        names = set(z.files)
+        missing = {"clip_obs", "epsilon"} - names
+        if missing:
+            raise ValueError(f"{str(path)!r} is not a normalization file: it lacks {sorted(missing)}")
+        mean = {n.split("/", 1)[1]: z[n] for n in names if n.startswith("mean/")}
+        var = {n.split("/", 1)[1]: z[n] for n in names if n.startswith("var/")}
+        if set(mean) != set(var) or any(mean[k].shape != var[k].shape for k in mean):
+            raise ValueError(f"{str(path)!r}: the mean and var entries do not match per key")
+        if any(not np.all(np.isfinite(v)) or np.any(v < 0) for v in var.values()):
+            raise ValueError(f"{str(path)!r}: variances must be finite and >= 0")
+        return ObsNormalizer(mean, var, float(z["clip_obs"]), float(z["epsilon"]))
+
+
+def load_ppo(path: str | Path, observation_space: Any, action_space: Any, *, device: str = "cpu"):
+    """SB3 ``PPO.load`` of ``model.zip`` without unpickling its cloudpickled entries.
+
+    ``observation_space`` and ``action_space`` are the env's (one agent's); the policy class is
+    ``MultiInputPolicy`` for dict observations, else ``MlpPolicy``. Training-only state (the last
+    observations, episode buffers, schedules) is replaced by empty values: the model predicts.
+
+    Raises:
+        ValueError: ``path`` is not an SB3 model file, or holds a pickled entry this function
+            cannot replace.
+    """
+    from gymnasium import spaces
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.policies import ActorCriticPolicy, MultiInputActorCriticPolicy
+
+    try:
+        with zipfile.ZipFile(path) as archive:
+            data = json.loads(archive.read("data"))
+    except (zipfile.BadZipFile, KeyError, ValueError) as err:
+        raise ValueError(f"{str(path)!r} is not a stable-baselines3 model file: {err}") from None
+    pickled = sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
+    policy = MultiInputActorCriticPolicy if isinstance(observation_space, spaces.Dict) else ActorCriticPolicy
+    replacements: dict[str, Any] = {
+        "policy_class": policy,
+        "observation_space": observation_space,
+        "action_space": action_space,
+        "lr_schedule": 0.0,  # rebuilt from the stored float learning_rate
+        "clip_range": 0.2,  # a training setting; prediction does not read it
+        "clip_range_vf": None,
+        "rollout_buffer_class": None,  # chosen from the observation space
+        "_last_obs": None,
+        "_last_episode_starts": None,
+        "_last_original_obs": None,
+        "ep_info_buffer": None,
+        "ep_success_buffer": None,
+    }
+    unknown = [k for k in pickled if k not in replacements]
+    if unknown:
+        raise ValueError(
+            f"{str(path)!r} holds pickled entries {unknown} that cannot be read safely; "
+            "load it with stable_baselines3.PPO.load only if you trust its source"
+        )
+    return PPO.load(path, device=device, custom_objects={k: replacements[k] for k in pickled})
