@@ -42,6 +42,8 @@ bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in d
 # patch refiner mined from that network's candidates (1.5 + 15 min), into $(DETECTOR_RUN).
 # Evaluate the result with benchmarks/detector.py --model/--refiner and uav-struct study
 # --detector learned --detector-model/--refiner-model (README, "With the learned detector").
+# make reruns a step only when its output is missing or older than its inputs, so each step
+# replaces the folder it finds there (--overwrite): a stale or half-written earlier run.
 DETECTOR_RUN ?= runs/detector
 DATA := $(DETECTOR_RUN)/data
 DATASET := $(BIN)/python -m uav_struct_env.datasets
@@ -49,24 +51,24 @@ DATASET := $(BIN)/python -m uav_struct_env.datasets
 detector: $(DETECTOR_RUN)/refiner/refiner.onnx
 
 $(DATA)/keypoint_train/labels.json: | $(STAMP)
-	$(DATASET) $(DATA)/keypoint_train --layouts 200 --views 15 --seed 0 --workers 2
+	$(DATASET) $(DATA)/keypoint_train --layouts 200 --views 15 --seed 0 --workers 2 --overwrite
 $(DATA)/keypoint_val/labels.json: | $(STAMP)
-	$(DATASET) $(DATA)/keypoint_val --layouts 6 --views 10 --seed 1
+	$(DATASET) $(DATA)/keypoint_val --layouts 6 --views 10 --seed 1 --overwrite
 $(DATA)/refiner_train/labels.json: | $(STAMP)
-	$(DATASET) $(DATA)/refiner_train --layouts 150 --views 10 --seed 3 --scale 1.0 --workers 2
+	$(DATASET) $(DATA)/refiner_train --layouts 150 --views 10 --seed 3 --scale 1.0 --workers 2 --overwrite
 $(DATA)/refiner_val/labels.json: | $(STAMP)
-	$(DATASET) $(DATA)/refiner_val --layouts 6 --views 10 --seed 1 --scale 1.0
+	$(DATASET) $(DATA)/refiner_val --layouts 6 --views 10 --seed 1 --scale 1.0 --overwrite
 
 $(DETECTOR_RUN)/keypoint/model.onnx: $(DATA)/keypoint_train/labels.json $(DATA)/keypoint_val/labels.json
 	$(BIN)/python -m uav_struct_env.training.train_detector --data $(DATA)/keypoint_train \
 		--val $(DATA)/keypoint_val --out $(DETECTOR_RUN)/keypoint --minutes 42 --batch 16 \
-		--crop 256 192 --workers 1 --threads 2 --eval-every 400 --seed 0
+		--crop 256 192 --workers 1 --threads 2 --eval-every 400 --seed 0 --overwrite
 
 $(DETECTOR_RUN)/refiner/refiner.onnx: $(DETECTOR_RUN)/keypoint/model.onnx \
 		$(DATA)/refiner_train/labels.json $(DATA)/refiner_val/labels.json
 	$(BIN)/python -m uav_struct_env.training.train_refiner --data $(DATA)/refiner_train \
 		--val $(DATA)/refiner_val --out $(DETECTOR_RUN)/refiner --minutes 15 --eval-every 1000 \
-		--workers 1 --seed 0 --detector-model $(DETECTOR_RUN)/keypoint/model.onnx
+		--workers 1 --seed 0 --detector-model $(DETECTOR_RUN)/keypoint/model.onnx --overwrite
 
 clean:
 	rm -rf $(VENV) renders results site

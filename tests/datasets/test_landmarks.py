@@ -70,3 +70,37 @@ def test_bad_config():
         DatasetConfig(scale=2.0)
     with pytest.raises(ConfigError, match="n_layouts"):
         DatasetConfig(n_layouts=0)
+
+
+def test_an_ifc_building_dataset_labels_its_own_landmarks(tmp_path):
+    """``--site building.ifc``: every layout is that building at one of its stages."""
+    pytest.importorskip("ifcopenshell")
+    from pathlib import Path
+
+    from localization.geometry import project
+    from uav_struct_env.site import ifc_stages, load_ifc
+
+    duplex = Path(__file__).resolve().parents[1] / "data" / "ifc" / "duplex.ifc"
+    out = tmp_path / "duplex"
+    assert cli_main([str(out), "--site", str(duplex), "--layouts", "2", "--views", "2",
+                     "--seed", "3", "--scale", "0.25", "--renderer", "tiny"]) == 0
+    data = load_labels(out)
+    assert data["config"]["site"] == str(duplex)
+    n = 0
+    for rec in data["images"]:
+        assert rec["stage"] in ifc_stages(duplex)
+        site = load_ifc(duplex, rec["stage"])
+        xyz = {i: p for name in LANDMARK_TYPES
+               for i, p in zip(site.landmarks(name).ids, site.landmarks(name).xyz, strict=True)}
+        for u, v, _, i in rec["keypoints"]:
+            uv, _ = project(np.asarray(rec["K"]), np.asarray(rec["cam_from_world"]), xyz[int(i)][None])
+            assert np.allclose(uv[0], (u, v), atol=1e-6)
+            n += 1
+    assert n > 0
+
+
+def test_a_missing_site_file_is_refused_before_anything_is_written(tmp_path, capsys):
+    out = tmp_path / "never"
+    assert cli_main([str(out), "--site", str(tmp_path / "missing.ifc")]) == 2
+    assert "DatasetConfig.site must be 'random' or an existing site file" in capsys.readouterr().err
+    assert not out.exists()

@@ -12,6 +12,7 @@ import gc
 import os
 import tempfile
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ from uav_struct_env.sim.client import egl_plugin_path
 from uav_struct_env.wrappers import make_localization_env
 
 MIB = 2**20
+DUPLEX = Path(__file__).resolve().parents[1] / "data" / "ifc" / "duplex.ifc"
 
 
 def _rss_mib() -> float:
@@ -39,6 +41,36 @@ def _make_env(renderer: str):
 
 def _make_wrapped(renderer: str):
     return make_localization_env("column_tops", env_overrides={"renderer": renderer})
+
+
+def _world_on_ifc(renderer: str):
+    """A SiteWorld of the duplex (an imported IFC site) that renders one view per "step"."""
+    pytest.importorskip("ifcopenshell")
+    from localization.geometry import look_at
+    from uav_struct_env.sim.world import SiteWorld
+    from uav_struct_env.site import load_ifc
+
+    world = SiteWorld(load_ifc(DUPLEX, "Level 2/slab"), renderer=renderer, image_size=(320, 180))
+
+    class Session:
+        agents = ["camera"]
+
+        def reset(self, seed):
+            self.rng = np.random.default_rng(seed)
+
+        def action_space(self, agent):
+            from gymnasium import spaces
+
+            return spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+        def step(self, actions):
+            eye = np.array([*(30 * np.asarray(actions["camera"], dtype=float)), 20.0])
+            world.render(look_at(eye, np.asarray(world.site.center)), depth=True)
+
+        def close(self):
+            world.close()
+
+    return Session()
 
 
 def _cycle(make, renderer: str, seed: int) -> None:
@@ -79,6 +111,14 @@ def test_create_close_cycles_leak_nothing(make, renderer, tmp_path, monkeypatch)
     _check(got, max_mib=80)
 
 
+def test_site_world_cycles_on_an_ifc_site_leak_nothing(tmp_path, monkeypatch):
+    # An imported site's element meshes and textures are files too (about 2-4 s a cycle for the
+    # duplex here, so fewer cycles than above; the slow test runs 100 on every renderer).
+    got = _growth(_world_on_ifc, "tiny", cycles=5, warmup=2, tmp=str(tmp_path), monkeypatch=monkeypatch)
+    assert got["per_cycle"] < 2.0, f"median {got['per_cycle']:.1f} MiB a cycle"
+    _check(got, max_mib=40)
+
+
 def _check(got: dict, max_mib: float) -> None:
     assert got["mib"] < max_mib, f"{got['mib']:.1f} MiB"
     before, after = got["resources"]
@@ -88,7 +128,8 @@ def _check(got: dict, max_mib: float) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("renderer", RENDERERS)
-@pytest.mark.parametrize("make", [_make_env, _make_wrapped], ids=["env", "wrapped"])
+@pytest.mark.parametrize("make", [_make_env, _make_wrapped, _world_on_ifc],
+                         ids=["env", "wrapped", "ifc-world"])
 def test_a_hundred_create_close_cycles_grow_less_than_50_mib(make, renderer, tmp_path, monkeypatch):
     _check(_growth(make, renderer, cycles=100, warmup=2, tmp=str(tmp_path), monkeypatch=monkeypatch),
            max_mib=50)

@@ -94,9 +94,11 @@ def test_settings_line_names_every_setting_and_the_version():
                  "robust association", "gnss_ins prior", "pixel sigma 1.0 px", "miss rate 0.1",
                  "false positives 1.0/image", "camera imaging", "seed 3", "QUICK"):
         assert part in line, part
+    assert "site paper, as designed" in line
+    assert "site paper, as built aci117 x 4" in settings_line(_results(as_built="aci117", as_built_scale=4))
     results = _results()
-    results["config"]["as_built"] = True  # a setting added later is listed all the same
-    assert "as_built True" in settings_line(results)
+    results["config"]["new_setting"] = True  # a setting added later is listed all the same
+    assert "new_setting True" in settings_line(results)
 
 
 def test_table2_opens_with_the_settings_and_sets_counts_against_the_paper_only_when_alike():

@@ -19,13 +19,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="dataset seed (held-out sets: another)")
     ap.add_argument("--scale", type=float, default=0.5, help="saved image scale of 1280x720")
     ap.add_argument("--renderer", default="auto", choices=["auto", "tiny", "egl"])
+    ap.add_argument("--site", default="random",
+                    help="random (a new random site per layout, default) or a site file (*.json) / "
+                         "IFC file (*.ifc): that building at a stage drawn per layout")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--overwrite", action="store_true",
                     help="replace a dataset already in out_dir (otherwise such a folder is refused)")
     args = ap.parse_args(argv)
-    config = DatasetConfig(n_layouts=args.layouts, views_per_layout=args.views, seed=args.seed,
-                           scale=args.scale, renderer=args.renderer)
     prog = ap.prog
+    try:
+        config = DatasetConfig(n_layouts=args.layouts, views_per_layout=args.views, seed=args.seed,
+                               scale=args.scale, renderer=args.renderer, site=args.site)
+    except ValueError as err:
+        print(f"{prog}: error: {err}", file=sys.stderr)
+        return 2
     try:
         path = generate(config, args.out_dir, workers=args.workers, overwrite=args.overwrite)
     except (OutputExistsError, NotADirectoryError) as err:

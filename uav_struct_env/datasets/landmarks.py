@@ -2,7 +2,9 @@
 
 Used to train and evaluate the learned landmark detector (:mod:`localization.learned`).
 Each *layout* is one random site (:func:`uav_struct_env.site.random_site`, both construction
-stages, with or without ArUco markers) with its own concrete/ground textures, a random texture
+stages, with or without ArUco markers) -- or, with ``site`` a site file or an IFC file, that
+building at one of its stages drawn per layout (``python -m uav_struct_env.datasets OUT --site
+building.ifc``: a held-out set on a real building) -- with its own concrete/ground textures, a random texture
 resolution and 3-14 clutter boxes (stacks of building material and equipment-sized boxes on the
 ground, a few small stacks on the slab away from its edges). Each layout is seen from
 ``views_per_layout`` random viewpoints: any azimuth, 10-40 m out from the slab edge, 8-30 m up,
@@ -47,7 +49,7 @@ from numpy.typing import NDArray
 from localization.geometry import look_at
 from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError
-from uav_struct_env.site import Site, random_site
+from uav_struct_env.site import Site, make_site, random_site
 
 __all__ = ["LANDMARK_TYPES", "DatasetConfig", "generate", "load_labels", "render_layout"]
 
@@ -74,8 +76,19 @@ class DatasetConfig:
     height: tuple[float, float] = (8.0, 30.0)
     renderer: str = "auto"
     source_size: tuple[int, int] = PAPER_IMAGE_SIZE
+    site: str = "random"
 
     def __post_init__(self) -> None:
+        if not isinstance(self.site, str) or not (
+            self.site == "random"
+            or (self.site.lower().endswith((".json", ".ifc")) and Path(self.site).is_file())
+        ):
+            raise ConfigError(
+                f"DatasetConfig.site must be 'random' or an existing site file (*.json) or IFC file "
+                f"(*.ifc), got {self.site!r}"
+            )
+        if self.site != "random":
+            object.__setattr__(self, "site", str(Path(self.site).resolve()))
         for name in ("n_layouts", "views_per_layout", "seed"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < (0 if name == "seed" else 1):
@@ -171,9 +184,15 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
     from uav_struct_env.sim.world import SiteWorld
 
     rng = np.random.default_rng([config.seed, layout])
-    stage = str(rng.choice(["slab", "columns"]))
-    marker_size = [None, 0.5, 1.0][int(rng.integers(3))]
-    site = random_site(rng, stage=stage, marker_size=marker_size)
+    if config.site == "random":
+        stage = str(rng.choice(["slab", "columns"]))
+        marker_size = [None, 0.5, 1.0][int(rng.integers(3))]
+        site = random_site(rng, stage=stage, marker_size=marker_size)
+    else:
+        stages = [st.name for st in make_site(config.site, _first_stage(config.site), None).stages]
+        stage = str(rng.choice(stages))
+        marker_size = [None, 0.5, 1.0][int(rng.integers(3))]
+        site = make_site(config.site, stage, marker_size)
     texture_size = int(rng.choice([128, 256, 512]))
     camera = Camera().scaled(*config.source_size)
     out_w, out_h = config.image_size
@@ -202,6 +221,15 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
                       "cam_from_world": cam_from_world.tolist(), "keypoints": keypoints}
             out.append((rgb, record))
     return out
+
+
+def _first_stage(path: str) -> str | None:
+    """A stage to open ``path`` at (an IFC file needs one; a site file has its own)."""
+    if path.lower().endswith(".ifc"):
+        from uav_struct_env.site.ifc import ifc_stages
+
+        return ifc_stages(path)[0]
+    return None
 
 
 def _layout_job(args):

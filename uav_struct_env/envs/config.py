@@ -25,12 +25,13 @@ from typing import Any
 import numpy as np
 
 from localization.synthetic import PAPER_IMAGE_SIZE
-from uav_struct_env.errors import ConfigError
+from uav_struct_env.errors import ConfigError, SiteGeometryError
 from uav_struct_env.sim.imaging import ImagingModel, make_imaging
 from uav_struct_env.sim.schedule import ScheduleSpec
 from uav_struct_env.sim.sensors import SensorModel, make_noise
 from uav_struct_env.sim.uav import FlightLimits, Geofence
 from uav_struct_env.site import LANDMARK_SETS, Site, paper_site
+from uav_struct_env.site.as_built import AsBuilt, make_as_built
 
 __all__ = ["PRESETS", "RENDER_MODES", "RENDERERS", "EnvConfig", "make_config"]
 
@@ -87,6 +88,11 @@ class EnvConfig:
             UAV's heading by a uniform angle in ``[-start_yaw_jitter, start_yaw_jitter]`` rad
             after the in-view check, so some start views miss part of the structure (a
             viewpoint-planning task); ``0`` (default) keeps the aimed views and draws nothing.
+        as_built: None (the building stands as designed) or an as-built deviation model
+            (:class:`~uav_struct_env.site.as_built.AsBuilt`, or a tolerance model name such as
+            ``"aci117"``): the rendered building, the collision obstacles and the landmark truth
+            in ``info`` are the as-built building; ``env.site`` (what a localizer uses) stays
+            the design.
     """
 
     stage: str | None = None
@@ -112,6 +118,7 @@ class EnvConfig:
     render_view_height: int = 180
     render_fps: int = 2
     start_yaw_jitter: float = 0.0
+    as_built: AsBuilt | str | None = None
 
     def __post_init__(self) -> None:
         if not (isinstance(self.site, Site) or self.site in ("paper", "random") or _is_site_file(self.site)):
@@ -179,6 +186,10 @@ class EnvConfig:
                 f"landmark_sets must be drawn from {LANDMARK_SETS}, got unknown {unknown}"
             )
         object.__setattr__(self, "landmark_sets", sets)
+        try:
+            object.__setattr__(self, "as_built", make_as_built(self.as_built))
+        except SiteGeometryError as exc:
+            raise ConfigError(str(exc)) from None
         for name, cls in (
             ("limits", FlightLimits),
             ("geofence", Geofence),

@@ -23,6 +23,10 @@ Per agent and step:
 * reward ``0.0``: the base env has no localization and no task; the LocalizationWrapper adds
   the reward. ``info["reward_terms"]`` is an empty dict that sums to it.
 
+With ``as_built`` (:mod:`uav_struct_env.site.as_built`) the rendered building, the obstacles and
+the landmark truth in ``info`` are ``env.built_site``, the design moved within tolerances;
+``env.site`` stays the design (the BIM a localizer knows). Landmark ids are the same in both.
+
 Episode: a crash (structure within ``uav_radius``, another UAV within ``2 * uav_radius``) or
 leaving the geofence terminates that agent (it leaves ``env.agents``); after ``max_cycles``
 steps every remaining agent is truncated. With ``on_crash="all"`` (the ``train`` preset) a crash
@@ -99,9 +103,12 @@ class UavStructParallelEnv(ParallelEnv):
         self.site: Site = make_site(
             cfg.site, cfg.stage, cfg.marker_size, rng=np.random.default_rng(cfg.texture_seed)
         )
+        # What stands: the design moved within the as-built tolerances (rendered, collided with,
+        # and the landmark truth); the localizer's BIM is ``self.site``.
+        self.built_site: Site = self.site if cfg.as_built is None else cfg.as_built.apply(self.site)
         w, h = cfg.image_size
         self.camera = Camera().scaled(w, h)
-        self.obstacles = Obstacles.from_site(self.site)
+        self.obstacles = Obstacles.from_site(self.built_site)
         # The schedule's ranges and the geofence fitted to the building (sim.schedule.fit_schedule).
         self.viewpoint_schedule: ViewpointSchedule
         self.viewpoint_schedule, scale = fit_schedule(self.site, cfg.n_agents, cfg.schedule)
@@ -161,7 +168,7 @@ class UavStructParallelEnv(ParallelEnv):
             from uav_struct_env.sim.world import SiteWorld
 
             self._world = SiteWorld(
-                self.site,
+                self.built_site,
                 renderer=self.config.renderer,
                 image_size=self.config.image_size,
                 rng=np.random.default_rng(self.config.texture_seed),

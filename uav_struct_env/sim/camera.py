@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.geometry import check_intrinsics, check_transform
+from localization.synthetic import PAPER_IMAGE_SIZE, PAPER_K
 
 __all__ = ["GL_FROM_CV", "Camera", "depth_from_buffer", "projection_matrix", "view_matrix"]
 
@@ -34,16 +35,16 @@ GL_FROM_CV = np.diag([1.0, -1.0, -1.0, 1.0])
 class Camera:
     """Pinhole intrinsics, image size in pixels and the renderer's clip planes (metres).
 
-    The default is the paper's camera: 1280 x 720, fx = fy = 1108.5 px, principal point
-    (640, 360).
+    The default is the paper's camera (:data:`localization.synthetic.PAPER_K`, the project's one
+    definition): 1280 x 720, fx = fy = 1108.5 px, principal point (640, 360).
     """
 
-    width: int = 1280
-    height: int = 720
-    fx: float = 1108.5
-    fy: float = 1108.5
-    cx: float = 640.0
-    cy: float = 360.0
+    width: int = PAPER_IMAGE_SIZE[0]
+    height: int = PAPER_IMAGE_SIZE[1]
+    fx: float = float(PAPER_K[0, 0])
+    fy: float = float(PAPER_K[1, 1])
+    cx: float = float(PAPER_K[0, 2])
+    cy: float = float(PAPER_K[1, 2])
     near: float = 0.1
     far: float = 400.0
     skew: float = 0.0

@@ -17,6 +17,7 @@ from localization.checks import check_choice, check_number
 from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.site import make_site
+from uav_struct_env.site.as_built import TOLERANCE_MODELS, AsBuilt
 from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS, check_weights
 
 __all__ = [
@@ -178,6 +179,11 @@ class StudyConfig:
             methods run at the floor's slab stage, column tops at its columns stage. None: the
             paper's first floor (``"slab"`` / ``"columns"``), or an IFC file's last floor.
             Methods whose stage the building lacks (no columns on that floor) are left out.
+        as_built: None (the building stands as designed) or a tolerance model of
+            :mod:`uav_struct_env.site.as_built` (``"aci117"``): the rendered building and the
+            ground truth deviate from the design, element by element, while the localizer keeps
+            the design.
+        as_built_scale: factor on every tolerance of ``as_built`` (0: the design).
     """
 
     seed: int = 0
@@ -198,6 +204,8 @@ class StudyConfig:
     detector_model: str | None = None
     refiner_model: str | None = None
     stage: str | None = None
+    as_built: str | None = None
+    as_built_scale: float = 1.0
 
     def __post_init__(self) -> None:
         for name, options in (
@@ -227,6 +235,10 @@ class StudyConfig:
             ("false_positives", 0.0, None),
         ):
             check_number(name, getattr(self, name), lo, hi, error=ConfigError, type_error=ConfigError)
+        if self.as_built is not None:
+            check_choice("as_built", self.as_built, tuple(TOLERANCE_MODELS), error=ConfigError)
+        check_number("as_built_scale", self.as_built_scale, 0.0, 100.0, error=ConfigError,
+                     type_error=ConfigError)
         for name in ("detector_model", "refiner_model"):
             v = check_weights(name, getattr(self, name), self.detector)
             object.__setattr__(self, name, None if v is None else str(Path(v).resolve()))
@@ -249,6 +261,13 @@ class StudyConfig:
         except ValueError as err:  # SiteGeometryError: an unknown stage, a malformed file
             raise ConfigError(str(err)) from None
         return {role: site.floor_stage(role) for role in ("slab", "columns")}
+
+    @property
+    def as_built_model(self) -> AsBuilt | None:
+        """The env's as-built model (seeded with ``seed``), or None for the design."""
+        if self.as_built is None:
+            return None
+        return AsBuilt(self.as_built, self.as_built_scale, seed=self.seed)
 
     def scene_stage(self, scene: Scene) -> str:
         """The site's stage name that ``scene`` is rendered at."""

@@ -210,6 +210,8 @@ def settings_line(results: dict) -> str:
         else "(QUICK: not the paper's {} x {})".format(*PAPER_PROTOCOL)
     )
     site, stage = c.pop("site"), c.pop("stage", None)
+    as_built, scale = c.pop("as_built", None), c.pop("as_built_scale", None)
+    building = "as designed" if as_built is None else f"as built {as_built} x {scale:g}"
     w, h = c.pop("image_size")
     version = f"{sw.get('package', 'uav-struct-env')} {sw.get('version', '?')}"
     if sw.get("git_commit"):
@@ -217,7 +219,7 @@ def settings_line(results: dict) -> str:
     parts = [
         version,
         f"site {site if site in ('paper', 'random') else Path(site).name}"
-        + (f", stage {stage}" if stage else ""),
+        + (f", stage {stage}" if stage else "") + f", {building}",
         detector,
         f"{c.pop('association')} association",
         f"{c.pop('noise')} prior",

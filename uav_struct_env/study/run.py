@@ -116,6 +116,7 @@ def _env_for(config: StudyConfig, scene: Scene):
             imaging=config.imaging,
             n_agents=config.n_agents,
             texture_seed=config.seed,
+            as_built=config.as_built_model,
         )
         _ENVS[scene] = env
     return env
@@ -171,13 +172,17 @@ def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoin
         prior = invert(info["prior_world_from_cam"])
         for method in methods:
             truth = info["landmarks"][method.landmarks]
-            model_xyz = site.landmarks(method.landmarks).xyz if method.structural else None
+            # The localizer's model is the design (env.site); the truth is what stands
+            # (env.built_site, which as built may expose other landmarks).
+            model = site.landmarks(method.landmarks) if method.structural else None
+            model_xyz = None if model is None else model.xyz
+            model_ids = np.asarray(truth["ids"]) if model is None else model.ids
             stack = build_stack(
                 stack_spec(config, method),
                 K,
                 config.image_size,
                 model_xyz=model_xyz,
-                model_ids=np.asarray(truth["ids"]),
+                model_ids=model_ids,
                 markers=site.markers,
                 rng=_rng(config, method, uav, viewpoint),
             )
@@ -188,7 +193,7 @@ def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoin
                 if viewpoint == overlay_viewpoint and uav == 0:
                     overlays.append(
                         _overlay(method, uav, viewpoint, image, K, prior, est, frame.detections,
-                                 truth, model_xyz)
+                                 model_ids, model_xyz)
                     )
             else:
                 counts = _marker_counts(frame, truth, site.markers)
@@ -304,8 +309,7 @@ def _structural_counts(frame: FrameLocalization) -> dict:
     }
 
 
-def _overlay(method, uav, viewpoint, image, K, prior, est, det, truth, model_xyz) -> Overlay:
-    ids = np.asarray(truth["ids"])
+def _overlay(method, uav, viewpoint, image, K, prior, est, det, ids, model_xyz) -> Overlay:
     correct = (est.assignment >= 0) & (ids[np.maximum(est.assignment, 0)] == det.true_ids)
     uv_prior, _ = project(K, prior, model_xyz)
     uv_final, _ = project(K, est.cam_from_world, model_xyz)

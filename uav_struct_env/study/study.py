@@ -14,6 +14,7 @@ from tqdm import tqdm
 from uav_struct_env.outputs import OutputExistsError, StagedOutput
 from uav_struct_env.processes import WorkerDied
 from uav_struct_env.site import make_site
+from uav_struct_env.site.as_built import TOLERANCE_MODELS
 from uav_struct_env.study.figures import plot_error_cdfs, plot_fig2, plot_viewpoint_map
 from uav_struct_env.study.protocol import ASSOCIATIONS, DETECTORS, NOISES, StudyConfig
 from uav_struct_env.study.report import (
@@ -131,6 +132,20 @@ def _parser() -> argparse.ArgumentParser:
         "python -c \"from uav_struct_env.site import ifc_stages; print(ifc_stages('b.ifc'))\"); "
         "default: the paper's first floor, or an IFC file's last floor",
     )
+    p.add_argument(
+        "--as-built",
+        default=None,
+        choices=sorted(TOLERANCE_MODELS),
+        help="render the building as built: every element moved within this tolerance model "
+        "(aci117: columns 25 mm lateral, slab tops 19 mm, opening edges 13 mm) while the "
+        "localizer keeps the design (default: the building stands as designed)",
+    )
+    p.add_argument(
+        "--as-built-scale",
+        type=float,
+        default=1.0,
+        help="factor on every --as-built tolerance (default 1; 0 is the design)",
+    )
     p.add_argument("--workers", type=int, default=1, help="parallel processes (default 1)")
     p.add_argument("--pixel-sigma", type=float, default=1.0, help="projection detector noise, px")
     p.add_argument("--miss-rate", type=float, default=0.0, help="projection detector miss rate")
@@ -180,6 +195,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             refiner_model=args.refiner_model,
             workers=args.workers,
             stage=args.stage,
+            as_built=args.as_built,
+            as_built_scale=args.as_built_scale,
         )
     except (ValueError, ImportError) as err:
         print(f"uav-struct study: error: {err}", file=sys.stderr)
