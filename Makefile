@@ -41,7 +41,7 @@ bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in d
 # rendered datasets (~17 min; existing ones are kept), the keypoint network (42 min), then the
 # patch refiner mined from that network's candidates (1.5 + 15 min), into $(DETECTOR_RUN).
 # Evaluate the result with benchmarks/detector.py --model/--refiner and uav-struct study
-# --detector learned --detector-model/--refiner-model (README, "With the learned detector").
+# --detector learned --detector-model/--refiner-model (docs/study.md, "Evaluating retrained detector weights").
 # make reruns a step only when its output is missing or older than its inputs, so each step
 # replaces the folder it finds there (--overwrite): a stale or half-written earlier run.
 DETECTOR_RUN ?= runs/detector
