@@ -3,9 +3,9 @@ PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-EXTRAS ?= dev,rl,train,ifc
+EXTRAS ?= dev,rl,train,ifc,docs
 
-.PHONY: demo test test-slow lint bench detector clean
+.PHONY: demo test test-slow lint bench docs docs-serve detector clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,10 +22,18 @@ test: $(STAMP)
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow
 
+# The documentation site into site/, strict: a warning (a broken link, an undocumented env
+# setting) fails the build. NO_MKDOCS_2_WARNING silences the Material theme's banner.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
+docs-serve: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs serve
+
 lint: $(STAMP)
 	$(BIN)/ruff check uav_struct_env localization tests benchmarks examples
 
-bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in the README
+bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in docs/benchmarks.md
 	for b in render env_step localizer wrapper_throughput detector ifc_import; do \
 		[ -f benchmarks/$$b.py ] && $(BIN)/python benchmarks/$$b.py || exit 1; done
 
@@ -33,7 +41,7 @@ bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in t
 # rendered datasets (~17 min; existing ones are kept), the keypoint network (42 min), then the
 # patch refiner mined from that network's candidates (1.5 + 15 min), into $(DETECTOR_RUN).
 # Evaluate the result with benchmarks/detector.py --model/--refiner and uav-struct study
-# --detector learned --detector-model/--refiner-model (README, "With the learned detector").
+# --detector learned --detector-model/--refiner-model (docs/study.md, "Evaluating retrained detector weights").
 # make reruns a step only when its output is missing or older than its inputs, so each step
 # replaces the folder it finds there (--overwrite): a stale or half-written earlier run.
 DETECTOR_RUN ?= runs/detector
@@ -63,4 +71,4 @@ $(DETECTOR_RUN)/refiner/refiner.onnx: $(DETECTOR_RUN)/keypoint/model.onnx \
 		--workers 1 --seed 0 --detector-model $(DETECTOR_RUN)/keypoint/model.onnx --overwrite
 
 clean:
-	rm -rf $(VENV) renders results
+	rm -rf $(VENV) renders results site

@@ -1,8 +1,8 @@
 """The attitude convention: camera position + (roll, pitch, yaw) <-> ``world_from_cam``.
 
-Documented once here and in the README, tested in ``tests/sim/test_attitude.py``. It lives in
-the bottom layer (pure numpy / scipy) so the localization package's synthetic data shares it;
-``uav_struct_env.sim.attitude`` re-exports it.
+Documented once here and in docs/environment.md (Conventions), tested in
+``tests/sim/test_attitude.py``. It lives in the bottom layer (pure numpy / scipy) so the
+localization package's synthetic data shares it; ``uav_struct_env.sim.attitude`` re-exports it.
 
 * The camera *body* frame is FLU: x forward along the optical axis, y left, z up in the image.
 * ``world_from_body = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (intrinsic Z-Y'-X'', scipy ``"ZYX"``).

@@ -1,9 +1,10 @@
-"""The README's Python examples run as written (in order, in one namespace)."""
+"""The README: its Python examples run as written, its links resolve, it says how to start."""
 
 import re
 from pathlib import Path
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
 
 
 def test_readme_python_blocks_run():
@@ -18,3 +19,13 @@ def test_readme_python_blocks_run():
         for name in ("env", "aec", "wenv", "train_env"):
             if name in namespace:
                 namespace[name].close()
+
+
+def test_readme_links_resolve_and_it_says_how_to_start():
+    text = README.read_text()
+    links = re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", text)
+    local = [link for link in links if "://" not in link]
+    assert len(local) >= 10
+    assert [link for link in local if not (ROOT / link).exists()] == []
+    for promise in ("source .venv/bin/activate", "make demo", "make test", "make docs", "CITATION.cff"):
+        assert promise in text, promise

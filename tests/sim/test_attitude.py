@@ -1,4 +1,4 @@
-"""The attitude convention (README): ZYX Euler, body FLU, positive pitch looks down."""
+"""The attitude convention (docs/environment.md): ZYX Euler, body FLU, positive pitch looks down."""
 
 import numpy as np
 import pytest

@@ -9,8 +9,14 @@ import pytest
 from localization import FailureCode, Localizer
 from localization.synthetic import PAPER_K
 from uav_struct_env.study.protocol import METHODS, StudyConfig
-from uav_struct_env.study.report import results_dict, summarize, write_results_json
-from uav_struct_env.study.run import ImageResult
+from uav_struct_env.study.report import (
+    results_dict,
+    settings_line,
+    summarize,
+    table2_markdown,
+    write_results_json,
+)
+from uav_struct_env.study.run import ImageResult, bound_pixel_sigma
 
 NAN = float("nan")
 
@@ -56,3 +62,49 @@ def test_failures_group_by_code_and_nan_is_null(tmp_path):
     written = json.loads((tmp_path / "results.json").read_text())["methods"]["column_tops"]
     assert written["association_f1"] is None and written["association_precision"] is None
     assert written["failures"]["too_few_detections"]["count"] == 3
+
+
+def _method(key):
+    return next(m for m in METHODS if m.key == key)
+
+
+def test_learned_detector_bound_uses_its_measured_pixel_error():
+    """The bound is at the run's own detector noise: measured for the learned detector (RMS of
+    the true detections' pixel errors, per axis), configured for the projection detector."""
+    base = _row(Localizer(np.eye(3) * 5, PAPER_K).localize(np.zeros((0, 2)), np.eye(4)), 0)
+    rows = [dataclasses.replace(base, n_true_detections=n, pixel_error_rms_px=e)
+            for n, e in ((4, 0.3), (12, 0.5), (0, NAN))]
+    expected = np.sqrt((4 * 0.3**2 + 12 * 0.5**2) / 16 / 2)
+    learned = StudyConfig(detector="learned")
+    assert bound_pixel_sigma(learned, _method("column_tops"), rows) == pytest.approx(expected)
+    assert bound_pixel_sigma(StudyConfig(pixel_sigma=2.0), _method("column_tops"), rows) == 2.0
+    assert np.isnan(bound_pixel_sigma(learned, _method("aruco_1.0m"), rows))
+
+
+def _results(**config):
+    rows = [_row(Localizer(np.eye(3) * 5, PAPER_K).localize(np.zeros((0, 2)), np.eye(4)), k)
+            for k in range(8)]
+    return results_dict(StudyConfig(methods=("column_tops",), **config), rows)
+
+
+def test_settings_line_names_every_setting_and_the_version():
+    line = settings_line(_results(detector="learned", miss_rate=0.1, false_positives=1.0, seed=3,
+                                  noise="gnss_ins", imaging="camera", n_viewpoints=2))
+    for part in ("uav-struct-env 0.1.0", "site paper", "landmarks_v1.onnx + landmarks_v1_refiner.onnx",
+                 "robust association", "gnss_ins prior", "pixel sigma 1.0 px", "miss rate 0.1",
+                 "false positives 1.0/image", "camera imaging", "seed 3", "QUICK"):
+        assert part in line, part
+    assert "site paper, as designed" in line
+    assert "site paper, as built aci117 x 4" in settings_line(_results(as_built="aci117", as_built_scale=4))
+    results = _results()
+    results["config"]["new_setting"] = True  # a setting added later is listed all the same
+    assert "new_setting True" in settings_line(results)
+
+
+def test_table2_opens_with_the_settings_and_sets_counts_against_the_paper_only_when_alike():
+    quick = table2_markdown(_results(n_viewpoints=2))
+    assert quick.startswith("Settings: uav-struct-env")
+    assert "(paper 40/40)" not in quick and "left out" in quick
+    full = _results()
+    full["methods"]["column_tops"]["total"] = 40
+    assert "(paper 40/40)" in table2_markdown(full)

@@ -7,6 +7,7 @@ import sys
 import numpy as np
 import pytest
 
+import uav_struct_env
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.study import METHODS, StudyConfig
 from uav_struct_env.study.study import main
@@ -59,7 +60,8 @@ def quick_study(tmp_path_factory):
 def test_quick_study_writes_the_schema_with_finite_computed_numbers(quick_study):
     out, stdout = quick_study
     results = json.loads((out / "results.json").read_text())
-    assert set(results) == {"config", "methods"}
+    assert set(results) == {"config", "software", "methods"}
+    assert results["software"]["version"] == uav_struct_env.__version__
     assert results["config"]["n_viewpoints"] == 2
     expected = {"slab_corners", "opening_corners", "column_tops", "aruco_0.5m", "aruco_1.0m", "all"}
     assert expected <= set(results["methods"])
@@ -81,6 +83,15 @@ def test_quick_study_writes_the_schema_with_finite_computed_numbers(quick_study)
     assert "Table II" in stdout and "Column tops" in stdout
     assert "| Slab corners |" in (out / "table2.md").read_text()
     assert "| Column tops |" in (out / "table1.md").read_text()
+    # every table file opens with how it was made; a quick run is not set against the paper's 40
+    for name in ("table1.md", "table2.md"):
+        first = (out / name).read_text().splitlines()[0]
+        assert first.startswith(f"Settings: uav-struct-env {uav_struct_env.__version__}"), first
+        assert "projection detector (pixel sigma 1.0 px" in first and "QUICK" in first, first
+    table2 = (out / "table2.md").read_text()
+    assert "(paper 39/40)" not in table2
+    assert "success counts (over 40 images per method) are left out" in table2
+    assert "| 1.00 (set) |" in table2
     for name in ("fig2_associations.png", "error_cdf.png", "viewpoint_map.png"):
         assert (out / name).stat().st_size > 10_000, name
 

@@ -69,7 +69,7 @@ class EnvConfig:
             for the paper's building; ``"Level 2/slab"`` ... for an IFC file, see
             :func:`~uav_struct_env.site.ifc_stages`); None: a given Site's own stage, else
             ``"columns"``.
-        site: ``"paper"``, ``"random"`` (drawn once per env from ``site_seed``), a
+        site: ``"paper"``, ``"random"`` (drawn once per env from ``texture_seed``), a
             :class:`~uav_struct_env.site.Site`, or the path of a site file (``*.json``) or an
             IFC file (``*.ifc``, needs the ``ifc`` extra).
         marker_size: ArUco marker side (m), or None for no markers.
@@ -80,7 +80,8 @@ class EnvConfig:
             ``ImagingModel``. Landmark truth is unaffected.
         noise: onboard sensor model: ``"paper"``, ``"gnss_ins"``, ``"none"`` or a model object
             from :mod:`uav_struct_env.sim.sensors`.
-        renderer: ``"auto"`` (EGL if it starts, else TinyRenderer), ``"tiny"`` or ``"egl"``.
+        renderer: ``"auto"`` (EGL for images of about 420 x 240 px and more where EGL starts,
+            else TinyRenderer), ``"tiny"`` or ``"egl"``.
         max_cycles: steps after which every live agent is truncated.
         render_mode: None or ``"rgb_array"``.
         n_agents: number of UAVs (``uav_0`` ... ``uav_{n-1}``), one per side sector.

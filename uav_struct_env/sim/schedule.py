@@ -74,7 +74,21 @@ _SIDE_NAMES_4 = ("south", "east", "north", "west")
 
 @dataclass(frozen=True)
 class ScheduleSpec:
-    """Parameters of a viewpoint schedule (see the module docstring). Lengths m, angles rad."""
+    """Parameters of a viewpoint schedule (see the module docstring). Lengths m, angles rad.
+
+    Attributes:
+        n_viewpoints: viewpoints per UAV (the paper: 10).
+        distance: ``(low, high)`` horizontal distance out from the slab edge on the UAV's side, m.
+        height: ``(low, high)`` camera height above ground, m.
+        azimuth_spread: width of the azimuth range around the side's outward direction, rad.
+        aim_jitter: the aim point moves by up to this much per axis, m.
+        margin_px: every structural landmark must project at least this far inside the image, px.
+        min_markers_in_view: markers on the UAV's side whose four corners must be in the image.
+        seed: seed of the schedule (one seed, one schedule).
+        max_tries: draws per viewpoint before giving up with a ``ConfigError``.
+        K: the reference camera's 3 x 3 intrinsics the in-view check uses (the paper's camera).
+        image_size: ``(W, H)`` of the reference camera, px.
+    """
 
     n_viewpoints: int = 10
     distance: tuple[float, float] = (15.0, 35.0)

@@ -71,6 +71,15 @@ class FlightLimits:
     horizontal, 4 m/s up, 3 m/s down, 100 deg/s yaw, 90 deg/s gimbal. In this project's attitude
     convention positive pitch looks down, so DJI's tilt range -90..+30 deg is camera pitch
     ``-30 deg .. +90 deg``.
+
+    Attributes:
+        max_horizontal_speed: speed of a full forward/left command, m/s.
+        max_ascent_speed: climb rate of a full up command, m/s.
+        max_descent_speed: sink rate of a full down command, m/s.
+        max_yaw_rate: yaw rate of a full yaw command, rad/s.
+        max_gimbal_rate: gimbal pitch rate of a full gimbal command, rad/s.
+        gimbal_pitch_min: lowest camera pitch (negative looks up), rad.
+        gimbal_pitch_max: highest camera pitch (positive looks down), rad.
     """
 
     max_horizontal_speed: float = 10.0
@@ -107,6 +116,12 @@ class Geofence:
 
     Defaults: 2 m above ground, 120 m (the common EU/US limit for open-category flights), and
     60 m from the building centre (the paper's viewpoints are 15-35 m out).
+
+    Attributes:
+        min_altitude: lowest camera altitude above ground, m.
+        max_altitude: highest camera altitude above ground, m.
+        max_distance: largest horizontal distance from the site centre, m (scaled up with the
+            schedule for buildings larger than the paper's).
     """
 
     min_altitude: float = 2.0

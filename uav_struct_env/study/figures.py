@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -32,6 +33,16 @@ def _pyplot():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def _stamp(fig, settings: str | None) -> float:
+    """Write the settings line along the figure's bottom edge; the height (figure fraction) it takes."""
+    if not settings:
+        return 0.0
+    width = max(60, int(fig.get_figwidth() * 18))  # characters per line at 6 pt
+    text = "\n".join(textwrap.wrap(settings, width))
+    fig.text(0.005, 0.005, text, ha="left", va="bottom", fontsize=6, color="0.3")
+    return (text.count("\n") + 1) * 8.5 / 72 / fig.get_figheight()
 
 
 def draw_overlay(ov: Overlay) -> np.ndarray:
@@ -72,8 +83,11 @@ def draw_overlay(ov: Overlay) -> np.ndarray:
     return img
 
 
-def plot_fig2(overlays: Sequence[Overlay], path: Path) -> None:
-    """Fig. 2: one image per landmark type with detections, associations and reprojections."""
+def plot_fig2(overlays: Sequence[Overlay], path: Path, settings: str | None = None) -> None:
+    """Fig. 2: one image per landmark type with detections, associations and reprojections.
+
+    ``settings`` (the study's settings line) is printed along the bottom, as in every figure here.
+    """
     plt = _pyplot()
     order = [m.key for m in METHODS]
     chosen = sorted(
@@ -82,26 +96,28 @@ def plot_fig2(overlays: Sequence[Overlay], path: Path) -> None:
     )
     if not chosen:
         return
-    fig, axes = plt.subplots(1, len(chosen), figsize=(6 * len(chosen), 3.9), squeeze=False)
+    fig, axes = plt.subplots(1, len(chosen), figsize=(6 * len(chosen), 3.9 + 0.3 * bool(settings)),
+                             squeeze=False)
     for ax, ov in zip(axes[0], chosen, strict=True):
         ax.imshow(draw_overlay(ov))
         label = next(m.label for m in METHODS if m.key == ov.method)
         ax.set_title(f"{label} — UAV {ov.uav}, viewpoint {ov.viewpoint}", fontsize=10)
         ax.axis("off")
+    foot = _stamp(fig, settings)
     fig.text(
         0.5,
-        0.01,
+        0.01 + foot,
         "circles: detections · yellow diamonds: BIM landmarks projected with the onboard prior · "
         "lines: association (green correct, red wrong) · cyan crosses: final-pose reprojection",
         ha="center",
         fontsize=8,
     )
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    fig.tight_layout(rect=(0, 0.04 + foot, 1, 1))
     save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
-def plot_error_cdfs(rows: Sequence[ImageResult], path: Path) -> None:
+def plot_error_cdfs(rows: Sequence[ImageResult], path: Path, settings: str | None = None) -> None:
     """Empirical CDFs of translation and rotation error per method (failures never reach 1)."""
     plt = _pyplot()
     fig, (ax_t, ax_r) = plt.subplots(1, 2, figsize=(11, 4))
@@ -126,12 +142,14 @@ def plot_error_cdfs(rows: Sequence[ImageResult], path: Path) -> None:
         ax.set_ylim(0, 1.02)
         ax.grid(True, which="both", alpha=0.3)
     ax_t.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, _stamp(fig, settings), 1, 1))
     save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
-def plot_viewpoint_map(site: Site, rows: Sequence[ImageResult], method: str, path: Path) -> None:
+def plot_viewpoint_map(
+    site: Site, rows: Sequence[ImageResult], method: str, path: Path, settings: str | None = None
+) -> None:
     """Top-down map: the building, markers and, per image, ground truth, prior and estimate."""
     plt = _pyplot()
     mine = [r for r in rows if r.method == method]
@@ -162,6 +180,6 @@ def plot_viewpoint_map(site: Site, rows: Sequence[ImageResult], method: str, pat
     ax.set_title("Viewpoints, one colour per UAV")
     ax.legend(loc="upper right", fontsize=8)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, _stamp(fig, settings), 1, 1))
     save_figure(fig, path, dpi=110)
     plt.close(fig)

@@ -25,11 +25,13 @@ from localization.metrics import (
     summarize_errors,
 )
 from uav_struct_env.outputs import atomic_path, atomic_write_json
+from uav_struct_env.provenance import software
 from uav_struct_env.study.protocol import METHODS, Method, StudyConfig
-from uav_struct_env.study.run import ImageResult
+from uav_struct_env.study.run import ImageResult, bound_source
 
 __all__ = [
     "failure_breakdown",
+    "settings_line",
     "summarize",
     "write_csv",
     "write_results_json",
@@ -59,8 +61,20 @@ def failure_breakdown(rows: Sequence[ImageResult]) -> dict[str, dict]:
     return dict(sorted(groups.items(), key=lambda kv: -kv[1]["count"]))
 
 
-def summarize(method: Method, rows: Sequence[ImageResult]) -> dict:
-    """The ``results.json`` entry of one method (NaN where undefined; null once written)."""
+def _pooled_rms(rows: Sequence[ImageResult]) -> float:
+    """RMS pixel error over every true detection of ``rows`` (NaN without any)."""
+    pairs = [(r.n_true_detections, r.pixel_error_rms_px) for r in rows
+             if r.n_true_detections > 0 and math.isfinite(r.pixel_error_rms_px)]
+    n = sum(k for k, _ in pairs)
+    return math.sqrt(sum(k * e * e for k, e in pairs) / n) if n else float("nan")
+
+
+def summarize(method: Method, rows: Sequence[ImageResult], bound: str | None = None) -> dict:
+    """The ``results.json`` entry of one method (NaN where undefined; null once written).
+
+    ``bound`` says where the rows' Cramér-Rao pixel noise came from (``"configured"`` or
+    ``"measured"``, see :func:`uav_struct_env.study.run.bound_pixel_sigma`).
+    """
     ok = [r for r in rows if r.success]
     visible = sum(r.n_visible for r in rows)
     true_det = sum(r.n_true_detections for r in rows)
@@ -97,6 +111,9 @@ def summarize(method: Method, rows: Sequence[ImageResult]) -> dict:
         "latency_s": median_p90([r.latency_s for r in rows]),
         "cramer_rao_translation_m": crb_t,
         "cramer_rao_rotation_deg": median_p90([r.crb_rotation_deg for r in rows]),
+        "cramer_rao_pixel_sigma_px": rows[0].crb_pixel_sigma_px if rows else float("nan"),
+        "cramer_rao_sigma_source": bound,
+        "detection_error_rms_px": _pooled_rms(rows),
         "median_error_over_bound": (
             t_stats["median"] / crb_t["median"] if crb_t["median"] != 0.0 else float("nan")
         ),
@@ -115,8 +132,8 @@ def results_dict(config: StudyConfig, rows: Sequence[ImageResult], extra_config:
     cfg.update(extra_config or {})
     methods = {}
     for m in config.selected_methods:
-        methods[m.key] = summarize(m, [r for r in rows if r.method == m.key])
-    return {"config": cfg, "methods": _clean(methods)}
+        methods[m.key] = summarize(m, [r for r in rows if r.method == m.key], bound_source(config, m))
+    return {"config": cfg, "software": software(), "methods": _clean(methods)}
 
 
 def _clean(obj):
@@ -153,9 +170,74 @@ def _pct(x: float | None) -> str:
     return "—" if x is None else f"{100 * x:.2f}"
 
 
+#: The paper's protocol (StudyConfig's defaults): viewpoints per UAV and UAVs; fewer is ``--quick``.
+PAPER_PROTOCOL = tuple(
+    next(f.default for f in dataclasses.fields(StudyConfig) if f.name == name)
+    for name in ("n_viewpoints", "n_agents")
+)
+#: Config keys that do not change the numbers (or that the tables show themselves).
+_UNSTATED = {"workers", "methods", "elapsed_s"}
+
+
+def _name(path: str | None, default: Path) -> str:
+    return Path(path).name if path else default.name
+
+
+def settings_line(results: dict) -> str:
+    """One line that says how a study output was made: every setting and the software.
+
+    Used by the table files, the figures and the console. A config key it does not spell out (a
+    setting added later) is still listed, as ``key value``.
+    """
+    from localization.learned import DEFAULT_MODEL
+    from localization.refine import DEFAULT_REFINER
+
+    c = dict(results["config"])
+    sw = results.get("software") or {}
+    noise = (f"miss rate {c.pop('miss_rate')}, false positives {c.pop('false_positives')}/image")
+    sigma = c.pop("pixel_sigma")
+    if c.pop("detector") == "learned":
+        detector = (f"learned detector ({_name(c.pop('detector_model'), DEFAULT_MODEL)} + "
+                    f"{_name(c.pop('refiner_model'), DEFAULT_REFINER)}; localizer noise model "
+                    f"pixel sigma {sigma} px, {noise})")
+    else:
+        for key in ("detector_model", "refiner_model"):
+            c.pop(key, None)
+        detector = f"projection detector (pixel sigma {sigma} px, {noise})"
+    nv, na = c.pop("n_viewpoints"), c.pop("n_agents")
+    protocol = f"{nv} viewpoints x {na} UAVs " + (
+        "(the paper's protocol)" if (nv, na) == PAPER_PROTOCOL
+        else "(QUICK: not the paper's {} x {})".format(*PAPER_PROTOCOL)
+    )
+    site, stage = c.pop("site"), c.pop("stage", None)
+    as_built, scale = c.pop("as_built", None), c.pop("as_built_scale", None)
+    building = "as designed" if as_built is None else f"as built {as_built} x {scale:g}"
+    w, h = c.pop("image_size")
+    version = f"{sw.get('package', 'uav-struct-env')} {sw.get('version', '?')}"
+    if sw.get("git_commit"):
+        version += f" (git {sw['git_commit'][:10]}{', modified' if sw.get('git_modified') else ''})"
+    parts = [
+        version,
+        f"site {site if site in ('paper', 'random') else Path(site).name}"
+        + (f", stage {stage}" if stage else "") + f", {building}",
+        detector,
+        f"{c.pop('association')} association",
+        f"{c.pop('noise')} prior",
+        f"{c.pop('imaging')} imaging, {w}x{h} px, {c.pop('renderer')} renderer",
+        f"seed {c.pop('seed')}",
+        protocol,
+    ]
+    parts += [f"{k} {v}" for k, v in sorted(c.items()) if k not in _UNSTATED]
+    return " · ".join(parts)
+
+
+def _settings_header(results: dict) -> list[str]:
+    return [f"Settings: {settings_line(results)}", ""]
+
+
 def table1_markdown(results: dict) -> str:
-    """Table I: detection and association, ours beside the paper's."""
-    lines = [
+    """Table I: detection and association, ours beside the paper's (settings line first)."""
+    lines = _settings_header(results) + [
         "| Landmark type | Detection (%) | Paper | Association F1 (%) | Paper | Latency (s) | Paper |",
         "|---|---:|---:|---:|---:|---:|---:|",
     ]
@@ -173,12 +255,17 @@ def table1_markdown(results: dict) -> str:
 
 
 def table2_markdown(results: dict) -> str:
-    """Table II: pose accuracy, ours beside the paper's, with the Cramér-Rao bound."""
-    lines = [
+    """Table II: pose accuracy, ours beside the paper's, with the Cramér-Rao bound.
+
+    The settings line comes first. The paper's success counts stand beside ours only where the
+    run had as many images as the paper (not in a ``--quick`` run).
+    """
+    lines = _settings_header(results) + [
         "| Method | Successful | Translation median / P90 (m) | Paper | Bound median (m) "
-        "| Rotation median / P90 (°) | Paper | Bound median (°) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| Rotation median / P90 (°) | Paper | Bound median (°) | Bound noise (px) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
+    uncounted = []
     for m in METHODS:
         r = results["methods"].get(m.key)
         if r is None:
@@ -187,25 +274,46 @@ def table2_markdown(results: dict) -> str:
         t, rot = r["translation_error_m"], r["rotation_error_deg"]
         paper_t = f"{p.translation_median_m:.3f} / {p.translation_p90_m:.3f}" if p else "—"
         paper_r = f"{p.rotation_median_deg:.3f} / {p.rotation_p90_deg:.3f}" if p else "—"
-        paper_n = f" (paper {p.successful}/{p.total})" if p else ""
+        paper_n = ""
+        if p and p.total == r["total"]:
+            paper_n = f" (paper {p.successful}/{p.total})"
+        elif p:
+            uncounted.append(p.total)
         lines.append(
             f"| {m.label} | {r['successful']}/{r['total']}{paper_n} | {_f(t['median'])} / {_f(t['p90'])} | "
             f"{paper_t} | {_f(r['cramer_rao_translation_m']['median'])} | "
             f"{_f(rot['median'])} / {_f(rot['p90'])} | {paper_r} | "
-            f"{_f(r['cramer_rao_rotation_deg']['median'])} |"
+            f"{_f(r['cramer_rao_rotation_deg']['median'])} | {_bound_noise(r)} |"
         )
     first = next(iter(results["methods"].values()), None)
     if first is not None:
         t, rot = first["prior_translation_error_m"], first["prior_rotation_error_deg"]
         lines.append(
             f"| Onboard prior (GNSS + attitude, input) | — | {_f(t['median'])} / {_f(t['p90'])} | — | — "
-            f"| {_f(rot['median'])} / {_f(rot['p90'])} | — | — |"
+            f"| {_f(rot['median'])} / {_f(rot['p90'])} | — | — | — |"
         )
-    sigma = results["config"].get("pixel_sigma")
     lines += [
         "",
-        f"Bound: the Cramér–Rao bound (RMS error) for the same images, visible landmarks and "
-        f"{sigma} px detector noise (structural rows; ArUco corners have another noise). "
-        "Errors: over successful poses only, as in the paper.",
+        "Bound: the Cramér–Rao bound (RMS error) for the same images and visible landmarks at the "
+        "detector's own pixel noise (per axis, last column): *set* is the projection detector's "
+        "configured noise; *measured* is the RMS error of this run's true detections (those matched "
+        "to a visible landmark within 3 px). An RMS bound sits somewhat above error medians. ArUco "
+        "rows have no bound (their corners have another noise). Errors: over successful poses "
+        "only, as in the paper.",
     ]
+    if uncounted:
+        total = next(iter(results["methods"].values()))["total"]
+        lines += [
+            "",
+            f"The paper's success counts (over {max(uncounted)} images per method) are left out: "
+            f"this run had {total} per method, so its counts and medians are not comparable to "
+            "the paper's one for one.",
+        ]
     return "\n".join(lines) + "\n"
+
+
+def _bound_noise(r: dict) -> str:
+    sigma, source = r.get("cramer_rao_pixel_sigma_px"), r.get("cramer_rao_sigma_source")
+    if sigma is None or source is None:
+        return "—"
+    return f"{sigma:.2f} ({'set' if source == 'configured' else source})"

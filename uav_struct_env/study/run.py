@@ -10,8 +10,8 @@ each site is loaded at most once per process. Every random draw is seeded from
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,7 +23,16 @@ from uav_struct_env.processes import run_chunks
 from uav_struct_env.stack import FrameLocalization, StackSpec, build_stack
 from uav_struct_env.study.protocol import METHODS, Method, Scene, StudyConfig
 
-__all__ = ["Overlay", "ImageResult", "StudyInterrupted", "iter_study", "run_units", "stack_spec"]
+__all__ = [
+    "ImageResult",
+    "Overlay",
+    "StudyInterrupted",
+    "bound_pixel_sigma",
+    "bound_source",
+    "iter_study",
+    "run_units",
+    "stack_spec",
+]
 
 
 @dataclass(frozen=True)
@@ -47,7 +56,7 @@ class ImageResult:
     n_correct: int
     n_inliers: int
     reprojection_rmse_px: float
-    crb_translation_m: float
+    crb_translation_m: float  # Cramér-Rao bound (RMS) at crb_pixel_sigma_px; NaN for markers
     crb_rotation_deg: float
     latency_s: float
     gt_x: float
@@ -59,6 +68,11 @@ class ImageResult:
     est_x: float
     est_y: float
     est_z: float
+    #: RMS distance (px) of this image's true detections from their landmarks' true
+    #: projections (NaN without any; markers: NaN).
+    pixel_error_rms_px: float = float("nan")
+    #: the per-axis pixel noise the bound columns assume (see :func:`bound_pixel_sigma`).
+    crb_pixel_sigma_px: float = float("nan")
 
 
 @dataclass(frozen=True, eq=False)
@@ -183,19 +197,20 @@ def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoin
                     )
             else:
                 counts = _marker_counts(frame, truth, site.markers)
-            sigma = max(config.pixel_sigma, 1e-3)
-            results.append(_row(method, uav, viewpoint, est, gt, prior, truth, K, sigma, **counts))
+            if method.structural:
+                counts["pixel_error_rms_px"] = _pixel_error_rms(frame.detections, truth)
+            results.append(_row(method, uav, viewpoint, est, gt, prior, truth, K, **counts))
     return results, overlays
 
 
-def _row(method, uav, viewpoint, est, gt, prior, truth, K, pixel_sigma, **counts) -> ImageResult:
+def _row(method, uav, viewpoint, est, gt, prior, truth, K, **counts) -> ImageResult:
     visible = np.asarray(truth["visible"], dtype=bool)
     t_err, r_err = pose_errors(est.cam_from_world, gt) if est.success else (float("nan"),) * 2
     p_err = pose_errors(prior, gt)
-    # The bound assumes the detector's pixel noise, which is known for the projection detector
-    # only; for ArUco corners (sub-pixel, not 1 px) it would not bound anything, so it is NaN.
+    # The bound at 1 px (it scales linearly with the pixel noise): run_units rescales it to the
+    # detector's own noise (bound_pixel_sigma). ArUco corners have another noise: no bound.
     if method.structural:
-        crb = cramer_rao_bound(np.asarray(truth["xyz"])[visible].reshape(-1, 3), gt, K, pixel_sigma)
+        crb = cramer_rao_bound(np.asarray(truth["xyz"])[visible].reshape(-1, 3), gt, K, 1.0)
         crb_t, crb_r = crb.position_rms_m, crb.rotation_rms_deg
     else:
         crb_t = crb_r = float("nan")
@@ -228,6 +243,59 @@ def _row(method, uav, viewpoint, est, gt, prior, truth, K, pixel_sigma, **counts
         est_z=c_est[2],
         **counts,
     )
+
+
+def _pixel_error_rms(det, truth: dict) -> float:
+    """RMS pixel distance of the true detections (``true_ids`` >= 0) from their true projections."""
+    if det.true_ids is None:
+        return float("nan")
+    index = {int(i): k for k, i in enumerate(np.asarray(truth["ids"]).tolist())}
+    true = np.asarray(det.true_ids) >= 0
+    if not true.any():
+        return float("nan")
+    uv_true = np.asarray(truth["uv"], dtype=float)[[index[int(i)] for i in det.true_ids[true]]]
+    return float(np.sqrt(np.mean(np.sum((det.uv[true] - uv_true) ** 2, axis=1))))
+
+
+def bound_pixel_sigma(config: StudyConfig, method: Method, rows: Sequence[ImageResult]) -> float:
+    """The per-axis pixel noise (px) of the method's detector, which its Cramér-Rao bound assumes.
+
+    The projection detector's is the configured ``pixel_sigma``. A pixel-reading detector's
+    (``learned``) is measured on the run's own images: the RMS over every true detection (matched
+    to a visible landmark within the detector's match radius) of its distance from the true
+    projection, divided by sqrt(2). ArUco rows have no bound: NaN.
+    """
+    if not method.structural:
+        return float("nan")
+    if config.detector == "projection":
+        return float(config.pixel_sigma)
+    n = np.array([r.n_true_detections for r in rows], dtype=float)
+    rms = np.array([r.pixel_error_rms_px for r in rows], dtype=float)
+    ok = np.isfinite(rms) & (n > 0)
+    if not ok.any():
+        return float("nan")
+    return float(np.sqrt(np.sum(n[ok] * rms[ok] ** 2) / (2.0 * np.sum(n[ok]))))
+
+
+def bound_source(config: StudyConfig, method: Method) -> str | None:
+    """Where :func:`bound_pixel_sigma` comes from: ``"configured"``, ``"measured"`` or None (no bound)."""
+    if not method.structural:
+        return None
+    return "configured" if config.detector == "projection" else "measured"
+
+
+def _with_bounds(config: StudyConfig, rows: list[ImageResult]) -> list[ImageResult]:
+    """Rows with their 1-px bounds rescaled to each method's :func:`bound_pixel_sigma`."""
+    out = []
+    for method in METHODS:
+        mine = [r for r in rows if r.method == method.key]
+        sigma = bound_pixel_sigma(config, method, mine)
+        out += [
+            replace(r, crb_translation_m=r.crb_translation_m * sigma,
+                    crb_rotation_deg=r.crb_rotation_deg * sigma, crb_pixel_sigma_px=sigma)
+            for r in mine
+        ]
+    return out
 
 
 def _structural_counts(frame: FrameLocalization) -> dict:
@@ -337,5 +405,6 @@ def run_units(
     except KeyboardInterrupt:
         raise StudyInterrupted(done, total) from None
     order = {m.key: i for i, m in enumerate(METHODS)}
+    results = _with_bounds(config, results)
     results.sort(key=lambda r: (order[r.method], r.uav, r.viewpoint))
     return results, overlays

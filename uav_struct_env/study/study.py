@@ -10,8 +10,6 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from localization.learned import DEFAULT_MODEL
-from localization.refine import DEFAULT_REFINER
 from uav_struct_env.outputs import OutputExistsError, StagedOutput
 from uav_struct_env.processes import WorkerDied
 from uav_struct_env.site import make_site
@@ -20,6 +18,7 @@ from uav_struct_env.study.figures import plot_error_cdfs, plot_fig2, plot_viewpo
 from uav_struct_env.study.protocol import ASSOCIATIONS, DETECTORS, NOISES, StudyConfig
 from uav_struct_env.study.report import (
     results_dict,
+    settings_line,
     table1_markdown,
     table2_markdown,
     write_csv,
@@ -84,13 +83,14 @@ def run_study(
         (stage / "table2.md").write_text(table2_markdown(results))
         write_csv(stage / "per_image.csv", rows)
         if figures:
-            plot_fig2(overlays, stage / "fig2_associations.png")
-            plot_error_cdfs(rows, stage / "error_cdf.png")
+            settings = settings_line(results)
+            plot_fig2(overlays, stage / "fig2_associations.png", settings)
+            plot_error_cdfs(rows, stage / "error_cdf.png", settings)
             structural = [m for m in config.selected_methods if m.structural]
             if structural:
                 site = make_site(config.site, stage=config.scene_stage(structural[0].scene),
                                  marker_size=1.0, rng=np.random.default_rng(config.seed))
-                plot_viewpoint_map(site, rows, structural[0].key, stage / "viewpoint_map.png")
+                plot_viewpoint_map(site, rows, structural[0].key, stage / "viewpoint_map.png", settings)
     return results
 
 
@@ -174,14 +174,6 @@ def _parser() -> CommandParser:
     return p
 
 
-def _detector_label(config: StudyConfig) -> str:
-    if config.detector != "learned":
-        return f"{config.detector} detector at {config.pixel_sigma} px"
-    names = [Path(p).name if p else default.name for p, default in
-             ((config.detector_model, DEFAULT_MODEL), (config.refiner_model, DEFAULT_REFINER))]
-    return f"learned detector ({' + '.join(names)})"
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     args = _parser().parse_args(argv)
@@ -229,15 +221,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"uav-struct study: error: {err}; nothing written to {args.out}", file=sys.stderr)
         return 1
     out = Path(args.out)
-    print(
-        f"\nTable II — camera-pose accuracy ({config.association} association, {config.noise} prior, "
-        f"{_detector_label(config)}, {config.imaging} imaging, "
-        f"{'' if config.as_built_model is None else 'as built ' + config.as_built_model.label + ', '}"
-        f"seed {config.seed}):\n"
-    )
+    print("\nTable II — camera-pose accuracy:\n")
     print((out / "table2.md").read_text())
-    print("Table I — detection and association:\n")
-    print((out / "table1.md").read_text())
+    print("Table I — detection and association (same settings):\n")
+    print((out / "table1.md").read_text().split("\n\n", 1)[1])  # its settings line printed above
     written = "results.json, table1.md, table2.md, per_image.csv" + ("" if args.no_figures else ", figures")
     print(f"Wrote {out.resolve()}/ ({written}) in {results['config']['elapsed_s']} s")
     return 0
