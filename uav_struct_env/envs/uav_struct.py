@@ -47,7 +47,7 @@ from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 
 from localization.checks import check_number
-from localization.geometry import invert
+from localization.geometry import invert, quat_wxyz_from_matrix
 from uav_struct_env.envs.config import EnvConfig, make_config
 from uav_struct_env.envs.render import MapView, UavMarker, compose_frame, draw_site_map
 from uav_struct_env.errors import ClosedError, ResetNeededError
@@ -162,6 +162,43 @@ class UavStructParallelEnv(ParallelEnv):
         """The (cached, shared) action space: Box(-1, 1, (5,), float32); see ACTION_COMPONENTS."""
         self._check_agent(agent)
         return self._action_space
+
+    @property
+    def observation_spaces(self) -> dict[str, spaces.Dict]:
+        """``{agent: observation_space(agent)}`` (the dict RLlib, TorchRL and skrl read)."""
+        return dict.fromkeys(self.possible_agents, self._observation_space)
+
+    @property
+    def action_spaces(self) -> dict[str, spaces.Box]:
+        """``{agent: action_space(agent)}``."""
+        return dict.fromkeys(self.possible_agents, self._action_space)
+
+    @property
+    def state_space(self) -> spaces.Box:
+        """The space of :meth:`state`: 8 float32 per possible agent."""
+        n = len(self.possible_agents)
+        return spaces.Box(-GNSS_BOUND, GNSS_BOUND, (8 * n,), np.float32)
+
+    def state(self) -> NDArray[np.float32]:
+        """The global true state, for centralized critics (privileged: not an observation).
+
+        Per possible agent, in order: the true camera position (x, y, z, m), its orientation
+        as a unit quaternion (w, x, y, z; ``world_from_cam``) and 1.0 if the agent is alive,
+        else 0.0 (a finished agent keeps its last pose).
+
+        Raises:
+            ResetNeededError: before the first :meth:`reset`.
+        """
+        self._check_open()
+        if not self._was_reset:
+            raise ResetNeededError("state() before reset(): call env.reset(seed=...) first")
+        out = np.zeros((len(self.possible_agents), 8), dtype=np.float64)
+        for i, a in enumerate(self.possible_agents):
+            T = self._states[a].world_from_cam
+            out[i, :3] = T[:3, 3]
+            out[i, 3:7] = quat_wxyz_from_matrix(T[:3, :3])
+            out[i, 7] = float(self._alive.get(a, False))
+        return np.clip(out.ravel(), -GNSS_BOUND, GNSS_BOUND).astype(np.float32)
 
     # ------------------------------------------------------------------ world
     @property

@@ -9,14 +9,14 @@ from collections.abc import Sequence
 from typing import Any
 
 from gymnasium import spaces
-from pettingzoo.utils import BaseParallelWrapper
 
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.wrappers.base import ParallelWrapper
 
 __all__ = ["DropKeys"]
 
 
-class DropKeys(BaseParallelWrapper):
+class DropKeys(ParallelWrapper):
     """Remove ``keys`` (default ``("image",)``) from every agent's Dict observation and space.
 
     Raises:

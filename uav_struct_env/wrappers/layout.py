@@ -24,10 +24,10 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from pettingzoo.utils import BaseParallelWrapper
 
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.stack import FrameLocalization
+from uav_struct_env.wrappers.base import ParallelWrapper
 from uav_struct_env.wrappers.localize import LocalizePoses, find_wrapper
 
 __all__ = ["LAYOUT_COMPONENTS", "PRIVILEGED_LAYOUT_COMPONENTS", "LayoutObservation"]
@@ -49,7 +49,7 @@ LAYOUT_COMPONENTS = ("inlier_frac", *_SHARED)
 PRIVILEGED_LAYOUT_COMPONENTS = ("visible_frac", *_SHARED)
 
 
-class LayoutObservation(BaseParallelWrapper):
+class LayoutObservation(ParallelWrapper):
     """Add the ``layout`` observation (module docstring).
 
     Args:

@@ -19,11 +19,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from pettingzoo.utils import BaseParallelWrapper
-
 from localization.checks import check_choice
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.stack import ASSOCIATIONS, DETECTORS, PAPER_WIDTH_PX, StackSpec
+from uav_struct_env.wrappers.base import ParallelWrapper
 from uav_struct_env.wrappers.keys import DropKeys
 from uav_struct_env.wrappers.layout import LAYOUT_COMPONENTS, LayoutObservation
 from uav_struct_env.wrappers.localize import LocalizePoses
@@ -35,7 +34,7 @@ __all__ = ["DETECTORS", "LAYOUT_COMPONENTS", "PAPER_WIDTH_PX", "REWARDS", "Local
 MODES = ASSOCIATIONS
 
 
-class LocalizationWrapper(BaseParallelWrapper):
+class LocalizationWrapper(ParallelWrapper):
     """Localize every agent each step; add pose, its quality, layout features and a reward.
 
     Args:

@@ -24,11 +24,11 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from pettingzoo.utils import BaseParallelWrapper
 
 from localization.geometry import camera_center, invert, quat_wxyz_from_matrix
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.stack import FrameLocalization, LocalizationStack, StackSpec, build_stack
+from uav_struct_env.wrappers.base import ParallelWrapper
 
 __all__ = ["POSE_BOUND", "STD_BOUND", "LocalizePoses", "find_wrapper"]
 
@@ -45,7 +45,7 @@ def find_wrapper(env: Any, cls: type) -> Any:
     return None
 
 
-class LocalizePoses(BaseParallelWrapper):
+class LocalizePoses(ParallelWrapper):
     """Add ``pose``, ``pose_std``, ``localized`` and ``info["localization"]`` (module docstring).
 
     Args:

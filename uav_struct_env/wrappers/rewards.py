@@ -26,11 +26,11 @@ from __future__ import annotations
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-from pettingzoo.utils import BaseParallelWrapper
 
 from localization.checks import check_choice, check_number
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.stack import FrameLocalization
+from uav_struct_env.wrappers.base import ParallelWrapper
 from uav_struct_env.wrappers.localize import LocalizePoses, find_wrapper
 
 __all__ = [
@@ -154,7 +154,7 @@ def make_reward(reward: str | Reward, **kwargs: Any) -> Reward:
     return REWARDS[reward](**kwargs)
 
 
-class RewardWrapper(BaseParallelWrapper):
+class RewardWrapper(ParallelWrapper):
     """Set each agent's reward to the sum of ``reward``'s terms; terms go to ``info``.
 
     Args:

@@ -1,0 +1,57 @@
+"""What the RL libraries read besides reset/step: space dicts on env and wrappers, state()."""
+
+import numpy as np
+import pytest
+
+import uav_struct_env
+from uav_struct_env.errors import ResetNeededError
+from uav_struct_env.wrappers import make_train_env
+
+
+def test_space_dicts_match_the_per_agent_spaces_on_the_env_and_every_wrapper():
+    wrapped = make_train_env("state")
+    try:
+        layer = wrapped
+        seen = 0
+        while True:
+            for a in layer.possible_agents:
+                assert layer.observation_spaces[a] == layer.observation_space(a)
+                assert layer.action_spaces[a] == layer.action_space(a)
+            seen += 1
+            inner = getattr(layer, "_chain", None) or getattr(layer, "env", None)
+            if inner is None or inner is layer:
+                break
+            layer = inner
+        # The wrapper's dict has the keys it adds (pose ...), not the bare env's.
+        assert "pose" in wrapped.observation_spaces["uav_0"].spaces
+        assert "pose" not in wrapped.unwrapped.observation_spaces["uav_0"].spaces
+        assert seen >= 3
+    finally:
+        wrapped.close()
+
+
+def test_state_stacks_the_true_camera_poses_and_who_is_alive():
+    env = uav_struct_env.parallel_env("train", renderer="tiny", observe_image=False)
+    try:
+        with pytest.raises(ResetNeededError, match="state\\(\\) before reset"):
+            env.state()
+        env.reset(seed=0)
+        s = env.state()
+        assert s.shape == env.state_space.shape == (32,) and s.dtype == np.float32
+        assert env.state_space.contains(s)
+        per = s.reshape(4, 8)
+        for i, a in enumerate(env.possible_agents):
+            T = env.uav_state(a).world_from_cam
+            np.testing.assert_allclose(per[i, :3], T[:3, 3], atol=1e-4)
+            assert np.linalg.norm(per[i, 3:7]) == pytest.approx(1.0, abs=1e-6)
+        np.testing.assert_array_equal(per[:, 7], 1.0)
+        # A UAV flown into the ground is no longer alive in the state.
+        down = np.array([0, 0, -1, 0, 0], dtype=np.float32)
+        for _ in range(200):
+            _, _, term, _, _ = env.step({a: down if a == "uav_0" else np.zeros(5, np.float32)
+                                         for a in env.agents})
+            if term.get("uav_0"):
+                break
+        assert env.state().reshape(4, 8)[0, 7] == 0.0
+    finally:
+        env.close()
