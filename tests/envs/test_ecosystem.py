@@ -55,3 +55,40 @@ def test_state_stacks_the_true_camera_poses_and_who_is_alive():
         assert env.state().reshape(4, 8)[0, 7] == 0.0
     finally:
         env.close()
+
+
+def _numbers_only(value) -> bool:
+    if isinstance(value, dict):
+        return all(_numbers_only(v) for v in value.values())
+    if isinstance(value, np.ndarray):
+        return value.dtype.kind in "biuf" and bool(np.all(np.isfinite(value)))
+    return isinstance(value, (bool, int, float, np.number)) and bool(np.isfinite(value))
+
+
+def test_the_wrapper_info_is_finite_numbers_and_deterministic_for_a_seed():
+    """What tensor libraries read, and PettingZoo's own seed test on the wrapped env."""
+    from pettingzoo.test import parallel_seed_test
+
+    from localization import FailureCode
+    from uav_struct_env.wrappers.localize import UNDEFINED, failure_code_number
+
+    env = make_train_env("state", max_cycles=8)
+    try:
+        _, infos = env.reset(seed=3)
+        codes = set()
+        for _ in range(8):
+            for a, info in infos.items():
+                loc = info["localization"]
+                assert _numbers_only(loc), loc
+                if not loc["success"]:
+                    assert loc["translation_error_m"] == UNDEFINED and loc["failure_code"] > 0
+                    code = env.last_frames[a].estimate.failure_code or FailureCode.UNKNOWN
+                    assert loc["failure_code"] == failure_code_number(code)
+                codes.add(loc["failure_code"])
+            if not env.agents:
+                break
+            _, _, _, _, infos = env.step({a: env.action_space(a).sample() for a in env.agents})
+        assert 0 in codes
+    finally:
+        env.close()
+    parallel_seed_test(lambda: make_train_env("state", max_cycles=6), num_cycles=6)

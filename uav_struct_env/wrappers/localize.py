@@ -12,9 +12,15 @@ wrapper adds to that agent's observation
 
 and to its info ``localization`` (success, translation_error_m, rotation_error_deg,
 prior_translation_error_m, n_correspondences, n_detections, n_visible, association_precision,
-association_recall, association_f1, reprojection_rmse_px, position_std_m, latency_s,
-failure_reason, failure_code). Nothing it adds to the observation needs ground truth; the errors
-in ``info`` do (simulation only). Its :attr:`last_frames` feed the layout and reward wrappers.
+association_recall, association_f1, reprojection_rmse_px, position_std_m, failure_code). Nothing
+it adds to the observation needs ground truth; the errors in ``info`` do (simulation only).
+
+The info holds numbers only, the same for the same seed (what tensor-based RL libraries and
+``pettingzoo.test.parallel_seed_test`` need): a quantity without a value (the error of a failed
+estimate) is :data:`UNDEFINED` (-1.0), never NaN; ``failure_code`` is 0 on success, else
+``1 + list(localization.FailureCode).index(code)`` (:func:`failure_code_number`). The wall-clock
+latency and the failure message, which are not, are in :attr:`last_frames` (``.latency_s``,
+``.estimate.failure_reason``). Its :attr:`last_frames` also feed the layout and reward wrappers.
 """
 
 from __future__ import annotations
@@ -25,12 +31,26 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from localization.failure import FailureCode
 from localization.geometry import camera_center, invert, quat_wxyz_from_matrix
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.stack import FrameLocalization, LocalizationStack, StackSpec, build_stack
 from uav_struct_env.wrappers.base import ParallelWrapper
 
-__all__ = ["POSE_BOUND", "STD_BOUND", "LocalizePoses", "find_wrapper"]
+__all__ = ["POSE_BOUND", "STD_BOUND", "UNDEFINED", "LocalizePoses", "failure_code_number", "find_wrapper"]
+
+#: The info value of a quantity that has none (the error of a failed estimate), instead of NaN.
+UNDEFINED = -1.0
+
+
+def _number(x: float) -> float:
+    x = float(x)
+    return x if np.isfinite(x) else UNDEFINED
+
+
+def failure_code_number(code: FailureCode | None) -> int:
+    """0 for success (None), else ``1 + list(FailureCode).index(code)``."""
+    return 0 if code is None else 1 + list(FailureCode).index(FailureCode(code))
 
 POSE_BOUND = 1.0e4
 STD_BOUND = 100.0
@@ -156,24 +176,23 @@ class LocalizePoses(ParallelWrapper):
         obs["pose"] = np.clip(pose, -POSE_BOUND, POSE_BOUND).astype(np.float32)
         obs["pose_std"] = np.clip(std, 0.0, STD_BOUND).astype(np.float32)
         obs["localized"] = np.array([1.0 if est.success else 0.0], np.float32)
-        position_std = float(np.sqrt(np.trace(est.covariance[:3, :3]))) if est.success else float("inf")
+        position_std = float(np.sqrt(np.trace(est.covariance[:3, :3]))) if est.success else UNDEFINED
         s = frame.scores
         info["localization"] = {
             "success": bool(est.success),
-            "translation_error_m": frame.translation_error_m,
-            "rotation_error_deg": frame.rotation_error_deg,
-            "prior_translation_error_m": frame.prior_translation_error_m,
+            "translation_error_m": _number(frame.translation_error_m),
+            "rotation_error_deg": _number(frame.rotation_error_deg),
+            "prior_translation_error_m": _number(frame.prior_translation_error_m),
             "n_correspondences": int(est.n_inliers),
             "n_detections": len(frame.detections),
             "n_visible": int(np.sum(truth["visible"])) if truth is not None else -1,
-            "association_precision": float(s.precision),
-            "association_recall": float(s.recall),
-            "association_f1": float(s.f1),
-            "reprojection_rmse_px": float(est.reprojection_rmse_px),
-            "position_std_m": position_std,
-            "latency_s": float(frame.latency_s),
-            "failure_reason": est.failure_reason,
-            "failure_code": None if est.failure_code is None else est.failure_code.value,
+            "association_precision": _number(s.precision),
+            "association_recall": _number(s.recall),
+            "association_f1": _number(s.f1),
+            "reprojection_rmse_px": _number(est.reprojection_rmse_px),
+            "position_std_m": _number(position_std),
+            "failure_code": 0 if est.success else failure_code_number(
+                est.failure_code or FailureCode.UNKNOWN),
         }
         self.last_frames[agent] = frame
         return frame
