@@ -92,3 +92,28 @@ def test_the_wrapper_info_is_finite_numbers_and_deterministic_for_a_seed():
     finally:
         env.close()
     parallel_seed_test(lambda: make_train_env("state", max_cycles=6), num_cycles=6)
+
+
+def test_flatten_observation_gives_one_vector_with_named_slices():
+    from uav_struct_env.wrappers import FlattenObservation
+
+    env = FlattenObservation(make_train_env("state"))
+    twin = make_train_env("state")  # the same seed, unflattened
+    try:
+        space = env.observation_space("uav_0")
+        assert space.dtype == np.float32 and space.shape == (3 + 3 + 10 + 1 + 7 + 6,)
+        assert env.observation_spaces["uav_0"] is space
+        assert sorted(env.layout) == sorted(twin.observation_space("uav_0").spaces)
+        flat, _ = env.reset(seed=0)
+        ref, _ = twin.reset(seed=0)
+        for _ in range(2):
+            for a, o in flat.items():
+                assert space.contains(o)
+                for key, where in env.layout.items():
+                    np.testing.assert_array_equal(o[where], np.ravel(ref[a][key]))
+            acts = {a: env.action_space(a).sample() for a in env.agents}
+            flat, *_ = env.step(acts)
+            ref, *_ = twin.step(acts)
+    finally:
+        env.close()
+        twin.close()

@@ -6,7 +6,8 @@ wenv = make_train_env("state")                             # a documented traini
 
 ``LocalizationWrapper`` composes :class:`LocalizePoses` (pose, pose_std, localized, info),
 :class:`LayoutObservation` (layout), :class:`RewardWrapper` (a reward object's terms) and
-:class:`DropKeys` (drop the image); the stack itself is :mod:`uav_struct_env.stack`.
+:class:`DropKeys` (drop the image); :class:`FlattenObservation` turns the Dict into one vector;
+the stack itself is :mod:`uav_struct_env.stack`.
 """
 
 from uav_struct_env.stack import FrameLocalization, localize_frame
@@ -16,6 +17,7 @@ from uav_struct_env.wrappers.configs import (
     make_localization_env,
     make_train_env,
 )
+from uav_struct_env.wrappers.flatten import FlattenObservation
 from uav_struct_env.wrappers.keys import DropKeys
 from uav_struct_env.wrappers.layout import (
     LAYOUT_COMPONENTS,
@@ -43,6 +45,7 @@ __all__ = [
     "AnchorReward",
     "DropKeys",
     "ErrorReward",
+    "FlattenObservation",
     "FrameLocalization",
     "LayoutObservation",
     "LocalizationWrapper",
