@@ -17,6 +17,15 @@ Metric definitions (the same for every policy):
     .venv/bin/python examples/evaluate_policy.py --model runs/ppo_state --episodes 20 \
         --plot runs/ppo_state/evaluation.png --json-out runs/ppo_state/evaluation.json
 
+Learning curve: ``--checkpoints RUN [RUN ...]`` evaluates every checkpoint folder
+(``RUN/checkpoints/step_<N>/``, written by ``train_viewpoint_ppo.py``) of each training run (one
+per training seed) deterministically on the same episodes, and plots the final-step success rate,
+median translation error and mean return against agent-steps: the median over runs with a band
+from the lowest to the highest run where several are given.
+
+    .venv/bin/python examples/evaluate_policy.py --checkpoints runs/ppo_seed0 runs/ppo_seed1 \
+        --episodes 10 --plot curve.png --json-out curve.json
+
 Nothing is written unless asked: ``--plot`` and ``--json-out`` name the files (no default path).
 
 A model folder is read without unpickling anything from it (unpickling runs whatever code the
@@ -60,6 +69,7 @@ DEFAULTS: dict[str, Any] = {
     "overwrite": False,
     "max_cycles": None,
     "trust_pickle": False,
+    "checkpoints": None,
 }
 
 
@@ -199,6 +209,66 @@ def table(results: dict[str, dict]) -> str:
     return "\n".join(rows)
 
 
+def checkpoint_folders(run: str | Path) -> list[tuple[int, Path]]:
+    """``(agent_steps, folder)`` of every checkpoint of a training run, in step order."""
+    root = Path(run)
+    root = root / "checkpoints" if (root / "checkpoints").is_dir() else root
+    found = []
+    for d in root.glob("step_*"):
+        if (d / "model.zip").is_file() and d.name[5:].isdigit():
+            found.append((int(d.name[5:]), d))
+    return sorted(found)
+
+
+def learning_curve(runs: list[str], env, seeds: list[int]) -> dict[str, list[dict]]:
+    """Evaluate every checkpoint of every run on ``seeds``: ``{run: [point, ...]}``."""
+    from tqdm.auto import tqdm
+
+    jobs = [(run, steps, folder) for run in runs for steps, folder in checkpoint_folders(run)]
+    curves: dict[str, list[dict]] = {run: [] for run in runs}
+    for run, steps, folder in tqdm(jobs, unit="checkpoint", desc="learning curve"):
+        rec = run_policy(PpoPolicy(folder, env), env, seeds)
+        final = summarize(rec["final"])
+        curves[run].append({"agent_steps": steps, "final_success_rate": final["success_rate"],
+                            "final_translation_median_m": final["translation_median_m"],
+                            "mean_return": float(np.mean(rec["returns"]))})
+    return curves
+
+
+CURVE_METRICS = (("final_success_rate", "localized at final step"),
+                 ("final_translation_median_m", "final-step median t-error [m]"),
+                 ("mean_return", "deterministic episode return"))
+
+
+def plot_curve(curves: dict[str, list[dict]], path: str | Path) -> None:
+    """Each metric against agent-steps: the median over runs, a min-max band over runs."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(CURVE_METRICS), figsize=(11, 3), dpi=90)
+    steps = sorted({p["agent_steps"] for c in curves.values() for p in c})
+    for ax, (key, label) in zip(axes, CURVE_METRICS, strict=True):
+        table = np.full((len(curves), len(steps)), np.nan)
+        for i, c in enumerate(curves.values()):
+            for p in c:
+                table[i, steps.index(p["agent_steps"])] = p[key]
+        with warnings.catch_warnings():  # a step no run reached, or no success there
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mid, lo, hi = (np.nanmedian(table, 0), np.nanmin(table, 0), np.nanmax(table, 0))
+        ax.plot(steps, mid, marker="o", color="C0", label=f"median of {len(curves)} run(s)")
+        if len(curves) > 1:
+            ax.fill_between(steps, lo, hi, color="C0", alpha=0.25, label="min-max over runs")
+        ax.set_xlabel("agent-steps")
+        ax.set_ylabel(label)
+    axes[0].set_ylim(0, 1.02)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)
+
+
 def check_options(opt: dict[str, Any]) -> None:
     """Every option (the model folder and the output files too), before any work.
 
@@ -217,7 +287,11 @@ def check_options(opt: dict[str, Any]) -> None:
     check_option("seed", opt["seed"], 0, integer=True)
     if opt["max_cycles"] is not None:
         check_option("max_cycles", opt["max_cycles"], 1, integer=True)
-    if "ppo" in opt["policies"]:
+    for run in opt["checkpoints"] or ():
+        if not checkpoint_folders(run):
+            raise UsageError(f"--checkpoints {str(run)!r} holds no checkpoints/step_<N>/model.zip "
+                             "(a folder written by train_viewpoint_ppo.py)")
+    if "ppo" in opt["policies"] and not opt["checkpoints"]:
         if opt["model"] is None:
             raise ValueError("policy 'ppo' needs model=<directory with model.zip>")
         check_input_file(Path(opt["model"]) / "model.zip", option="--model", what="model.zip")
@@ -240,6 +314,22 @@ def main(**kwargs: Any) -> dict[str, Any]:
     overrides = {} if opt["max_cycles"] is None else {"max_cycles": opt["max_cycles"]}
     env = make_train_env(opt["config"], **overrides)
     seeds = [opt["seed"] + i for i in range(opt["episodes"])]
+    if opt["checkpoints"]:
+        try:
+            curves = learning_curve(list(opt["checkpoints"]), env, seeds)
+        finally:
+            env.close()
+        if opt["plot"]:
+            plot_curve(curves, opt["plot"])
+        summary = {"options": opt, "seeds": seeds, "learning_curve": curves}
+        if opt["json_out"]:
+            atomic_write_json(opt["json_out"], summary, indent=2, default=str)
+        for run, points in curves.items():
+            print(run)
+            for q in points:
+                print(f"  {q['agent_steps']:>9d} steps: localized {q['final_success_rate']:.2f}, "
+                      f"median {q['final_translation_median_m']:.3f} m, return {q['mean_return']:.2f}")
+        return summary
     results: dict[str, dict] = {}
     try:  # the model folder is read (and refused) before any episode runs
         ppo = PpoPolicy(opt["model"], env, trust_pickle=opt["trust_pickle"]) if "ppo" in policies else None
@@ -285,6 +375,9 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--json-out", default=None, help="write the summary (JSON) to this file")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --plot / --json-out")
     p.add_argument("--max-cycles", type=int, default=None, help="episode length (default: the config's)")
+    p.add_argument("--checkpoints", nargs="+", default=None, metavar="RUN",
+                   help="training run folders (one per seed): evaluate every checkpoint into a "
+                   "learning curve instead of comparing policies")
     p.add_argument("--trust-pickle", action="store_true",
                    help="read a model folder's vecnormalize.pkl when it has no normalization.npz "
                    "(unpickling runs code from the file: only for folders you trust)")

@@ -13,8 +13,11 @@ as plain arrays, which ``evaluate_policy.py`` reads without unpickling anything;
     .venv/bin/tensorboard --logdir runs/ppo_state/tb
 
 Writes ``model.zip``, ``normalization.npz``, ``vecnormalize.pkl``, ``train.json`` (options, steps,
-wall clock, agent-steps per second), ``checkpoints/`` and ``tb/`` under ``--out`` only (every option
-is checked, and ``--out`` too, before training starts).
+wall clock, agent-steps per second), ``progress.jsonl`` (per rollout: training episode return and
+final-step localization, also on the progress bar and in TensorBoard), ``checkpoints/step_<N>/``
+(model folders every ``--checkpoint-every`` agent-steps, for ``evaluate_policy.py
+--checkpoints``' learning curve) and ``tb/`` under ``--out`` only (every option is checked, and
+``--out`` too, before training starts).
 """
 
 from __future__ import annotations
@@ -71,14 +74,27 @@ def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles:
 
 
 class _Progress:
-    """A tqdm progress bar and an optional wall-clock limit, as an SB3 callback."""
+    """Progress a researcher can read, as an SB3 callback (and the optional wall-clock limit).
 
-    def __new__(cls, total: int, minutes: float | None, show: bool):
+    After every rollout: the mean training episode return (raw rewards, the stochastic policy
+    while it explores) and, over the last 100 agent-episodes, the final-step localization
+    success rate and median translation error; on the progress bar, in TensorBoard
+    (``uav/...``) and as one JSON line per rollout in ``progress.jsonl``. The deterministic
+    evaluation of saved checkpoints is ``evaluate_policy.py --checkpoints`` (docs/training.md
+    explains why the two returns differ).
+    """
+
+    def __new__(cls, total: int, minutes: float | None, show: bool, log_path):
+        from collections import deque
+
+        import numpy as np
         from stable_baselines3.common.callbacks import BaseCallback
 
         class Progress(BaseCallback):
             def _on_training_start(self) -> None:
                 self.t0 = time.perf_counter()
+                self.finals: deque = deque(maxlen=100)
+                log_path.unlink(missing_ok=True)  # a new file, never through a planted link
                 self.bar = None
                 if show:
                     from tqdm.auto import tqdm
@@ -86,17 +102,66 @@ class _Progress:
                     self.bar = tqdm(total=total, unit="step", smoothing=0.05)
 
             def _on_step(self) -> bool:
+                for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
+                    if done and "localization" in info:
+                        loc = info["localization"]
+                        self.finals.append((loc["success"], loc["translation_error_m"]))
                 if self.bar is not None:
                     self.bar.update(self.training_env.num_envs)
                 if minutes is not None and time.perf_counter() - self.t0 > 60.0 * minutes:
                     return False
                 return True
 
+            def _on_rollout_end(self) -> None:
+                returns = [e["r"] for e in self.model.ep_info_buffer]
+                ok = [e for s, e in self.finals if s]
+                row = {
+                    "agent_steps": int(self.num_timesteps),
+                    "wall_clock_s": round(time.perf_counter() - self.t0, 2),
+                    "episode_return_mean": float(np.mean(returns)) if returns else None,
+                    "final_success_rate": len(ok) / len(self.finals) if self.finals else None,
+                    "final_translation_median_m": float(np.median(ok)) if ok else None,
+                }
+                for key, value in row.items():
+                    if key != "agent_steps" and value is not None:
+                        self.logger.record(f"uav/{key}", value)
+                with open(log_path, "a") as log:
+                    log.write(json.dumps(row) + "\n")
+                if self.bar is not None and row["episode_return_mean"] is not None:
+                    self.bar.set_postfix(ret=f"{row['episode_return_mean']:.2f}",
+                                         loc=f"{row['final_success_rate'] or 0:.2f}",
+                                         err=f"{row['final_translation_median_m'] or float('nan'):.2f}m")
+
             def _on_training_end(self) -> None:
                 if self.bar is not None:
                     self.bar.close()
 
         return Progress()
+
+
+class _Checkpoints:
+    """Every ``every`` agent-steps a model folder ``checkpoints/step_<steps>/``.
+
+    It holds ``model.zip`` and ``normalization.npz``, which ``evaluate_policy.py`` reads without
+    unpickling (SB3's own checkpoints would pickle the normalization).
+    """
+
+    def __new__(cls, every: int, folder, vec_normalize):
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        from uav_struct_env.training.policy_files import NORMALIZATION_FILE, save_normalization
+
+        class Checkpoints(BaseCallback):
+            def _on_step(self) -> bool:
+                if self.num_timesteps // every > getattr(self, "saved", 0):
+                    self.saved = self.num_timesteps // every
+                    target = real_folder(folder / f"step_{self.num_timesteps:09d}")
+                    with atomic_path(target / "model.zip") as tmp:
+                        self.model.save(tmp)
+                    save_normalization(vec_normalize, target / NORMALIZATION_FILE)
+                return True
+
+        return Checkpoints()
 
 
 def check_options(opt: dict[str, Any]) -> None:
@@ -135,7 +200,7 @@ def main(**kwargs: Any) -> dict[str, Any]:
     check_options(opt)
     import torch
     from stable_baselines3 import PPO
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -168,13 +233,9 @@ def main(**kwargs: Any) -> dict[str, Any]:
     n = vec.num_envs
     callbacks = CallbackList(
         [
-            CheckpointCallback(
-                max(opt["checkpoint_every"] // n, 1),
-                str(real_folder(out / "checkpoints")),
-                name_prefix="ppo",
-                save_vecnormalize=True,
-            ),
-            _Progress(opt["total_timesteps"], opt["minutes"], opt["progress_bar"]),
+            _Checkpoints(opt["checkpoint_every"], real_folder(out / "checkpoints"), vec),
+            _Progress(opt["total_timesteps"], opt["minutes"], opt["progress_bar"],
+                      out / "progress.jsonl"),
         ]
     )
     t0 = time.perf_counter()

@@ -9,10 +9,13 @@ import sys
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
+
+from uav_struct_env.errors import UsageError  # noqa: E402
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -50,7 +53,14 @@ def test_train_writes_model_normalization_logs_and_checkpoints(trained):
     for name in ("model.zip", "normalization.npz", "vecnormalize.pkl", "train.json"):
         assert (out / name).is_file(), name
     assert json.loads((out / "train.json").read_text())["options"]["seed"] == 3
-    assert any((out / "checkpoints").glob("ppo_*_steps.zip"))
+    steps = sorted(d.name for d in (out / "checkpoints").glob("step_*"))
+    assert steps == ["step_000000128", "step_000000256"]
+    for d in steps:  # model folders the evaluator reads without unpickling
+        assert {f.name for f in (out / "checkpoints" / d).iterdir()} == {"model.zip", "normalization.npz"}
+    rows = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]
+    assert [r["agent_steps"] for r in rows] == [256]  # one rollout of 64 steps x 4 agent slots
+    assert rows[-1]["agent_steps"] >= 256 and rows[-1]["episode_return_mean"] is not None
+    assert 0.0 <= rows[-1]["final_success_rate"] <= 1.0
     assert any((out / "tb").rglob("events.out.tfevents*"))
 
 
@@ -156,3 +166,27 @@ def test_example_mistakes_are_one_line_and_status_2(tmp_path):
 def test_evaluate_writes_nothing_unless_asked():
     evaluate = load("evaluate_policy")
     assert evaluate.DEFAULTS["plot"] is None and evaluate.DEFAULTS["json_out"] is None
+
+
+def test_checkpoints_evaluate_into_a_learning_curve_with_a_band_over_runs(trained, tmp_path):
+    out, _ = trained
+    second = tmp_path / "seed4"
+    load("train_viewpoint_ppo").main(out=str(second), total_timesteps=128, n_envs=1, num_cpus=0,
+                                     n_steps=64, batch_size=64, n_epochs=1, max_cycles=8,
+                                     checkpoint_every=128, progress_bar=False, seed=4)
+    evaluate = load("evaluate_policy")
+    summary = evaluate.main(checkpoints=(str(out), str(second)), episodes=1, max_cycles=4,
+                            plot=str(tmp_path / "curve.png"), json_out=str(tmp_path / "curve.json"))
+    curves = summary["learning_curve"]
+    assert [p["agent_steps"] for p in curves[str(out)]] == [128, 256]
+    assert [p["agent_steps"] for p in curves[str(second)]] == [128, 256]  # one rollout: 4 x 64
+    for points in curves.values():
+        for p in points:
+            assert 0.0 <= p["final_success_rate"] <= 1.0 and np.isfinite(p["mean_return"])
+    assert (tmp_path / "curve.png").stat().st_size > 1000
+    # The same checkpoint evaluates to the same numbers as the model folder it is.
+    direct = evaluate.main(model=str(out / "checkpoints" / "step_000000256"), policies=("ppo",),
+                           episodes=1, max_cycles=4)
+    assert direct["results"]["ppo"]["mean_return"] == pytest.approx(curves[str(out)][1]["mean_return"])
+    with pytest.raises(UsageError, match="holds no checkpoints/step_<N>/model.zip"):
+        evaluate.main(checkpoints=(str(tmp_path),), episodes=1)
