@@ -8,6 +8,7 @@ import pytest
 
 from localization import FailureCode, Localizer
 from localization.synthetic import PAPER_K
+from uav_struct_env.errors import ConfigError
 from uav_struct_env.study.protocol import METHODS, StudyConfig
 from uav_struct_env.study.report import (
     results_dict,
@@ -96,6 +97,10 @@ def test_settings_line_names_every_setting_and_the_version():
         assert part in line, part
     assert "site paper, as designed" in line
     assert "site paper, as built aci117 x 4" in settings_line(_results(as_built="aci117", as_built_scale=4))
+    assert "camera imaging, fixed lighting" in line
+    assert "random lighting" in settings_line(_results(lighting="random"))
+    with pytest.raises(ConfigError, match=r"lighting must be one of \('fixed', 'random'\), got 'dusk'"):
+        StudyConfig(lighting="dusk")
     results = _results()
     results["config"]["new_setting"] = True  # a setting added later is listed all the same
     assert "new_setting True" in settings_line(results)

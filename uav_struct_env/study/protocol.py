@@ -184,6 +184,8 @@ class StudyConfig:
             ground truth deviate from the design, element by element, while the localizer keeps
             the design.
         as_built_scale: factor on every tolerance of ``as_built`` (0: the design).
+        lighting: ``"fixed"`` (the default sun) or ``"random"`` (a sun drawn per scene and
+            viewpoint from the seed, :func:`uav_struct_env.sim.world.random_light`).
     """
 
     seed: int = 0
@@ -206,6 +208,7 @@ class StudyConfig:
     stage: str | None = None
     as_built: str | None = None
     as_built_scale: float = 1.0
+    lighting: str = "fixed"
 
     def __post_init__(self) -> None:
         for name, options in (
@@ -235,6 +238,7 @@ class StudyConfig:
             ("false_positives", 0.0, None),
         ):
             check_number(name, getattr(self, name), lo, hi, error=ConfigError, type_error=ConfigError)
+        check_choice("lighting", self.lighting, ("fixed", "random"), error=ConfigError)
         if self.as_built is not None:
             check_choice("as_built", self.as_built, tuple(TOLERANCE_MODELS), error=ConfigError)
         check_number("as_built_scale", self.as_built_scale, 0.0, 100.0, error=ConfigError,

@@ -223,7 +223,8 @@ def settings_line(results: dict) -> str:
         detector,
         f"{c.pop('association')} association",
         f"{c.pop('noise')} prior",
-        f"{c.pop('imaging')} imaging, {w}x{h} px, {c.pop('renderer')} renderer",
+        f"{c.pop('imaging')} imaging, {c.pop('lighting', 'fixed')} lighting, {w}x{h} px, "
+        f"{c.pop('renderer')} renderer",
         f"seed {c.pop('seed')}",
         protocol,
     ]

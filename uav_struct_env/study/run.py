@@ -117,6 +117,7 @@ def _env_for(config: StudyConfig, scene: Scene):
             n_agents=config.n_agents,
             texture_seed=config.seed,
             as_built=config.as_built_model,
+            lighting=config.lighting,
         )
         _ENVS[scene] = env
     return env

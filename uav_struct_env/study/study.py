@@ -158,6 +158,12 @@ def _parser() -> CommandParser:
         help="camera effects on the rendered images: ideal (none) or camera (blur, noise, JPEG)",
     )
     p.add_argument(
+        "--lighting",
+        default="fixed",
+        choices=("fixed", "random"),
+        help="the sun: fixed, or random (direction and intensity drawn per viewpoint from --seed)",
+    )
+    p.add_argument(
         "--detector-model",
         default=None,
         metavar="ONNX",
@@ -197,6 +203,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             stage=args.stage,
             as_built=args.as_built,
             as_built_scale=args.as_built_scale,
+            lighting=args.lighting,
         )
         check_site(args.site, args.stage, seed=args.seed)
         check_output_dir(args.out, overwrite=args.overwrite)
