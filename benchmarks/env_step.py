@@ -8,7 +8,8 @@ Usage::
 For each configuration: the time of one ``reset`` (the first one also builds the world), then
 ``--steps`` steps with random actions (gentle, so the UAVs stay up), reporting env steps/s (one
 step = all four UAVs), the time inside ``SiteWorld.render`` (four images per step) and inside
-``SiteWorld.landmark_truth`` as shares of the step time, and the rest (kinematics, sensors,
+``SiteWorld.landmark_truth`` (or ``landmark_truth_raycast`` without images) as shares of the step
+time, and the rest (kinematics, sensors,
 projections, dict building).
 """
 
@@ -26,6 +27,8 @@ CONFIGS = {
     "paper 1280x720, no landmark info": ("paper", {"landmark_sets": ()}),
     "train 128x72": ("train", {}),
     "train 128x72 + landmark info": ("train", {"landmark_sets": ("column_tops", "slab_corners")}),
+    "train, no image + landmark info (ray-cast)": (
+        "train", {"landmark_sets": ("column_tops", "slab_corners"), "observe_image": False}),
 }
 
 
@@ -54,7 +57,8 @@ def bench(preset: str, overrides: dict, steps: int, renderer: str) -> dict:
     reset = time.perf_counter() - t0
     world = env.world
     render, truth = _Timed(world.render), _Timed(world.landmark_truth)
-    world.render, world.landmark_truth = render, truth
+    rays = _Timed(world.landmark_truth_raycast)
+    world.render, world.landmark_truth, world.landmark_truth_raycast = render, truth, rays
     rng = np.random.default_rng(0)
     t0 = time.perf_counter()
     n = 0
@@ -72,7 +76,7 @@ def bench(preset: str, overrides: dict, steps: int, renderer: str) -> dict:
         "step_ms": 1e3 * elapsed / n,
         "render_ms_per_image": 1e3 * render.total / max(render.calls, 1),
         "render_share": render.total / elapsed,
-        "truth_share": truth.total / elapsed,
+        "truth_share": (truth.total + rays.total) / elapsed,
     }
     env.close()
     return out
@@ -81,7 +85,7 @@ def bench(preset: str, overrides: dict, steps: int, renderer: str) -> dict:
 def main(steps: int = 20, renderer: str = "auto", configs: list[str] | None = None) -> dict:
     results = {}
     print(
-        f"{'config':36s} {'backend':7s} {'1st reset':>9s} {'reset':>7s} {'steps/s':>8s} "
+        f"{'config':44s} {'backend':7s} {'1st reset':>9s} {'reset':>7s} {'steps/s':>8s} "
         f"{'ms/step':>8s} {'ms/img':>7s} {'render':>7s} {'truth':>6s} {'other':>6s}"
     )
     for name in configs or list(CONFIGS):
@@ -90,7 +94,7 @@ def main(steps: int = 20, renderer: str = "auto", configs: list[str] | None = No
         results[name] = r
         other = 1.0 - r["render_share"] - r["truth_share"]
         print(
-            f"{name:36s} {r['backend']:7s} {r['first_reset_s']:8.2f}s {r['reset_s']:6.3f}s "
+            f"{name:44s} {r['backend']:7s} {r['first_reset_s']:8.2f}s {r['reset_s']:6.3f}s "
             f"{r['steps_per_s']:8.2f} {r['step_ms']:8.1f} {r['render_ms_per_image']:7.1f} "
             f"{r['render_share']:6.0%} {r['truth_share']:6.0%} {other:6.0%}",
             flush=True,
