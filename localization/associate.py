@@ -28,7 +28,7 @@ Two methods:
        The prior term is what decides between assignments that fit equally well, such as the
        permutations of four coplanar corners. A hypothesis whose pose is farther from the prior
        than the Mahalanobis gate, or whose inlier residuals fail a chi-square test against
-       ``pixel_sigma`` (99.9 %, ``2 n - 6`` dof), is dropped.
+       ``pixel_sigma`` (``1 - 1e-6`` quantile, ``2 n - 6`` dof), is dropped.
     4. *Rivals and ambiguity* (:mod:`localization.ambiguity`). The winner's pose moved by the
        layout's self-translations gives rival hypotheses, refined and scored the same way; a
        rival with conflicting identities and a distinct pose within ``2 ln 100`` of the best
@@ -396,7 +396,7 @@ def associate_robust(
     max_rivals: int = 6,
     max_rival_rounds: int = 2,
     ambiguity_margin: float = AMBIGUITY_MARGIN,
-    fit_quantile: float = 0.999,
+    fit_quantile: float = 1.0 - 1e-6,
 ) -> Association:
     """Robust association: shift hypotheses, re-association after each PnP, likelihood scoring.
 
@@ -436,7 +436,9 @@ def associate_robust(
             this of the winner's makes the association fail as ``AMBIGUOUS``
             (:func:`localization.ambiguity.ambiguity`).
         fit_quantile: a hypothesis whose inlier residuals exceed this chi-square quantile
-            (``2 n - 6`` dof, ``pixel_sigma``) is rejected: it does not fit the noise model.
+            (``2 n - 6`` dof, ``pixel_sigma``) is rejected: it does not fit the noise model. The
+            default rejects one correct pose in a million (0.999 lost one of the benchmark's
+            200 column-top views, chi-square 42.9 on 18 dof).
     """
     sig = prior_sigmas or PriorSigmas()
     gate = float(gate_px) if gate_px is not None else max(5.0 * pixel_sigma, 3.0)
