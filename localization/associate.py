@@ -26,7 +26,13 @@ Two methods:
        per landmark predicted inside the image but not detected (miss), plus the squared
        Mahalanobis distance of the pose from the prior (sigmas 3 m, 2/2/5 degrees by default).
        The prior term is what decides between assignments that fit equally well, such as the
-       permutations of four coplanar corners.
+       permutations of four coplanar corners. A hypothesis whose pose is farther from the prior
+       than the Mahalanobis gate, or whose inlier residuals fail a chi-square test against
+       ``pixel_sigma`` (``1 - 1e-6`` quantile, ``2 n - 6`` dof), is dropped.
+    4. *Rivals and ambiguity* (:mod:`localization.ambiguity`). The winner's pose moved by the
+       layout's self-translations gives rival hypotheses, refined and scored the same way; a
+       rival with conflicting identities and a distinct pose within ``2 ln 100`` of the best
+       score makes the association fail as ``ambiguous`` instead of guessing.
 
     Gating means a detection (clutter) or a landmark (miss, occlusion) may stay unassigned.
 """
@@ -40,7 +46,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
+from scipy.stats import chi2
 
+from localization.ambiguity import AMBIGUITY_MARGIN, ambiguity, translation_hypotheses
 from localization.failure import FailureCode
 from localization.geometry import invert, project
 from localization.pnp import (
@@ -385,6 +393,10 @@ def associate_robust(
     position_offsets: tuple[tuple[float, float, float], ...] = GRID_OFFSETS,
     shifts_per_layout: int = 2,
     exhaustive_limit: int = 150,
+    max_rivals: int = 6,
+    max_rival_rounds: int = 2,
+    ambiguity_margin: float = AMBIGUITY_MARGIN,
+    fit_quantile: float = 1.0 - 1e-6,
 ) -> Association:
     """Robust association: shift hypotheses, re-association after each PnP, likelihood scoring.
 
@@ -397,7 +409,9 @@ def associate_robust(
         margin_px: how far outside the image a projection may fall and remain a candidate.
         pixel_sigma: detector noise, px.
         gate_px: final inlier gate, px; default ``max(5 * pixel_sigma, 3)``.
-        coarse_gate_px: gate of the first assignment of each shift hypothesis, px.
+        coarse_gate_px: gate of the first assignment of each shift hypothesis, px; never below
+            the prior's smallest rotation sigma seen through the lens (``f * min(sigma_rot)``,
+            38.7 px for the paper's camera and default sigmas, 310 px at f = 8900 px).
         max_hypotheses: number of distinct coarse assignments refined by PnP and re-association
             (those agreeing with an already refined result are skipped and not counted).
         max_iterations: PnP / re-association rounds per hypothesis.
@@ -415,9 +429,22 @@ def associate_robust(
         exhaustive_limit: when the number of largest one-to-one assignments between the finite
             detections and the candidate landmarks is at most this, all of them are tried
             (small sets such as four corners) instead of the layout vote.
+        max_rivals: most rivals of the winner refined per round (its pose moved by the layout's
+            self-translations, :func:`localization.ambiguity.translation_hypotheses`).
+        max_rival_rounds: rounds of the rival search (a rival that wins gets its own rivals).
+        ambiguity_margin: a rival with conflicting identities, a distinct pose and a score within
+            this of the winner's makes the association fail as ``AMBIGUOUS``
+            (:func:`localization.ambiguity.ambiguity`).
+        fit_quantile: a hypothesis whose inlier residuals exceed this chi-square quantile
+            (``2 n - 6`` dof, ``pixel_sigma``) is rejected: it does not fit the noise model. The
+            default rejects one correct pose in a million (0.999 lost one of the benchmark's
+            200 column-top views, chi-square 42.9 on 18 dof).
     """
     sig = prior_sigmas or PriorSigmas()
     gate = float(gate_px) if gate_px is not None else max(5.0 * pixel_sigma, 3.0)
+    # The prior's attitude error is an angle: through a long lens it moves the projections by
+    # hundreds of pixels, and a gate fixed in pixels would then match only coincidences.
+    coarse_gate_px = max(coarse_gate_px, min(K[0, 0], K[1, 1]) * min(sig.rotation_rad))
     n = detections_uv.shape[0]
     empty = np.full(n, -1, dtype=np.int64)
     prior = prior_cam_from_world
@@ -485,8 +512,31 @@ def associate_robust(
                     break
 
     # 2. re-association after each pose refinement
+    def refine(a: NDArray, start: NDArray | None = None) -> tuple[NDArray, NDArray] | None:
+        return _refine_hypothesis(
+            a, det, good, landmarks_xyz, K, prior, image_size, margin_px,
+            pixel_sigma=pixel_sigma, prior_sigmas=sig, gate_px=gate,
+            coarse_gate_px=coarse_gate_px, max_iterations=max_iterations, need=need, start=start,
+        )
+
+    def consistent(T: NDArray) -> bool:
+        return (
+            max_prior_mahalanobis_sq is None
+            or prior_mahalanobis_sq(T, prior, sig) <= max_prior_mahalanobis_sq
+        )
+
+    def fits(a: NDArray, T: NDArray) -> bool:
+        # The residuals' chi-square against the noise model (2n - 6 dof): every pair within
+        # the gate is not enough -- four wrong pairs at 3 px RMS each pass a 5 px gate.
+        m = a >= 0
+        dof = 2 * int(m.sum()) - 6
+        if dof <= 0:
+            return True
+        res, _ = reprojection_residuals(K, T, landmarks_xyz[a[m]], det[m])
+        return float(np.sum(res**2)) / pixel_sigma**2 <= chi2.ppf(fit_quantile, dof)
+
     finals: dict[bytes, tuple[NDArray, NDArray]] = {}
-    rejected_by_prior = 0
+    rejected_by_prior = rejected_by_fit = 0
     explored: list[NDArray] = []
     budget = max(max_hypotheses, 1)
     for a in coarse:
@@ -496,62 +546,26 @@ def associate_robust(
         if budget == 0:
             break
         budget -= 1
-        T = None
-        current = a
-        for it in range(max_iterations):
-            m = current >= 0
-            if m.sum() < need:
-                T = None
-                break
-            if T is None:
-                res = solve_pnp(
-                    landmarks_xyz[current[m]],
-                    det[m],
-                    K,
-                    prior,
-                    rule="prior",
-                    min_points=need,
-                    pixel_sigma=pixel_sigma,
-                    prior_sigmas=sig,
-                    ransac=m.sum() >= 6,
-                    ransac_threshold_px=max(gate, coarse_gate_px / 4),
-                )
-                if not res.success:
-                    break
-                T = res.cam_from_world
-                if not res.inliers.all():
-                    # drop RANSAC outliers before re-assigning
-                    keep = np.flatnonzero(m)[res.inliers]
-                    current = np.full(n, -1, dtype=np.int64)
-                    current[keep] = a[keep]
-            else:
-                T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, T, max_iterations=5)
-            step_gate = max(gate, coarse_gate_px / 4 ** (it + 1))
-            cidx, cproj = candidate_landmarks(landmarks_xyz, K, T, image_size, margin_px)
-            local = assign(det[good], cproj, step_gate)
-            new = np.full(n, -1, dtype=np.int64)
-            ok = local >= 0
-            new[good[ok]] = cidx[local[ok]]
-            if np.array_equal(new, current) and step_gate == gate:
-                break
-            current = new
-        if T is None:
+        hyp = refine(a)
+        if hyp is None:
             continue
-        m = current >= 0
-        if m.sum() < need:
-            continue
-        explored.append(current)
-        T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, T, max_iterations=10)
-        if (
-            max_prior_mahalanobis_sq is not None
-            and prior_mahalanobis_sq(T, prior, sig) > max_prior_mahalanobis_sq
-        ):
+        explored.append(hyp[0])
+        if not consistent(hyp[1]):
             rejected_by_prior += 1
             continue
-        finals.setdefault(current.tobytes(), (current, T))
+        if not fits(*hyp):
+            rejected_by_fit += 1
+            continue
+        finals.setdefault(hyp[0].tobytes(), hyp)
 
     if not finals:
-        if rejected_by_prior:
+        if rejected_by_fit and not rejected_by_prior:
+            code = FailureCode.NO_CONSISTENT_ASSOCIATION
+            reason = (
+                f"all {rejected_by_fit} association hypotheses fit worse than pixel_sigma="
+                f"{pixel_sigma:g} px allows (chi-square quantile {fit_quantile})"
+            )
+        elif rejected_by_prior:
             code = FailureCode.INCONSISTENT_WITH_PRIOR
             reason = (
                 f"all {rejected_by_prior} association hypotheses give poses inconsistent with "
@@ -563,14 +577,117 @@ def associate_robust(
         return Association(empty, prior, 0.0, np.inf, len(coarse), reason, code)
 
     # 3. scoring
-    best = None
-    for a, T in finals.values():
-        score = _nll(
-            det, landmarks_xyz, K, T, a, prior, image_size, pixel_sigma, gate, miss_cost, sig
+    def nll(a: NDArray, T: NDArray) -> float:
+        return _nll(det, landmarks_xyz, K, T, a, prior, image_size, pixel_sigma, gate, miss_cost, sig)
+
+    scored = sorted(((nll(a, T), a, T) for a, T in finals.values()), key=lambda h: h[0])
+
+    # 4. rivals of the winner under the layout's self-translations, then the ambiguity rule
+    for _ in range(max_rival_rounds):
+        best_a, best_T = scored[0][1], scored[0][2]
+        rivals = translation_hypotheses(
+            det, landmarks_xyz, K, best_T, best_a, prior, sig.as_array()[:3],
+            max_prior_mahalanobis_sq, coarse_gate_px, need, max_rivals,
         )
-        if best is None or score < best[0]:
-            best = (score, a, T)
-    score, a, T = best
+        added = False
+        for idx_r, proj_r, start in rivals:
+            local = assign(det[good], proj_r, coarse_gate_px)
+            a = np.full(n, -1, dtype=np.int64)
+            a[good[local >= 0]] = idx_r[local[local >= 0]]
+            if (a >= 0).sum() < need or any(np.all((a < 0) | (a == e)) for e in explored):
+                continue
+            hyp = refine(a, start)
+            if hyp is None:
+                continue
+            explored.append(hyp[0])
+            if hyp[0].tobytes() in finals or not consistent(hyp[1]) or not fits(*hyp):
+                continue
+            finals[hyp[0].tobytes()] = hyp
+            scored.append((nll(*hyp), *hyp))
+            added = True
+        scored.sort(key=lambda h: h[0])
+        if not added or scored[0][1] is best_a:
+            break
+    reason = ambiguity(scored, landmarks_xyz, K, pixel_sigma, ambiguity_margin)
+    if reason is not None:
+        return Association(empty, prior, 0.0, np.inf, len(finals), reason, FailureCode.AMBIGUOUS)
+    score, a, T = scored[0]
     m = a >= 0
     res, _ = reprojection_residuals(K, T, landmarks_xyz[a[m]], det[m])
     return Association(a, T, float(np.sum(res**2)), float(score), len(finals), None)
+
+
+def _refine_hypothesis(
+    a: NDArray,
+    det: NDArray,
+    good: NDArray,
+    landmarks_xyz: NDArray,
+    K: NDArray,
+    prior: NDArray,
+    image_size: tuple[int, int],
+    margin_px: float,
+    *,
+    pixel_sigma: float,
+    prior_sigmas: PriorSigmas,
+    gate_px: float,
+    coarse_gate_px: float,
+    max_iterations: int,
+    need: int,
+    start: NDArray | None = None,
+) -> tuple[NDArray, NDArray] | None:
+    """A coarse assignment turned into ``(assignment, pose)`` by PnP and re-association.
+
+    The first pose is ``start`` refined on the coarse pairs when given, else PnP on them (RANSAC
+    with 6 or more, candidates chosen with the prior); then the landmarks are re-projected and
+    re-assigned with a gate that tightens from ``coarse_gate_px / 4`` to ``gate_px``, the pose
+    refined on the new pairs, until the assignment is stable. None when fewer than ``need``
+    pairs remain or PnP fails.
+    """
+    n = det.shape[0]
+    T = None
+    current = a
+    for it in range(max_iterations):
+        m = current >= 0
+        if m.sum() < need:
+            return None
+        if T is None and start is not None:
+            T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, start, max_iterations=5)
+        elif T is None:
+            res = solve_pnp(
+                landmarks_xyz[current[m]],
+                det[m],
+                K,
+                prior,
+                rule="prior",
+                min_points=need,
+                pixel_sigma=pixel_sigma,
+                prior_sigmas=prior_sigmas,
+                ransac=m.sum() >= 6,
+                ransac_threshold_px=max(gate_px, coarse_gate_px / 4),
+            )
+            if not res.success:
+                return None
+            T = res.cam_from_world
+            if not res.inliers.all():
+                # drop RANSAC outliers before re-assigning
+                keep = np.flatnonzero(m)[res.inliers]
+                current = np.full(n, -1, dtype=np.int64)
+                current[keep] = a[keep]
+        else:
+            T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, T, max_iterations=5)
+        step_gate = max(gate_px, coarse_gate_px / 4 ** (it + 1))
+        cidx, cproj = candidate_landmarks(landmarks_xyz, K, T, image_size, margin_px)
+        local = assign(det[good], cproj, step_gate)
+        new = np.full(n, -1, dtype=np.int64)
+        ok = local >= 0
+        new[good[ok]] = cidx[local[ok]]
+        if np.array_equal(new, current) and step_gate == gate_px:
+            break
+        current = new
+    if T is None:
+        return None
+    m = current >= 0
+    if m.sum() < need:
+        return None
+    T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, T, max_iterations=10)
+    return current, T

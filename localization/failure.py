@@ -25,6 +25,9 @@ class FailureCode(str, Enum):
     INCONSISTENT_WITH_PRIOR = "inconsistent_with_prior"
     #: No association hypothesis kept enough mutually consistent correspondences.
     NO_CONSISTENT_ASSOCIATION = "no_consistent_association"
+    #: Two association hypotheses with conflicting identities and distinct poses fit about
+    #: equally well: the geometry cannot tell them apart (:mod:`localization.ambiguity`).
+    AMBIGUOUS = "ambiguous"
     #: Fewer assigned detections than the minimum number of correspondences.
     TOO_FEW_CORRESPONDENCES = "too_few_correspondences"
     #: The PnP solver returned no pose, or a non-finite one.

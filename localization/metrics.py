@@ -41,7 +41,7 @@ from localization.geometry import (
     check_transform,
     rotation_angle_deg,
 )
-from localization.pnp import pose_covariance
+from localization.pnp import pose_covariance, pose_difference
 
 __all__ = [
     "DEFAULT_THRESHOLDS",
@@ -55,6 +55,7 @@ __all__ = [
     "median_p90",
     "pooled_scores",
     "pose_errors",
+    "pose_nees",
     "recall_at",
     "rotation_error_deg",
     "summarize_errors",
@@ -90,6 +91,30 @@ def pose_errors(est_cam_from_world: ArrayLike, gt_cam_from_world: ArrayLike) -> 
         translation_error_m(est_cam_from_world, gt_cam_from_world),
         rotation_error_deg(est_cam_from_world, gt_cam_from_world),
     )
+
+
+def pose_nees(
+    est_cam_from_world: ArrayLike, gt_cam_from_world: ArrayLike, covariance: ArrayLike
+) -> float:
+    """Normalized estimation error squared ``e^T cov^-1 e`` of a pose (6 dof).
+
+    ``e`` is the estimate minus the truth in the package's ``(C, dtheta)`` parameterization
+    (:func:`localization.pnp.pose_difference`), ``covariance`` the estimate's (6, 6). A calibrated
+    covariance gives chi-square(6) values: median 5.35, mean 6. NaN when the covariance is not
+    finite or not invertible.
+    """
+    est = check_transform("est_cam_from_world", est_cam_from_world)
+    gt = check_transform("gt_cam_from_world", gt_cam_from_world)
+    cov = np.asarray(covariance, dtype=np.float64)
+    if cov.shape != (6, 6):
+        raise ValueError(f"covariance must have shape (6, 6), got {cov.shape}")
+    if not np.all(np.isfinite(cov)):
+        return float("nan")
+    e = pose_difference(est, gt)
+    try:
+        return float(e @ np.linalg.solve(cov, e))
+    except np.linalg.LinAlgError:
+        return float("nan")
 
 
 @dataclass(frozen=True)

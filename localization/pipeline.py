@@ -215,6 +215,20 @@ class Localizer:
             raise ValueError(f"prior_sigmas must be positive and finite, got {value!r}")
         return PriorSigmas(tuple(pos.tolist()), tuple(rot.tolist()))
 
+    def _edge_on(self, what: str, uv: NDArray[np.float64]) -> str | None:
+        """Why ``uv`` cannot give a pose when its points lie on one line, else None.
+
+        Landmarks whose images lie on one line (a plane seen edge-on) admit several poses that
+        fit equally well; the covariance at any one of them does not show it.
+        """
+        spread = _minor_spread_px(uv)
+        if spread >= max(2.0 * self.pixel_sigma, 1.0):
+            return None
+        return (
+            f"degenerate geometry: the {what} lie on a line (spread across it {spread:.2g} px), "
+            "the landmarks are seen edge-on"
+        )
+
     # ----------------------------------------------------------------------------------------
 
     def associate(
@@ -296,6 +310,11 @@ class Localizer:
             what = "no detections" if n == 0 else f"{int(usable.sum())} usable (finite) detections"
             return fail(FailureCode.TOO_FEW_DETECTIONS, f"too few detections: {what}, need {need}")
 
+        edge_on = self._edge_on("detections", det[usable])
+        if edge_on is not None:  # no association can help: fail before trying any
+            timings.update(associate=0.0, pnp=0.0, covariance=0.0)
+            return fail(FailureCode.DEGENERATE_GEOMETRY, edge_on)
+
         assoc = self.associate(det, prior)
         t2 = time.perf_counter()
         timings["associate"] = t2 - t1
@@ -360,17 +379,9 @@ class Localizer:
         timings["covariance"] = time.perf_counter() - t3
         if not np.all(np.isfinite(T)):
             return fail(FailureCode.PNP_FAILED, "PnP returned a non-finite pose", a, assoc.n_hypotheses)
-        spread = _minor_spread_px(det[m])
-        if spread < max(2.0 * self.pixel_sigma, 1.0):
-            # Landmarks whose images lie on one line (a plane seen edge-on) admit several poses
-            # that fit equally well; the covariance at any one of them does not show it.
-            return fail(
-                FailureCode.DEGENERATE_GEOMETRY,
-                f"degenerate geometry: the inlier detections lie on a line (spread across it "
-                f"{spread:.2g} px), the landmarks are seen edge-on",
-                a,
-                assoc.n_hypotheses,
-            )
+        edge_on = self._edge_on("inlier detections", det[m])
+        if edge_on is not None:
+            return fail(FailureCode.DEGENERATE_GEOMETRY, edge_on, a, assoc.n_hypotheses)
         if self.max_position_std_m is not None:
             std = float(np.sqrt(np.max(np.diag(cov)[:3]))) if np.all(np.isfinite(cov)) else np.inf
             if std > self.max_position_std_m:

@@ -42,9 +42,11 @@ from localization.geometry import (
 __all__ = [
     "PnPResult",
     "PriorSigmas",
+    "is_collinear",
     "is_coplanar",
     "plane_from_world",
     "pnp_candidates",
+    "pose_difference",
     "pose_covariance",
     "pose_jacobian",
     "prior_mahalanobis_sq",
@@ -112,6 +114,19 @@ def is_coplanar(points_xyz: ArrayLike, rel_tol: float = 1e-3) -> bool:
         return True
     s = np.linalg.svd(X - X.mean(axis=0), compute_uv=False)
     return bool(s[0] > 0 and s[2] <= rel_tol * s[0])
+
+
+def is_collinear(points_xyz: ArrayLike, rel_tol: float = 1e-3) -> bool:
+    """True when the points' spread across their best-fit line is below ``rel_tol`` x their extent.
+
+    Two or fewer points, or all in one place, are always collinear. A pose from collinear
+    landmarks is undetermined: any rotation about the line fits them.
+    """
+    X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
+    if X.shape[0] <= 2:
+        return True
+    s = np.linalg.svd(X - X.mean(axis=0), compute_uv=False)
+    return bool(s[1] <= rel_tol * s[0])
 
 
 def plane_from_world(points_xyz: ArrayLike) -> NDArray[np.float64]:
@@ -208,6 +223,18 @@ def pose_covariance(
     return pixel_sigma**2 * 0.5 * (cov + cov.T)
 
 
+def pose_difference(cam_from_world: ArrayLike, reference_cam_from_world: ArrayLike) -> NDArray[np.float64]:
+    """(6,) a pose minus a reference pose in the package's parameterization ``(C, dtheta)``.
+
+    ``C`` (first 3): camera centre difference along project x, y, z [m]; ``dtheta`` (last 3): the
+    world-frame rotation vector ``log(R_wc @ R_wc_ref.T)`` [rad] (module docstring).
+    """
+    T = np.asarray(cam_from_world, dtype=np.float64)
+    P = np.asarray(reference_cam_from_world, dtype=np.float64)
+    dC = camera_center(T) - camera_center(P)
+    return np.concatenate([dC, so3_log(T[:3, :3].T @ P[:3, :3])])
+
+
 def prior_mahalanobis_sq(
     cam_from_world: ArrayLike, prior_cam_from_world: ArrayLike, sigmas: PriorSigmas | None = None
 ) -> float:
@@ -217,11 +244,7 @@ def prior_mahalanobis_sq(
     vector ``log(R_wc @ R_wc_prior.T)`` divided by ``sigmas.rotation_rad`` about x, y, z.
     """
     sig = (sigmas or PriorSigmas()).as_array()
-    T = np.asarray(cam_from_world, dtype=np.float64)
-    P = np.asarray(prior_cam_from_world, dtype=np.float64)
-    dC = camera_center(T) - camera_center(P)
-    dtheta = so3_log(T[:3, :3].T @ P[:3, :3])  # R_wc @ R_wc_prior.T
-    return float(np.sum((np.concatenate([dC, dtheta]) / sig) ** 2))
+    return float(np.sum((pose_difference(cam_from_world, prior_cam_from_world) / sig) ** 2))
 
 
 # --------------------------------------------------------------------------------------------
@@ -465,6 +488,12 @@ def solve_pnp(
             keep[idx[np.asarray(ransac_in).reshape(-1)]] = True
             inliers = keep
     Xi, ui = X[inliers], u[inliers]
+    if is_collinear(Xi):
+        return fail(
+            FailureCode.DEGENERATE_GEOMETRY,
+            f"degenerate geometry: the {Xi.shape[0]} landmarks lie on a line, so any rotation "
+            "about it fits them",
+        )
     coplanar = is_coplanar(Xi)
     cands = pnp_candidates(Xi, ui, K, coplanar=coplanar)
     if not cands:

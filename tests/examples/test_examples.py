@@ -64,9 +64,36 @@ def test_train_writes_model_normalization_logs_and_checkpoints(trained):
     assert any((out / "tb").rglob("events.out.tfevents*"))
 
 
-def test_evaluate_compares_all_policies_on_the_same_seeds(trained, tmp_path):
+def _record_resets(monkeypatch) -> list[tuple[int, bytes]]:
+    """Make ``make_train_env`` return envs whose resets log ``(seed, first observations)``."""
+    import uav_struct_env.wrappers as wrappers
+
+    log: list[tuple[int, bytes]] = []
+    make = wrappers.make_train_env
+
+    def recording(*args, **kwargs):
+        env = make(*args, **kwargs)
+        reset = env.reset
+
+        def logged_reset(*, seed=None, options=None):
+            obs, infos = reset(seed=seed, options=options)
+            first = b"".join(
+                np.ascontiguousarray(obs[a][k]).tobytes() for a in sorted(obs) for k in sorted(obs[a])
+            )
+            log.append((seed, first))
+            return obs, infos
+
+        env.reset = logged_reset
+        return env
+
+    monkeypatch.setattr(wrappers, "make_train_env", recording)
+    return log
+
+
+def test_evaluate_compares_all_policies_on_the_same_seeds(trained, tmp_path, monkeypatch):
     out, _ = trained
     evaluate = load("evaluate_policy")
+    resets = _record_resets(monkeypatch)
     summary = evaluate.main(
         model=str(out),
         episodes=2,
@@ -78,7 +105,12 @@ def test_evaluate_compares_all_policies_on_the_same_seeds(trained, tmp_path):
     assert summary["seeds"] == [10_000, 10_001]
     for r in summary["results"].values():
         assert r["final_step"]["n"] == 8  # 2 episodes x 4 agents
-        assert 0.0 <= r["final_step"]["success_rate"] <= 1.0
+    # Every policy started its episodes from the same seeds, in order, and so from the same
+    # scenes (identical first observations); the two seeds give two different scenes.
+    assert [seed for seed, _ in resets] == [10_000, 10_001] * 4
+    starts = [first for _, first in resets]
+    assert starts[0] != starts[1]
+    assert starts == starts[:2] * 4
     assert (tmp_path / "eval.png").stat().st_size > 1000
     assert json.loads((tmp_path / "eval.json").read_text())["seeds"] == [10_000, 10_001]
 

@@ -4,6 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
+from localization.failure import FailureCode
 from localization.geometry import (
     camera_center,
     look_at,
@@ -127,8 +128,14 @@ def test_degenerate_inputs_fail_with_reason(K):
     assert not res.success and "too few" in res.failure_reason
     np.testing.assert_array_equal(res.cam_from_world, T)
     line = np.array([(0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0)], dtype=float)
-    res = solve_pnp(line, project(K, T, line)[0], K, T)
-    assert not res.success or np.isfinite(res.rmse_px)
+    # exactly on a line, and 1 mm off it (which SQPnP "solved" 50 m from the truth at 0.01 px)
+    for pts in (line, line + np.array([(0, 0, 0), (0, 0.001, 0), (0, 0, 0), (0, 0, 0)])):
+        res = solve_pnp(pts, project(K, T, pts)[0], K, T)
+        assert not res.success
+        assert res.failure_code is FailureCode.DEGENERATE_GEOMETRY
+        assert "lie on a line" in res.failure_reason
+        assert res.rmse_px == np.inf
+        np.testing.assert_array_equal(res.cam_from_world, T)
     with pytest.raises(ValueError, match="same length"):
         solve_pnp(SLAB, uv[:3], K)
     with pytest.raises(ValueError, match=r"shape \(N, 2\)"):
