@@ -34,7 +34,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check uav_struct_env localization tests benchmarks examples
 
 bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in docs/benchmarks.md
-	for b in render env_step localizer wrapper_throughput detector ifc_import; do \
+	for b in render env_step raycast localizer wrapper_throughput detector ifc_import; do \
 		[ -f benchmarks/$$b.py ] && $(BIN)/python benchmarks/$$b.py || exit 1; done
 
 # The learned detector from scratch, as localization/models/MODEL_CARD.md trained it: four
