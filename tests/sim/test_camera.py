@@ -86,8 +86,8 @@ def test_from_K_round_trip():
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
-        ({"width": 0}, "width must be a positive int"),
-        ({"height": 7.5}, "height must be a positive int"),
+        ({"width": 0}, r"Camera.width must be an int >= 1, got 0"),
+        ({"height": 7.5}, r"Camera.height must be an int >= 1, got 7.5"),
         ({"fx": -1.0}, "focal lengths must be positive"),
         ({"near": 0.0}, "0 < near < far"),
         ({"near": 10.0, "far": 5.0}, "0 < near < far"),

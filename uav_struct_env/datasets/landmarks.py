@@ -46,6 +46,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from localization.checks import check_number
 from localization.geometry import look_at
 from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError
@@ -91,10 +92,10 @@ class DatasetConfig:
             object.__setattr__(self, "site", str(Path(self.site).resolve()))
         for name in ("n_layouts", "views_per_layout", "seed"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < (0 if name == "seed" else 1):
-                raise ConfigError(f"DatasetConfig.{name} must be a positive int, got {v!r}")
-        if not (0 < self.scale <= 1):
-            raise ConfigError(f"DatasetConfig.scale must be in (0, 1], got {self.scale!r}")
+            check_number(f"DatasetConfig.{name}", v, 0 if name == "seed" else 1, integer=True,
+                         error=ConfigError, type_error=ConfigError)
+        check_number("DatasetConfig.scale", self.scale, 0, 1, lo_open=True, error=ConfigError,
+                     type_error=ConfigError)
         for name in ("distance", "height"):
             lo, hi = getattr(self, name)
             if not 0 < lo <= hi:

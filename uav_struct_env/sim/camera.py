@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization.checks import check_number
 from localization.geometry import check_intrinsics, check_transform
 from localization.synthetic import PAPER_IMAGE_SIZE, PAPER_K
 
@@ -50,18 +51,12 @@ class Camera:
     skew: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("width", "height"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
-                raise ValueError(f"Camera.{name} must be a positive int (pixels), got {value!r}")
+        for name in ("width", "height"):  # pixels
+            value = check_number(f"Camera.{name}", getattr(self, name), 1, integer=True,
+                                 type_error=ValueError)
             object.__setattr__(self, name, int(value))
         for name in ("fx", "fy", "cx", "cy", "near", "far", "skew"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
-                raise TypeError(f"Camera.{name} must be a number, got {value!r}")
-            if not np.isfinite(value):
-                raise ValueError(f"Camera.{name} must be finite, got {value!r}")
-            object.__setattr__(self, name, float(value))
+            object.__setattr__(self, name, check_number(f"Camera.{name}", getattr(self, name)))
         if self.fx <= 0 or self.fy <= 0:
             raise ValueError(
                 f"Camera focal lengths must be positive, got fx={self.fx}, fy={self.fy}"

@@ -39,6 +39,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization.checks import check_number
 from localization.geometry import invert, look_at, project
 from localization.synthetic import PAPER_IMAGE_SIZE, PAPER_K
 from uav_struct_env.errors import ConfigError
@@ -103,14 +104,8 @@ class ScheduleSpec:
     image_size: tuple[int, int] = PAPER_IMAGE_SIZE
 
     def __post_init__(self) -> None:
-        if (
-            isinstance(self.n_viewpoints, bool)
-            or not isinstance(self.n_viewpoints, (int, np.integer))
-            or self.n_viewpoints < 1
-        ):
-            raise ConfigError(
-                f"ScheduleSpec.n_viewpoints must be a positive int, got {self.n_viewpoints!r}"
-            )
+        check_number("ScheduleSpec.n_viewpoints", self.n_viewpoints, 1, integer=True,
+                     error=ConfigError, type_error=ConfigError)
         for name in ("distance", "height"):
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
@@ -310,8 +305,7 @@ def make_schedule(
     site: Site, n_agents: int = 4, spec: ScheduleSpec = ScheduleSpec()
 ) -> ViewpointSchedule:
     """The seeded viewpoint schedule of ``n_agents`` UAVs around ``site`` (module docstring)."""
-    if isinstance(n_agents, bool) or not isinstance(n_agents, (int, np.integer)) or n_agents < 1:
-        raise ConfigError(f"n_agents must be a positive int, got {n_agents!r}")
+    check_number("n_agents", n_agents, 1, integer=True, error=ConfigError, type_error=ConfigError)
     rng = np.random.default_rng(spec.seed)
     targets = _ViewTargets.from_site(site)
     V = spec.n_viewpoints

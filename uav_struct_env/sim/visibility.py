@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization.checks import check_number
 from localization.geometry import as_points, check_transform, project
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.site.model import LandmarkSet
@@ -103,8 +104,7 @@ def landmark_visibility(
             f"depth must have the camera's shape (H, W) = {(camera.height, camera.width)}, "
             f"got {D.shape}"
         )
-    if isinstance(radius, bool) or not isinstance(radius, (int, np.integer)) or radius < 0:
-        raise ValueError(f"radius must be an int >= 0 (pixels), got {radius!r}")
+    check_number("radius (pixels)", radius, 0, integer=True, type_error=ValueError)
 
     uv, z = project(camera.K, T, xyz)
     uv[z <= 0] = np.nan

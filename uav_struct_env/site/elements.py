@@ -162,8 +162,8 @@ class Element:
         where = f"{self.kind} {self.name!r}"
         if not isinstance(self.guid, str) or not self.guid:
             raise SiteGeometryError(f"{where} needs a non-empty guid string, got {self.guid!r}")
-        if isinstance(self.storey, bool) or not isinstance(self.storey, (int, np.integer)) or self.storey < 0:
-            raise SiteGeometryError(f"{where} storey must be an int >= 0, got {self.storey!r}")
+        check_number(f"{where} storey", self.storey, 0, integer=True, error=SiteGeometryError,
+                     type_error=SiteGeometryError)
         object.__setattr__(self, "outline", canonical_outline(self.outline, f"{where} outline"))
         z0 = check_coordinate(f"{where} z_bottom", self.z_bottom, None)
         z1 = check_coordinate(f"{where} z_top", self.z_top, None)

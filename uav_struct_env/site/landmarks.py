@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
+from localization.checks import check_number
 from numpy.typing import NDArray
 
 from uav_struct_env.errors import SiteGeometryError
@@ -165,8 +166,7 @@ def check_landmarks(site: Site, name: str, minimum: int = 4) -> LandmarkSet:
     """
     if name not in LANDMARK_SETS:
         raise ValueError(f"landmark set must be one of {LANDMARK_SETS}, got {name!r}")
-    if isinstance(minimum, bool) or not isinstance(minimum, (int, np.integer)) or minimum < 1:
-        raise ValueError(f"minimum must be an int >= 1, got {minimum!r}")
+    check_number("minimum", minimum, 1, integer=True, type_error=ValueError)
     found = site.landmarks(name)
     if len(found) >= minimum:
         return found

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
+from localization.checks import check_number
 from numpy.typing import ArrayLike, NDArray
 
 from uav_struct_env.site.elements import Column, Element, Slab
@@ -466,9 +467,7 @@ def site_elements(
     """
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-    if (isinstance(texture_size, bool) or not isinstance(texture_size, (int, np.integer))
-            or texture_size < 16):
-        raise ValueError(f"texture_size must be an int >= 16 (pixels), got {texture_size!r}")
+    check_number("texture_size (pixels)", texture_size, 16, integer=True, type_error=ValueError)
     if not (isinstance(texel_size, (int, float)) and texel_size > 0):
         raise ValueError(f"texel_size must be a positive length in metres, got {texel_size!r}")
     built = [e for kind in ELEMENT_KINDS for e in site.built if e.kind == kind]

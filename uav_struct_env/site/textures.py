@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization.checks import check_number
 from uav_struct_env.site.model import ArucoMarker
 
 __all__ = [
@@ -32,8 +33,7 @@ def _check_rng(rng: object) -> np.random.Generator:
 
 
 def _check_size(size: int) -> int:
-    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or size < 2:
-        raise ValueError(f"texture size must be an int >= 2 (pixels), got {size!r}")
+    check_number("texture size (pixels)", size, 2, integer=True, type_error=ValueError)
     return int(size)
 
 
@@ -212,8 +212,7 @@ def aruco_texture(marker: ArucoMarker, module_px: int = 16) -> NDArray[np.uint8]
     """
     import cv2
 
-    if isinstance(module_px, bool) or not isinstance(module_px, (int, np.integer)) or module_px < 1:
-        raise ValueError(f"module_px must be a positive int, got {module_px!r}")
+    check_number("module_px", module_px, 1, integer=True, type_error=ValueError)
     dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, marker.dictionary))
     modules = dictionary.markerSize + 2  # data bits plus the one-module black border
     pattern = cv2.aruco.generateImageMarker(dictionary, int(marker.id), modules, borderBits=1)
