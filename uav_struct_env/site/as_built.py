@@ -6,8 +6,8 @@ a random deviation within a tolerance model, element by element and seeded per e
 the environment can render (and report as ground truth) the as-built building while the
 localizer keeps the design (``EnvConfig.as_built``; the study's ``--as-built``).
 
-The tolerance model :data:`ACI117` (ACI 117-10, *Specification for Tolerances for Concrete
-Construction and Materials*, section 4.1 and 4.3 for cast-in-place members) gives:
+The tolerance model :data:`ACI117` (ACI 117, *Specification for Tolerances for Concrete
+Construction and Materials*, cast-in-place members) gives:
 
 =========================  =======  ==========================================================
 deviation                  limit    applied as
