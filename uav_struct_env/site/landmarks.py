@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
-from localization.checks import check_number
 from numpy.typing import NDArray
 
+from localization.checks import check_number
 from uav_struct_env.errors import SiteGeometryError
 from uav_struct_env.site.elements import Column, Element, Slab
 

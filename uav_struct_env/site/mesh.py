@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-from localization.checks import check_number
 from numpy.typing import ArrayLike, NDArray
 
+from localization.checks import check_number
 from uav_struct_env.site.elements import Column, Element, Slab
 from uav_struct_env.site.model import ArucoMarker, Site
 from uav_struct_env.site.polygons import is_axis_aligned_rectangle
