@@ -24,9 +24,9 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from localization.geometry import as_points, check_transform, project
+from localization.geometry import as_points, check_transform
 from uav_struct_env.sim.camera import Camera
-from uav_struct_env.sim.visibility import depth_tolerance
+from uav_struct_env.sim.visibility import window_visibility
 
 __all__ = ["RayScene", "raycast_visibility"]
 
@@ -164,24 +164,15 @@ def raycast_visibility(
     T = check_transform("cam_from_world", cam_from_world)
     if not isinstance(camera, Camera):
         raise TypeError(f"camera must be a uav_struct_env.sim.camera.Camera, got {type(camera).__name__}")
-    uv, z = project(camera.K, T, xyz)
-    uv[z <= 0] = np.nan
-    W, H = camera.width, camera.height
-    with np.errstate(invalid="ignore"):
-        in_frame = ((z > camera.near) & (uv[:, 0] >= -0.5) & (uv[:, 0] < W - 0.5)
-                    & (uv[:, 1] >= -0.5) & (uv[:, 1] < H - 0.5))
-    visible = np.zeros(len(xyz), dtype=bool)
-    idx = np.flatnonzero(in_frame)
-    if len(idx):
-        offsets = np.arange(-radius, radius + 1)
-        col = np.clip(np.rint(uv[idx, 0]).astype(np.intp)[:, None, None] + offsets[None, None, :], 0, W - 1)
-        row = np.clip(np.rint(uv[idx, 1]).astype(np.intp)[:, None, None] + offsets[None, :, None], 0, H - 1)
-        col, row = np.broadcast_arrays(col, row)
-        pixels = np.stack([col.ravel(), row.ravel(), np.ones(col.size)], axis=1).astype(np.float64)
-        rays_cam = pixels @ np.linalg.inv(camera.K).T  # z = 1: t is the depth
-        R, t = T[:3, :3], T[:3, 3]
+    R, t = T[:3, :3], T[:3, 3]
+    K_inv = np.linalg.inv(camera.K)
+
+    def ray_depths(rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.float64]:
+        pixels = np.stack([cols.ravel(), rows.ravel(), np.ones(cols.size)], axis=1).astype(np.float64)
+        rays_cam = pixels @ K_inv.T  # z = 1: a hit's t is its depth
         depth = scene.first_hit(-R.T @ t, rays_cam @ R, t_min=camera.near)
-        samples = np.minimum(depth, camera.far).reshape(len(idx), -1)
-        tol = depth_tolerance(z[idx], camera, abs_tol=abs_tol, rel_tol=rel_tol, depth_bits=24)
-        visible[idx] = np.any(samples >= (z[idx] - tol)[:, None], axis=1)
-    return {"ids": ids_arr.copy(), "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}
+        return np.minimum(depth, camera.far).reshape(rows.shape)
+
+    # The depth is exact (no buffer quantization): the tolerance of a 24-bit buffer.
+    return window_visibility(xyz, ids_arr, T, camera, ray_depths, radius=radius, abs_tol=abs_tol,
+                             rel_tol=rel_tol, depth_bits=24)

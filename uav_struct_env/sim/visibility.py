@@ -22,6 +22,8 @@ more in front (a column, the slab edge) always does.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -30,7 +32,7 @@ from localization.geometry import as_points, check_transform, project
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.site.model import LandmarkSet
 
-__all__ = ["depth_tolerance", "landmark_visibility"]
+__all__ = ["depth_tolerance", "landmark_visibility", "window_visibility"]
 
 
 def depth_tolerance(
@@ -106,7 +108,30 @@ def landmark_visibility(
         )
     check_number("radius (pixels)", radius, 0, integer=True, type_error=ValueError)
 
-    uv, z = project(camera.K, T, xyz)
+    return window_visibility(xyz, ids_arr, T, camera, lambda rows, cols: D[rows, cols],
+                             radius=radius, abs_tol=abs_tol, rel_tol=rel_tol, depth_bits=depth_bits)
+
+
+def window_visibility(
+    xyz: NDArray[np.float64],
+    ids: NDArray[np.int64],
+    cam_from_world: NDArray[np.float64],
+    camera: Camera,
+    sample_depth: Callable[[NDArray[np.intp], NDArray[np.intp]], NDArray],
+    *,
+    radius: int,
+    abs_tol: float,
+    rel_tol: float,
+    depth_bits: int,
+) -> dict[str, NDArray]:
+    """The test of the module docstring on checked inputs, with the depths from ``sample_depth``.
+
+    ``sample_depth(rows, cols)`` returns the depth (m along the optical axis; ``camera.far`` or
+    more where nothing is hit) at integer pixels ``rows``, ``cols`` (same shape): a rendered depth
+    image's pixels (:func:`landmark_visibility`) or ray-cast depths
+    (:func:`uav_struct_env.sim.raycast.raycast_visibility`).
+    """
+    uv, z = project(camera.K, cam_from_world, xyz)
     uv[z <= 0] = np.nan
     W, H = camera.width, camera.height
     with np.errstate(invalid="ignore"):
@@ -123,8 +148,9 @@ def landmark_visibility(
         offsets = np.arange(-radius, radius + 1)
         cols = np.clip(col[:, None, None] + offsets[None, None, :], 0, W - 1)
         rows = np.clip(row[:, None, None] + offsets[None, :, None], 0, H - 1)
-        samples = D[rows, cols].reshape(len(idx), -1)
+        rows, cols = np.broadcast_arrays(rows, cols)
+        samples = np.asarray(sample_depth(rows, cols), dtype=np.float64).reshape(len(idx), -1)
         tol = depth_tolerance(z[idx], camera, abs_tol=abs_tol, rel_tol=rel_tol,
                               depth_bits=depth_bits)
         visible[idx] = np.any(samples >= (z[idx] - tol)[:, None], axis=1)
-    return {"ids": ids_arr.copy(), "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}
+    return {"ids": ids.copy(), "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}
