@@ -156,8 +156,8 @@ class SiteWorld:
         except BaseException:
             self.close()
             raise
-        self._extra_bodies: set[int] = set()
-        self._half_extents: dict[int, NDArray[np.float64]] = {}
+        #: Bodies added with add_body: body id -> the box's half extents (m).
+        self._extra_bodies: dict[int, NDArray[np.float64]] = {}
         #: The rendered triangles, for landmark visibility without rendering (:mod:`.raycast`).
         self._rays = RayScene([(e.mesh.vertices, e.mesh.faces) for e in elements])
         self._depth_meta: dict[int, tuple[weakref.ref, float, float, int]] = {}
@@ -341,12 +341,12 @@ class SiteWorld:
         self._check_open()
         camera = self.camera if camera is None else camera
         boxes = []
-        for body in self._extra_bodies:
+        for body, half_extents in self._extra_bodies.items():
             position, quat = p.getBasePositionAndOrientation(body, physicsClientId=self.client_id)
             T = np.eye(4)
             T[:3, :3] = np.reshape(p.getMatrixFromQuaternion(quat), (3, 3))
             T[:3, 3] = position
-            boxes.append((T, self._half_extents[body]))
+            boxes.append((T, half_extents))
         self._rays.boxes = boxes
         points = self.site.landmarks(name)
         return raycast_visibility(self._rays, points.xyz, points.ids, cam_from_world, camera)
@@ -371,8 +371,7 @@ class SiteWorld:
             baseMass=0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=shape,
             physicsClientId=self.client_id,
         )
-        self._extra_bodies.add(body)
-        self._half_extents[body] = np.asarray(half_extents, dtype=np.float64)
+        self._extra_bodies[body] = np.asarray(half_extents, dtype=np.float64)
         if world_from_body is not None:
             self.move_body(body, world_from_body)
         return body
@@ -398,8 +397,7 @@ class SiteWorld:
             raise ValueError(f"body {body_id!r} was not added with add_body")
         self._client.activate()
         p.removeBody(body_id, physicsClientId=self.client_id)
-        self._extra_bodies.discard(body_id)
-        self._half_extents.pop(body_id, None)
+        del self._extra_bodies[body_id]
 
     # ------------------------------------------------------------------------------ lifetime
     def close(self) -> None:
