@@ -39,6 +39,8 @@ also truncates every other agent, ending the episode: SuperSuit's
 from __future__ import annotations
 
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -401,9 +403,8 @@ class UavStructParallelEnv(ParallelEnv):
         observations: dict[str, dict[str, NDArray]] = {}
         infos: dict[str, dict[str, Any]] = {}
         clearance = self.obstacles.distances(np.array([self._states[a].xyz for a in agents]))
-        airframes = self._airframes
-        if airframes is not None:  # draw the flying UAVs, hide the finished ones
-            airframes.place({a: self._states[a] for a in agents})
+        if self._airframes is not None:  # draw the flying UAVs, hide the finished ones
+            self._airframes.place({a: self._states[a] for a in agents})
         for k, agent in enumerate(agents):
             i = self._index[agent]
             state = self._states[agent]
@@ -417,28 +418,25 @@ class UavStructParallelEnv(ParallelEnv):
             att32 = np.clip(attitude, -np.pi, np.pi).astype(np.float32)
             world_from_cam = state.world_from_cam
             cam_from_world = invert(world_from_cam)
-            if airframes is not None:  # a camera does not see its own airframe
-                airframes.set(agent, None)
             obs = {"gnss": gnss32, "attitude": att32}
-            if render:
-                result = world.render(cam_from_world, self.camera, depth=need_depth)
-                image = cfg.imaging.apply(result.rgb, self._rng)
-                if cfg.observe_image:
-                    obs = {"image": image, **obs}
-                    self._last_images[agent] = image
-                if cfg.observe_depth:
-                    obs["depth"] = np.asarray(result.depth, dtype=np.float32)
-                landmarks = {
-                    name: world.landmark_truth(name, cam_from_world, self.camera, result.depth)
-                    for name in cfg.landmark_sets
-                }
-            else:
-                landmarks = {
-                    name: world.landmark_truth_raycast(name, cam_from_world, self.camera)
-                    for name in cfg.landmark_sets
-                }
-            if airframes is not None:
-                airframes.set(agent, state)
+            with self._own_airframe_hidden(agent):
+                if render:
+                    result = world.render(cam_from_world, self.camera, depth=need_depth)
+                    image = cfg.imaging.apply(result.rgb, self._rng)
+                    if cfg.observe_image:
+                        obs = {"image": image, **obs}
+                        self._last_images[agent] = image
+                    if cfg.observe_depth:
+                        obs["depth"] = np.asarray(result.depth, dtype=np.float32)
+                    landmarks = {
+                        name: world.landmark_truth(name, cam_from_world, self.camera, result.depth)
+                        for name in cfg.landmark_sets
+                    }
+                else:
+                    landmarks = {
+                        name: world.landmark_truth_raycast(name, cam_from_world, self.camera)
+                        for name in cfg.landmark_sets
+                    }
             prior = world_from_cam_from_attitude(
                 gnss32.astype(np.float64), att32.astype(np.float64)
             )
@@ -495,14 +493,20 @@ class UavStructParallelEnv(ParallelEnv):
 
     def _view(self, agent: str) -> NDArray[np.uint8]:
         """``agent``'s camera image now (its own airframe hidden), for :meth:`render`."""
-        airframes = self._airframes
-        if airframes is not None:
-            airframes.set(agent, None)
-        cam_from_world = invert(self._states[agent].world_from_cam)
-        rgb = self.world.render(cam_from_world, self.camera).rgb
-        if airframes is not None:
-            airframes.set(agent, self._states[agent])
-        return rgb
+        with self._own_airframe_hidden(agent):
+            return self.world.render(invert(self._states[agent].world_from_cam), self.camera).rgb
+
+    @contextmanager
+    def _own_airframe_hidden(self, agent: str) -> Iterator[None]:
+        """While ``agent``'s camera looks: its own airframe is hidden (it never sees itself)."""
+        if self._airframes is None:
+            yield
+            return
+        self._airframes.set(agent, None)
+        try:
+            yield
+        finally:
+            self._airframes.set(agent, self._states[agent])
 
     def _check_open(self) -> None:
         if self._closed:
