@@ -45,6 +45,7 @@ from uav_struct_env.site.model import Site
 
 __all__ = [
     "ACI117",
+    "MAX_SCALE",
     "TOLERANCE_MODELS",
     "AsBuilt",
     "Tolerances",
@@ -71,6 +72,9 @@ class Tolerances:
 
 #: ACI 117-10 cast-in-place concrete tolerances.
 ACI117 = Tolerances("aci117", column_lateral_m=0.025, slab_elevation_m=0.019, opening_edge_m=0.013)
+
+#: Largest accepted ``AsBuilt.scale`` (a site 100 times as sloppy as the tolerances allow).
+MAX_SCALE = 100.0
 
 #: Tolerance models by name.
 TOLERANCE_MODELS: dict[str, Tolerances] = {ACI117.name: ACI117}
@@ -100,7 +104,7 @@ class AsBuilt:
                 f"as-built tolerances must be a Tolerances or one of {sorted(TOLERANCE_MODELS)}, "
                 f"got {self.tolerances!r}"
             )
-        scale = check_number("as-built scale", self.scale, 0.0, 100.0, error=SiteGeometryError,
+        scale = check_number("as-built scale", self.scale, 0.0, MAX_SCALE, error=SiteGeometryError,
                              type_error=SiteGeometryError)
         object.__setattr__(self, "scale", scale)
         check_number("as-built seed", self.seed, 0, integer=True, error=SiteGeometryError,

@@ -15,9 +15,10 @@ import numpy as np
 
 from localization.checks import check_choice, check_number
 from localization.synthetic import PAPER_IMAGE_SIZE
+from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.site import make_site
-from uav_struct_env.site.as_built import TOLERANCE_MODELS, AsBuilt
+from uav_struct_env.site.as_built import MAX_SCALE, TOLERANCE_MODELS, AsBuilt
 from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS, check_weights
 
 __all__ = [
@@ -238,10 +239,10 @@ class StudyConfig:
             ("false_positives", 0.0, None),
         ):
             check_number(name, getattr(self, name), lo, hi, error=ConfigError, type_error=ConfigError)
-        check_choice("lighting", self.lighting, ("fixed", "random"), error=ConfigError)
+        check_choice("lighting", self.lighting, LIGHTINGS, error=ConfigError)
         if self.as_built is not None:
             check_choice("as_built", self.as_built, tuple(TOLERANCE_MODELS), error=ConfigError)
-        check_number("as_built_scale", self.as_built_scale, 0.0, 100.0, error=ConfigError,
+        check_number("as_built_scale", self.as_built_scale, 0.0, MAX_SCALE, error=ConfigError,
                      type_error=ConfigError)
         for name in ("detector_model", "refiner_model"):
             v = check_weights(name, getattr(self, name), self.detector)

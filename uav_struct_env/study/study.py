@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.outputs import OutputExistsError, StagedOutput
 from uav_struct_env.processes import WorkerDied
 from uav_struct_env.site import make_site
@@ -160,7 +161,7 @@ def _parser() -> CommandParser:
     p.add_argument(
         "--lighting",
         default="fixed",
-        choices=("fixed", "random"),
+        choices=LIGHTINGS,
         help="the sun: fixed, or random (direction and intensity drawn per viewpoint from --seed)",
     )
     p.add_argument(
