@@ -64,8 +64,10 @@ from localization.pnp import (
     is_coplanar,
     pnp_candidates,
     prior_mahalanobis_sq,
+    refine_pose,
     reprojection_residuals,
 )
+from localization.upright import upright_two_point
 
 __all__ = [
     "Association",
@@ -440,7 +442,7 @@ class _Problem:
             X, uv, m = self.pairs(a[mv])
             robust = max(self.gate_px, self.coarse_gate_px / 4) if (it == 0 and first_robust) else None
             Rm, tm, cost = refine_many(
-                self.K, R[mv], t[mv], X, uv, m, iterations=5 if it == 0 else 3, robust_px=robust
+                self.K, R[mv], t[mv], X, uv, m, iterations=3 if it == 0 else 2, robust_px=robust
             )
             R[mv], t[mv] = Rm, tm
             alive[mv[~np.isfinite(cost)]] = False
@@ -452,7 +454,7 @@ class _Problem:
         idx = np.flatnonzero(alive & moving)  # the others were refined on their final pairs
         if idx.size:
             X, uv, m = self.pairs(a[idx])
-            Rf, tf, cost = refine_many(self.K, R[idx], t[idx], X, uv, m, iterations=5)
+            Rf, tf, cost = refine_many(self.K, R[idx], t[idx], X, uv, m, iterations=3)
             R[idx], t[idx] = Rf, tf
             alive[idx[~np.isfinite(cost)]] = False
         return a, to_transforms(R, t), alive
@@ -469,8 +471,10 @@ class _Problem:
         r2 = np.where(m, np.sum((np.nan_to_num(uvp, nan=1e6) - uv) ** 2, axis=2), 0.0)
         return np.sum(r2, axis=1) / self.pixel_sigma**2
 
-    def nll(self, a: NDArray, T: NDArray, chi: NDArray, prior_sq: NDArray, miss_cost: float) -> NDArray:
-        """(H,) negative log-likelihoods: inliers, clutter, misses and the prior (module docstring)."""
+    def nll(
+        self, a: NDArray, T: NDArray, chi: NDArray, prior_sq: NDArray, miss_cost: float
+    ) -> tuple[NDArray, NDArray]:
+        """(H,) negative log-likelihoods (inliers, clutter, misses, prior) and (H,) miss counts."""
         R, t = T[:, :3, :3], T[:, :3, 3]
         uv = _candidate_projections(self.K, R, t, self.landmarks_xyz, self.image_size, 0.0)
         expected = np.isfinite(uv).all(axis=2)  # (H, M) predicted inside the image
@@ -479,7 +483,8 @@ class _Problem:
         hit[hi, a[hi, ii]] = True
         n_missed = np.sum(expected & ~hit, axis=1)
         n_unassigned = np.sum(a < 0, axis=1)
-        return chi + n_unassigned * (self.gate_px / self.pixel_sigma) ** 2 + n_missed * miss_cost + prior_sq
+        nll = chi + n_unassigned * (self.gate_px / self.pixel_sigma) ** 2 + n_missed * miss_cost + prior_sq
+        return nll, n_missed
 
 
 def associate_robust(
@@ -557,7 +562,7 @@ def associate_robust(
     n = detections_uv.shape[0]
     empty = np.full(n, -1, dtype=np.int64)
     prior = prior_cam_from_world
-    idx, _ = candidate_landmarks(landmarks_xyz, K, prior, image_size, margin_px)
+    idx, proj = candidate_landmarks(landmarks_xyz, K, prior, image_size, margin_px)
     if idx.size == 0:
         return Association(
             empty,
@@ -580,133 +585,262 @@ def associate_robust(
         coarse_gate_px, max_iterations, need,
     )
 
-    # 1. coarse hypotheses (assignment, start pose)
+    def covered(a: NDArray) -> bool:
+        # a hypothesis whose pairs all agree with an explored result would converge to it again
+        return any(np.all((a < 0) | (a == e)) for e in explored)
+
+    def check(a: NDArray, T: NDArray, alive: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        """(prior Mahalanobis^2, chi-square, consistent, consistent & fits) of refined hypotheses."""
+        prior_sq = P.prior_sq(T)
+        chi = P.chi_sq(a, T)
+        dof = 2 * (a >= 0).sum(axis=1) - 6
+        consistent = alive & (
+            prior_sq <= max_prior_mahalanobis_sq if max_prior_mahalanobis_sq is not None else True
+        )
+        # The residuals' chi-square against the noise model (2n - 6 dof): every pair within
+        # the gate is not enough -- four wrong pairs at 3 px RMS each pass a 5 px gate.
+        limit = np.where(dof > 0, chi2.ppf(fit_quantile, np.maximum(dof, 1)), np.inf)
+        return prior_sq, chi, consistent, consistent & (chi <= limit)
+
+    finals: dict[bytes, tuple[NDArray, NDArray, float, float]] = {}
+    rejected = {"prior": 0, "fit": 0}
+    explored: list[NDArray] = []
+    tried = [0]
+
+    def explore(coarse: list[tuple[NDArray, NDArray]], first_robust: bool) -> list[tuple]:
+        """Refine the not yet covered coarse hypotheses at once; keep those that pass the tests."""
+        chunk = [c for c in coarse if not covered(c[0])][: 2 * max(max_hypotheses, 1)]
+        tried[0] += len(chunk)
+        if not chunk:
+            return []
+        a, T, alive = P.refine(np.stack([c[0] for c in chunk]), np.stack([c[1] for c in chunk]), first_robust)
+        prior_sq, chi, consistent, ok = check(a, T, alive)
+        new = []
+        for h in np.flatnonzero(alive):
+            explored.append(a[h])
+            key = a[h].tobytes()
+            if not consistent[h]:
+                rejected["prior"] += 1
+            elif not ok[h]:
+                rejected["fit"] += 1
+            elif key not in finals:
+                finals[key] = (a[h], T[h], chi[h], prior_sq[h])
+                new.append(finals[key])
+        return new
+
+    def full(hyps: list[tuple[NDArray, NDArray]]) -> list[tuple[NDArray, NDArray]]:
+        """Hypotheses on the finite detections as assignments of all rows, distinct, >= need pairs."""
+        out, seen = [], set()
+        for local_a, start in hyps:
+            a = np.full(n, -1, dtype=np.int64)
+            a[good] = local_a
+            key = a.tobytes()
+            if key not in seen and (a >= 0).sum() >= need:
+                seen.add(key)
+                out.append((a, start))
+        return out
+
+    def score(hyps: list[tuple]) -> list[tuple[float, NDArray, NDArray, int]]:
+        a = np.stack([h[0] for h in hyps])
+        T = np.stack([h[1] for h in hyps])
+        s, missed = P.nll(a, T, np.array([h[2] for h in hyps]), np.array([h[3] for h in hyps]), miss_cost)
+        return [(float(s[i]), a[i], T[i], int(missed[i])) for i in range(len(hyps))]
+
+    def decide() -> tuple[list[tuple], str | None]:
+        """Score the finals, search the winner's rivals, apply the ambiguity rule."""
+        scored = sorted(score(list(finals.values())), key=lambda h: h[0])
+        for _ in range(max_rival_rounds):
+            best_a, best_T = scored[0][1], scored[0][2]
+            rivals = translation_hypotheses(
+                det, landmarks_xyz, K, best_T, best_a, prior, sig.as_array()[:3],
+                max_prior_mahalanobis_sq, coarse_gate_px, need, max_rivals,
+            )
+            chunk = []
+            for idx_r, proj_r, start in rivals:
+                local = assign(det[good], proj_r, coarse_gate_px)
+                a = np.full(n, -1, dtype=np.int64)
+                a[good[local >= 0]] = idx_r[local[local >= 0]]
+                chunk.append((a, start))
+            new = explore([c for c in chunk if (c[0] >= 0).sum() >= need], False)
+            if not new:
+                break
+            scored = sorted(scored + score(new), key=lambda h: h[0])
+            if scored[0][1] is best_a:
+                break
+        return scored, ambiguity([h[:3] for h in scored], landmarks_xyz, K, pixel_sigma, ambiguity_margin)
+
+    def weak() -> bool:
+        """No final, or the best leaves a quarter of the detections or of the expected unmatched."""
+        if not finals:
+            return True
+        _, a, _, missed = min(score(list(finals.values())), key=lambda h: h[0])
+        pairs = int((a >= 0).sum())
+        return good.size - pairs > 0.25 * good.size or missed > 0.25 * (pairs + missed)
+
+    def layouts() -> list[tuple[NDArray, NDArray]]:
+        return full(
+            [(a, T) for _, a, T in _layout_hypotheses(
+                det[good], landmarks_xyz, K, prior, image_size, margin_px, sig, position_offsets,
+                coarse_gate_px, shifts_per_layout, need,
+            )][: 5 * max_hypotheses]
+        )
+
+    # 1-2. coarse hypotheses, refined with re-association: every assignment of a small set;
+    # else upright two-point poses, and the prior's layout vote when those leave the detections
+    # poorly explained (or, below, ambiguous)
     exhaustive = _exhaustive_hypotheses(
         det, good, idx, landmarks_xyz, K, prior, need, pixel_sigma, gate, sig, exhaustive_limit,
         min(max(max_hypotheses, 1), 3),
     )
-    first_robust = exhaustive is None
+    voted = exhaustive is not None
     if exhaustive is not None:
-        coarse = exhaustive
+        explore(exhaustive, False)
     else:
-        coarse, seen = [], set()
-        for _, local_a, start in _layout_hypotheses(
-            det[good], landmarks_xyz, K, prior, image_size, margin_px, sig, position_offsets,
-            coarse_gate_px, shifts_per_layout, need,
-        ):
-            a = np.full(n, -1, dtype=np.int64)
-            a[good] = local_a
-            key = a.tobytes()
-            if key not in seen:
-                seen.add(key)
-                coarse.append((a, start))
-                if len(coarse) >= 5 * max_hypotheses:
-                    break
-
-    def covered(a: NDArray, explored: list[NDArray]) -> bool:
-        # a hypothesis whose pairs all agree with an explored result would converge to it again
-        return any(np.all((a < 0) | (a == e)) for e in explored)
-
-    def check(a: NDArray, T: NDArray, alive: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-        """(prior Mahalanobis^2, chi-square, consistent & fits) of refined hypotheses."""
-        prior_sq = P.prior_sq(T)
-        chi = P.chi_sq(a, T)
-        dof = 2 * (a >= 0).sum(axis=1) - 6
-        consistent = prior_sq <= max_prior_mahalanobis_sq if max_prior_mahalanobis_sq is not None else alive
-        # The residuals' chi-square against the noise model (2n - 6 dof): every pair within
-        # the gate is not enough -- four wrong pairs at 3 px RMS each pass a 5 px gate.
-        limit = np.where(dof > 0, chi2.ppf(fit_quantile, np.maximum(dof, 1)), np.inf)
-        return prior_sq, chi, np.stack([alive & consistent, alive & consistent & (chi <= limit)])
-
-    # 2. re-association after each pose refinement, all hypotheses of a chunk at once
-    finals: dict[bytes, tuple[NDArray, NDArray, float, float]] = {}
-    rejected_by_prior = rejected_by_fit = 0
-    explored: list[NDArray] = []
-    budget = max(max_hypotheses, 1)
-    pos = 0
-    while budget > 0 and pos < len(coarse):
-        chunk = []
-        while pos < len(coarse) and len(chunk) < 2 * budget:
-            if not covered(coarse[pos][0], explored):
-                chunk.append(coarse[pos])
-            pos += 1
-        if not chunk:
-            break
-        a, T, alive = P.refine(np.stack([c[0] for c in chunk]), np.stack([c[1] for c in chunk]), first_robust)
-        prior_sq, chi, (consistent, ok) = check(a, T, alive)
-        distinct = set()
-        for h in np.flatnonzero(alive):
-            explored.append(a[h])
-            distinct.add(a[h].tobytes())
-            if not consistent[h]:
-                rejected_by_prior += 1
-            elif not ok[h]:
-                rejected_by_fit += 1
-            else:
-                finals.setdefault(a[h].tobytes(), (a[h], T[h], chi[h], prior_sq[h]))
-        budget -= max(2 * len(distinct), len(chunk))
+        explore(full(_upright_hypotheses(
+            det[good], landmarks_xyz, idx, proj, K, prior, sig, max_prior_mahalanobis_sq, coarse_gate_px,
+            need, 5 * max_hypotheses,
+        )), True)
+        if weak():
+            explore(layouts(), True)
+            voted = True
 
     if not finals:
-        if rejected_by_fit and not rejected_by_prior:
+        if rejected["fit"] and not rejected["prior"]:
             code = FailureCode.NO_CONSISTENT_ASSOCIATION
             reason = (
-                f"all {rejected_by_fit} association hypotheses fit worse than pixel_sigma="
+                f"all {rejected['fit']} association hypotheses fit worse than pixel_sigma="
                 f"{pixel_sigma:g} px allows (chi-square quantile {fit_quantile})"
             )
-        elif rejected_by_prior:
+        elif rejected["prior"]:
             code = FailureCode.INCONSISTENT_WITH_PRIOR
             reason = (
-                f"all {rejected_by_prior} association hypotheses give poses inconsistent with "
+                f"all {rejected['prior']} association hypotheses give poses inconsistent with "
                 f"the prior (Mahalanobis^2 > {max_prior_mahalanobis_sq})"
             )
         else:
             code = FailureCode.NO_CONSISTENT_ASSOCIATION
             reason = f"no association hypothesis with {need} or more consistent correspondences"
-        return Association(empty, prior, 0.0, np.inf, len(coarse), reason, code)
+        return Association(empty, prior, 0.0, np.inf, tried[0], reason, code)
 
-    # 3. scoring
-    def score(hyps: list[tuple[NDArray, NDArray, float, float]]) -> list[tuple[float, NDArray, NDArray]]:
-        a = np.stack([h[0] for h in hyps])
-        T = np.stack([h[1] for h in hyps])
-        s = P.nll(a, T, np.array([h[2] for h in hyps]), np.array([h[3] for h in hyps]), miss_cost)
-        return [(float(s[i]), a[i], T[i]) for i in range(len(hyps))]
-
-    scored = sorted(score(list(finals.values())), key=lambda h: h[0])
-
-    # 4. rivals of the winner under the layout's self-translations, then the ambiguity rule
-    for _ in range(max_rival_rounds):
-        best_a, best_T = scored[0][1], scored[0][2]
-        rivals = translation_hypotheses(
-            det, landmarks_xyz, K, best_T, best_a, prior, sig.as_array()[:3],
-            max_prior_mahalanobis_sq, coarse_gate_px, need, max_rivals,
-        )
-        chunk = []
-        for idx_r, proj_r, start in rivals:
-            local = assign(det[good], proj_r, coarse_gate_px)
-            a = np.full(n, -1, dtype=np.int64)
-            a[good[local >= 0]] = idx_r[local[local >= 0]]
-            if (a >= 0).sum() >= need and not covered(a, explored):
-                chunk.append((a, start))
-        if not chunk:
-            break
-        a, T, alive = P.refine(np.stack([c[0] for c in chunk]), np.stack([c[1] for c in chunk]), False)
-        prior_sq, chi, (_, ok) = check(a, T, alive)
-        new = []
-        for h in np.flatnonzero(alive):
-            explored.append(a[h])
-            key = a[h].tobytes()
-            if ok[h] and key not in finals:
-                finals[key] = (a[h], T[h], chi[h], prior_sq[h])
-                new.append(finals[key])
-        if not new:
-            break
-        scored = sorted(scored + score(new), key=lambda h: h[0])
-        if scored[0][1] is best_a:
-            break
-    reason = ambiguity(scored, landmarks_xyz, K, pixel_sigma, ambiguity_margin)
+    # 3-4. scoring, rivals of the winner under the layout's self-translations, ambiguity
+    scored, reason = decide()
+    if reason is not None and not voted and explore(layouts(), True):
+        scored, reason = decide()
     if reason is not None:
         return Association(empty, prior, 0.0, np.inf, len(finals), reason, FailureCode.AMBIGUOUS)
-    score_best, a, T = scored[0]
+    score_best, a, T, _ = scored[0]
+    # The batched assignment pairs mutual nearest neighbours; two landmarks projecting within a
+    # gate of each other can be swapped there, so the winner gets the minimum-cost assignment.
+    cidx, cproj = candidate_landmarks(landmarks_xyz, K, T, image_size, margin_px)
+    local = assign(det[good], cproj, gate)
+    exact = np.full(n, -1, dtype=np.int64)
+    exact[good[local >= 0]] = cidx[local[local >= 0]]
+    if not np.array_equal(exact, a) and (exact >= 0).sum() >= need:
+        a = exact
+        T, _ = refine_pose(landmarks_xyz[a[a >= 0]], det[a >= 0], K, T, max_iterations=10)
     m = a >= 0
     res, _ = reprojection_residuals(K, T, landmarks_xyz[a[m]], det[m])
     return Association(a, T, float(np.sum(res**2)), float(score_best), len(finals), None)
+
+
+def _anchor_pairs(det: NDArray, k: int = 4) -> list[tuple[int, int]]:
+    """Every pair among ``k`` spread-out detections of the dense part of the image.
+
+    Far-apart anchors condition the two-point pose best, but the extremes of a detection set are
+    often clutter (uniform over the image, while landmarks gather on the building): the anchors
+    are taken, farthest-point first, among the detections whose median distance to the others
+    is at most the median of that (and any detection when there are at most ``k``). Every pair
+    of ``k`` anchors leaves a pair of true detections unless ``k - 1`` of them are clutter.
+    """
+    n = det.shape[0]
+    if n < 2:
+        return []
+    d2 = np.sum((det[:, None, :] - det[None, :, :]) ** 2, axis=2)
+    pool = np.arange(n)
+    if n > k:
+        spread = np.median(d2, axis=1)
+        pool = np.flatnonzero(spread <= np.median(spread))
+        if pool.size < k:
+            pool = np.argsort(spread, kind="stable")[:k]
+    sub = d2[np.ix_(pool, pool)]
+    first = int(np.argmax(sub.sum(axis=1)))
+    chosen = [first]
+    dmin = sub[first].copy()
+    for _ in range(min(k, pool.size) - 1):
+        nxt = int(np.argmax(dmin))
+        chosen.append(nxt)
+        dmin = np.minimum(dmin, sub[nxt])
+    return list(itertools.combinations(pool[chosen].tolist(), 2))
+
+
+def _upright_hypotheses(
+    det: NDArray,
+    landmarks_xyz: NDArray,
+    idx: NDArray,
+    proj: NDArray,
+    K: NDArray,
+    prior: NDArray,
+    sig: PriorSigmas,
+    max_prior_sq: float | None,
+    gate_px: float,
+    min_pairs: int,
+    keep: int,
+) -> list[tuple[NDArray, NDArray]]:
+    """Coarse assignments from upright two-point poses (:mod:`localization.upright`).
+
+    For each pair of spread-out detections (:func:`_anchor_pairs`) and each ordered pair of
+    candidate landmarks ``idx``, the pose with the prior's tilt that puts the two landmarks on
+    the two detections; poses farther from the prior than ``max_prior_sq`` (yaw and position
+    terms) are dropped. Each pose is scored like a rival (:func:`localization.ambiguity.
+    translation_hypotheses`): detections explained within ``gate_px``, then the sum of squared
+    distances to the nearest projection capped at ``gate_px^2``, then the prior distance. The
+    best ``keep`` give gated assignments. Returns ``[(assignment of det rows into landmarks,
+    start cam_from_world), ...]``, best first.
+    """
+    pairs = _anchor_pairs(det)
+    m = idx.size
+    if not pairs or m < 2:
+        return []
+    i1, i2 = (np.array(v) for v in zip(*pairs, strict=True))
+    j1, j2 = (v.reshape(-1) for v in np.meshgrid(np.arange(m), np.arange(m), indexing="ij"))
+    distinct = j1 != j2
+    j1, j2 = j1[distinct], j2[distinct]
+    s_i1, s_i2 = np.repeat(i1, j1.size), np.repeat(i2, j1.size)
+    s_j1, s_j2 = np.tile(j1, i1.size), np.tile(j2, i1.size)
+    # The prior's errors scale and turn the image of a landmark pair only so much: its prior
+    # projection must be within a factor 3 in length and 45 degrees in direction of the
+    # detection pair's (a 9 m / 15 degree error at the nearest views stays well inside).
+    vd = det[s_i2] - det[s_i1]
+    vp = proj[s_j2] - proj[s_j1]
+    dot = np.sum(vd * vp, axis=1)
+    nd, np_ = np.sum(vd * vd, axis=1), np.sum(vp * vp, axis=1)
+    near = (nd <= 9.0 * np_) & (np_ <= 9.0 * nd) & (dot > 0.0) & (2.0 * dot * dot >= nd * np_)
+    s_i1, s_i2, s_j1, s_j2 = s_i1[near], s_i2[near], idx[s_j1[near]], idx[s_j2[near]]
+    rays = np.column_stack([det, np.ones(det.shape[0])]) @ np.linalg.inv(K).T @ prior[:3, :3]
+    psi, C, ok = upright_two_point(rays[s_i1], rays[s_i2], landmarks_xyz[s_j1], landmarks_xyz[s_j2])
+    sp = np.asarray(sig.position_m, dtype=np.float64)
+    prior_sq = (psi / sig.rotation_rad[2]) ** 2 + np.sum(((C - camera_center(prior)) / sp) ** 2, axis=1)
+    if max_prior_sq is not None:
+        ok &= prior_sq <= max_prior_sq
+    psi, C, prior_sq = psi[ok], C[ok], prior_sq[ok]
+    if psi.size == 0:
+        return []
+    c, s = np.cos(psi), np.sin(psi)
+    Rz_t = np.zeros((psi.size, 3, 3))  # Rz(psi)^T
+    Rz_t[:, 0, 0], Rz_t[:, 0, 1], Rz_t[:, 1, 0], Rz_t[:, 1, 1], Rz_t[:, 2, 2] = c, s, -s, c, 1.0
+    R = prior[:3, :3] @ Rz_t
+    t = -(R @ C[..., None])[..., 0]
+    uv, _ = project_many(K, R, t, landmarks_xyz[idx])
+    du = det[None, :, 0, None] - uv[:, None, :, 0]
+    dv = det[None, :, 1, None] - uv[:, None, :, 1]
+    nearest = np.minimum(np.min(np.fmin(du * du + dv * dv, np.inf), axis=2), gate_px**2)
+    explained = np.sum(nearest < gate_px**2, axis=1)
+    misfit = np.sum(nearest, axis=1)
+    order = np.lexsort((prior_sq, misfit, -explained))
+    order = order[explained[order] >= min_pairs][:keep]
+    if order.size == 0:
+        return []
+    local = assign_many(det, uv[order], gate_px)
+    a = np.where(local >= 0, idx[np.maximum(local, 0)], -1)
+    T = to_transforms(R[order], t[order])
+    return [(a[q], T[q]) for q in range(order.size)]

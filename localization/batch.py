@@ -33,16 +33,19 @@ __all__ = [
 
 def so3_exp_many(w: NDArray[np.float64]) -> NDArray[np.float64]:
     """(H, 3, 3) rotation matrices of (H, 3) rotation vectors (Rodrigues, series near zero)."""
-    theta = np.linalg.norm(w, axis=1)
-    small = theta < 1e-8
+    theta2 = np.sum(w * w, axis=1)
+    theta = np.sqrt(theta2)
+    small = theta < 1e-4
     safe = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0, np.sin(safe) / safe)
-    b = np.where(small, 0.5, (1.0 - np.cos(safe)) / safe**2)
-    W = np.zeros((w.shape[0], 3, 3))
-    W[:, 0, 1], W[:, 0, 2] = -w[:, 2], w[:, 1]
-    W[:, 1, 0], W[:, 1, 2] = w[:, 2], -w[:, 0]
-    W[:, 2, 0], W[:, 2, 1] = -w[:, 1], w[:, 0]
+    a = np.where(small, 1.0 - theta2 / 6.0, np.sin(safe) / safe)
+    b = np.where(small, 0.5 - theta2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
+    W = (w[:, _SKEW_FROM] * _SKEW_SIGN).reshape(-1, 3, 3)
     return np.eye(3) + a[:, None, None] * W + b[:, None, None] * (W @ W)
+
+
+#: The skew matrix [w]x as a gather of w's components (row-major) times signs (0 where zero).
+_SKEW_FROM = np.array([0, 2, 1, 2, 0, 0, 1, 0, 0])
+_SKEW_SIGN = np.array([0.0, -1.0, 1.0, 1.0, 0.0, -1.0, -1.0, 1.0, 0.0])
 
 
 def rotation_between(b1: NDArray[np.float64], b2: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -62,7 +65,7 @@ def project_many(
 
     A point at or behind the camera gets NaN pixels (its depth tells which).
     """
-    p = np.einsum("hij,hmj->hmi", R, np.broadcast_to(X, (R.shape[0],) + X.shape[-2:])) + t[:, None, :]
+    p = X @ R.transpose(0, 2, 1) + t[:, None, :]
     z = p[..., 2]
     front = z > 1e-6
     zs = np.where(front, z, 1.0)
@@ -88,21 +91,24 @@ def assign_many(
     out = np.full((h, n), -1, dtype=np.int64)
     if n == 0 or m == 0 or h == 0:
         return out
-    d2 = np.sum((det[None, :, None, :] - proj[:, None, :, :]) ** 2, axis=3)
-    d2[~np.isfinite(d2)] = np.inf
-    d2[d2 > gate_px**2] = np.inf
+    du = det[None, :, 0, None] - proj[:, None, :, 0]
+    dv = det[None, :, 1, None] - proj[:, None, :, 1]
+    d2 = du * du + dv * dv  # NaN for NaN points, and NaN > gate is False: see below
+    d2[~(d2 <= gate_px**2)] = np.inf
     rows = np.arange(n)
-    hh = np.arange(h)[:, None]
     for _ in range(rounds):
         jn = np.argmin(d2, axis=2)  # (H, N) nearest projection of each detection
         inn = np.argmin(d2, axis=1)  # (H, M) nearest detection of each projection
-        ok = (inn[hh, jn] == rows) & np.isfinite(d2[hh, rows, jn])
+        mutual = np.take_along_axis(inn, jn, axis=1) == rows
+        ok = mutual & (np.take_along_axis(d2, jn[..., None], axis=2)[..., 0] < np.inf)
         if not ok.any():
             break
         out[ok] = jn[ok]
-        hi, ii = np.nonzero(ok)
-        d2[hi, ii, :] = np.inf
-        d2[hi, :, jn[ok]] = np.inf
+        d2[ok] = np.inf  # paired detections leave
+        cols = np.zeros((h, m), dtype=bool)
+        hi = np.nonzero(ok)[0]
+        cols[hi, jn[ok]] = True
+        d2[np.broadcast_to(cols[:, None, :], d2.shape)] = np.inf  # and so do their projections
     return out
 
 
@@ -113,14 +119,16 @@ def _residuals_and_jacobian(
 
     For ``p' = p + w x p + d``: ``du/dw = p x du/dp`` and ``du/dd = du/dp``.
     """
-    p = np.einsum("hij,hpj->hpi", R, X) + t[:, None, :]
+    p = X @ R.transpose(0, 2, 1) + t[:, None, :]
     x, y, z = p[..., 0], p[..., 1], p[..., 2]
     iz = 1.0 / np.where(z > 1e-6, z, 1.0)
     fx, fy, s = K[0, 0], K[1, 1], K[0, 1]
     xs, ys = x * iz, y * iz
-    r = np.stack([fx * xs + s * ys + K[0, 2] - uv[..., 0], fy * ys + K[1, 2] - uv[..., 1]], axis=-1)
-    a, b, c = fx * iz, s * iz, -(fx * xs + s * ys) * iz  # du/dp
-    e, f = fy * iz, -fy * ys * iz  # dv/dp = (0, e, f)
+    ur = fx * xs + K[0, 2] if s == 0.0 else fx * xs + s * ys + K[0, 2]
+    r = np.stack([ur - uv[..., 0], fy * ys + K[1, 2] - uv[..., 1]], axis=-1)
+    a, b, c = fx * iz, s * iz, (K[0, 2] - ur) * iz  # du/dp
+    e = fy * iz
+    f = -e * ys  # dv/dp = (0, e, f)
     zero = np.zeros_like(z)
     J = np.stack(
         [y * c - z * b, z * a - x * c, x * b - y * a, a, b, c,
@@ -138,13 +146,15 @@ def _normal_equations(
     w = np.where(z > 1e-6, w, 0.0)
     r = r * (w > 0)[..., None]
     A, g = _weighted_system(J, r, w)
-    cost = np.einsum("hp,hpk,hpk->h", w, r, r)
+    cost = np.sum(w * (r[..., 0] ** 2 + r[..., 1] ** 2), axis=1)
     return A, g, cost, r, J
 
 
 def _weighted_system(J: NDArray, r: NDArray, w: NDArray) -> tuple[NDArray, NDArray]:
-    Jw = J * w[..., None, None]
-    return np.einsum("hpki,hpkj->hij", Jw, J), np.einsum("hpki,hpk->hi", Jw, r)
+    h = J.shape[0]
+    Jf = J.reshape(h, -1, 6)
+    JwT = (Jf * np.repeat(w, 2, axis=1)[..., None]).transpose(0, 2, 1)
+    return JwT @ Jf, (JwT @ r.reshape(h, -1, 1))[..., 0]
 
 
 def refine_many(
@@ -177,7 +187,6 @@ def refine_many(
         ``(R, t, cost)``: refined poses and their unweighted sum of squared residuals over the
         mask, px^2 (inf for a pose with a masked point at or behind the camera).
     """
-    R, t = R.copy(), t.copy()
     h = R.shape[0]
     w0 = mask.astype(np.float64)
     lam = np.full(h, 1e-3)
@@ -186,35 +195,39 @@ def refine_many(
     w = w0
     A, g, cost, r, J = _normal_equations(K, R, t, X, uv, w)
     for _ in range(iterations):
-        if not active.any():
-            break
         if robust_px is not None:
             w = w0 / (1.0 + np.sum(r**2, axis=-1) / robust_px**2)
             A, g = _weighted_system(J, r, w)
-            cost = np.einsum("hp,hpk,hpk->h", w, r, r)
-        diag = np.maximum(np.einsum("hii->hi", A), 1e-12)
-        M = A + lam[:, None, None] * diag[:, :, None] * eye
+            cost = np.sum(w * np.sum(r**2, axis=-1), axis=1)
+        M = A + (lam[:, None] * np.maximum(np.diagonal(A, axis1=1, axis2=2), 1e-12))[:, :, None] * eye
         try:
             delta = -np.linalg.solve(M, g[..., None])[..., 0]
         except np.linalg.LinAlgError:
             delta = -np.stack([np.linalg.lstsq(Mi, gi, rcond=None)[0] for Mi, gi in zip(M, g, strict=True)])
-        delta[~active | ~np.all(np.isfinite(delta), axis=1)] = 0.0
+        delta = np.where(active[:, None] & np.isfinite(delta), delta, 0.0)
         dR = so3_exp_many(delta[:, :3])
         Rn = dR @ R
-        tn = np.einsum("hij,hj->hi", dR, t) + delta[:, 3:]
+        tn = (dR @ t[..., None])[..., 0] + delta[:, 3:]
         An, gn, costn, rn, Jn = _normal_equations(K, Rn, tn, X, uv, w)
-        better = active & np.isfinite(costn) & (costn <= cost)
+        better = active & (costn <= cost)  # False for NaN
         rel = (cost - costn) / np.maximum(cost, 1e-300)
-        R[better], t[better] = Rn[better], tn[better]
-        A[better], g[better], r[better], J[better] = An[better], gn[better], rn[better], Jn[better]
-        cost = np.where(better, costn, cost)
-        lam = np.where(better, np.maximum(lam / 10.0, 1e-12), lam * 10.0)
+        if better.all():
+            R, t, A, g, r, J, cost = Rn, tn, An, gn, rn, Jn, costn
+        else:
+            b3 = better[:, None, None]
+            R, t = np.where(b3, Rn, R), np.where(better[:, None], tn, t)
+            A, g = np.where(b3, An, A), np.where(better[:, None], gn, g)
+            r, J = np.where(b3, rn, r), np.where(better[:, None, None, None], Jn, J)
+            cost = np.where(better, costn, cost)
+        lam = np.where(better, np.maximum(lam * 0.1, 1e-12), lam * 10.0)
         active &= ~(better & (rel < tol)) & (lam < 1e8)
+        if not active.any():
+            break
     # re-orthonormalize, then the unweighted cost (and inf when a point is behind the camera)
     U, _, Vt = np.linalg.svd(R)
     R = U @ Vt
     r, _, z = _residuals_and_jacobian(K, R, t, X, uv)
-    final = np.einsum("hp,hpk,hpk->h", w0, r, r)
+    final = np.sum(w0 * np.sum(r * r, axis=-1), axis=1)
     behind = np.any(mask & (z <= 1e-6), axis=1)
     return R, t, np.where(behind, np.inf, final)
 
@@ -226,12 +239,12 @@ def pose_difference_many(
 
     Camera centre difference [m], then the world-frame rotation vector ``log(R_wc R_wc_prior^T)``.
     """
-    C = -np.einsum("hji,hj->hi", R, t)
+    C = -(R.transpose(0, 2, 1) @ t[..., None])[..., 0]
     Rp = prior[:3, :3]
     Cp = -Rp.T @ prior[:3, 3]
-    Q = np.einsum("hji,jk->hik", R, Rp)  # R_wc @ R_wc_prior.T = R.T @ Rp
+    Q = R.transpose(0, 2, 1) @ Rp  # R_wc @ R_wc_prior.T
     w = np.stack([Q[:, 2, 1] - Q[:, 1, 2], Q[:, 0, 2] - Q[:, 2, 0], Q[:, 1, 0] - Q[:, 0, 1]], axis=1)
-    cos = np.clip((np.einsum("hii->h", Q) - 1.0) / 2.0, -1.0, 1.0)
+    cos = np.clip((Q[:, 0, 0] + Q[:, 1, 1] + Q[:, 2, 2] - 1.0) / 2.0, -1.0, 1.0)
     s = 0.5 * np.linalg.norm(w, axis=1)
     theta = np.arctan2(s, cos)
     rot = w * np.where(s < 1e-12, 0.5, theta / (2.0 * np.maximum(s, 1e-300)))[:, None]
