@@ -12,15 +12,25 @@ Two methods:
     Goes beyond it for a detector that misses landmarks and reports clutter and a prior that is off
     by metres and degrees:
 
-    1. *Hypotheses.* The prior's attitude error mostly shifts the projected layout in the image;
-       its position error also changes scale and perspective. The prior camera centre is moved
-       on the grid {-1, 0, +1 sigma}^3; for each, every (detection, projected
-       landmark) pair proposes a 2D shift, ranked by how many other pairs agree with it (a Hough
-       vote). The best distinct layouts each give a gated assignment. Small problems (a slab's
-       four corners) enumerate every one-to-one assignment instead.
-    2. *Re-association.* Each hypothesis is turned into a pose (PnP, candidates chosen with the
-       prior as tie-breaker), the landmarks are re-projected with that pose and re-assigned with
-       a gate that tightens to ``gate_px``, until the assignment is stable.
+    1. *Hypotheses.* An onboard attitude sensor knows the camera's tilt far better than its yaw
+       and position; with the prior's tilt, two correspondences fix the pose in closed form
+       (:mod:`localization.upright`). Four spread-out detections of the dense part of the image
+       give six anchor pairs; every ordered pair of candidate landmarks whose prior image is
+       within a factor 3 in length and 45 degrees in direction of an anchor pair's gives a pose;
+       poses beyond the prior's Mahalanobis gate are dropped, and the rest are ranked by the
+       detections they explain within the coarse gate (then by the capped squared distances).
+       The best distinct ones each give a gated assignment. When the best refined hypothesis
+       leaves a quarter of the detections or of the predicted landmarks unmatched (or is
+       ambiguous), the older layout vote adds its hypotheses: the prior camera centre moved on
+       the grid {-1, 0, +1 sigma}^3, and for each, every (detection, projected landmark) pair
+       proposes a 2D shift ranked by how many other pairs agree with it (a Hough vote). Small
+       problems (a slab's four corners) enumerate every one-to-one assignment instead.
+    2. *Re-association.* Each hypothesis is refined from its start pose (Levenberg-Marquardt
+       with Cauchy weights first, as coarse pairs may hold wrong ones), the landmarks are
+       re-projected with that pose and re-assigned with the inlier gate ``gate_px`` (rivals and
+       enumerated assignments, whose starts need no robust step, with a gate tightening from
+       ``coarse_gate_px / 4``), until the assignment is stable. All hypotheses go through these steps together
+       (:mod:`localization.batch`): one set of numpy calls per step, not one per hypothesis.
     3. *Scoring.* Each final hypothesis is scored by a negative log-likelihood: squared residuals
        of the inliers over ``pixel_sigma^2``, a fixed cost per unassigned detection (clutter) and
        per landmark predicted inside the image but not detected (miss), plus the squared
@@ -422,10 +432,11 @@ class _Problem:
     def refine(self, a: NDArray, starts: NDArray, first_robust: bool) -> tuple[NDArray, NDArray, NDArray]:
         """Coarse assignments (H, N) and start poses (H, 4, 4) -> (assignments, poses, alive (H,)).
 
-        Each round refines every pose on its pairs (LM; the first round of a layout start
-        with Cauchy weights at the round's gate, as its coarse pairs may hold wrong ones),
-        re-projects the landmarks and re-assigns with a gate that tightens from
-        ``coarse_gate_px / 4`` to ``gate_px``, until the assignments are stable. A hypothesis
+        Each round refines every pose on its pairs (LM; with ``first_robust``, the first round
+        with Cauchy weights at ``coarse_gate_px / 4``, as coarse pairs may hold wrong ones, and
+        every re-assignment at ``gate_px``; else with a gate that tightens from
+        ``coarse_gate_px / 4`` to ``gate_px``), re-projects the landmarks and re-assigns, until
+        the assignments are stable. A hypothesis
         with fewer than ``need`` pairs, or with a point behind its camera, dies.
         """
         a = a.copy()
@@ -512,7 +523,7 @@ def associate_robust(
     ambiguity_margin: float = AMBIGUITY_MARGIN,
     fit_quantile: float = 1.0 - 1e-6,
 ) -> Association:
-    """Robust association: shift hypotheses, re-association after each PnP, likelihood scoring.
+    """Robust association: upright two-point hypotheses, batched re-association, likelihood scoring.
 
     Args:
         detections_uv: (N, 2) detections (validated; NaN rows stay unassigned).
@@ -526,8 +537,9 @@ def associate_robust(
         coarse_gate_px: gate of the first assignment of each shift hypothesis, px; never below
             the prior's smallest rotation sigma seen through the lens (``f * min(sigma_rot)``,
             38.7 px for the paper's camera and default sigmas, 310 px at f = 8900 px).
-        max_hypotheses: number of distinct coarse assignments refined by PnP and re-association
-            (those agreeing with an already refined result are skipped and not counted).
+        max_hypotheses: twice this many distinct coarse assignments of each source (upright
+            poses, then the layout vote if needed) are refined and re-associated in one batch
+            (those agreeing with an already refined result are skipped).
         max_iterations: PnP / re-association rounds per hypothesis.
         min_correspondences: a hypothesis needs this many pairs to be turned into a pose.
         miss_cost: cost of a landmark predicted inside the image but not detected (about
@@ -537,8 +549,9 @@ def associate_robust(
             (squared Mahalanobis distance, 6 dof; default the chi-square 99.9 % quantile 22.46)
             are rejected; None keeps all.
         position_offsets: offsets of the prior camera centre (in units of the prior's position
-            sigmas, project axes) that generate layout hypotheses; default the 27-point grid
-            ``{-1, 0, 1}^3``.
+            sigmas, project axes) that generate the layout vote's hypotheses (used when the
+            upright hypotheses leave the detections poorly explained); default the 27-point
+            grid ``{-1, 0, 1}^3``.
         shifts_per_layout: best-voted image shifts tried per layout (besides no shift).
         exhaustive_limit: when the number of largest one-to-one assignments between the finite
             detections and the candidate landmarks is at most this, all of them are tried
