@@ -449,7 +449,9 @@ class _Problem:
             if not moving.any():
                 break
             mv = np.flatnonzero(moving)
-            step_gate = max(self.gate_px, self.coarse_gate_px / 4 ** (it + 1)) if not first_robust else self.gate_px
+            step_gate = max(self.gate_px, self.coarse_gate_px / 4 ** (it + 1))
+            if first_robust:
+                step_gate = self.gate_px
             X, uv, m = self.pairs(a[mv])
             robust = max(self.gate_px, self.coarse_gate_px / 4) if (it == 0 and first_robust) else None
             Rm, tm, cost = refine_many(
