@@ -49,6 +49,7 @@ Two methods:
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from dataclasses import dataclass
@@ -614,7 +615,7 @@ def associate_robust(
         )
         # The residuals' chi-square against the noise model (2n - 6 dof): every pair within
         # the gate is not enough -- four wrong pairs at 3 px RMS each pass a 5 px gate.
-        limit = np.where(dof > 0, chi2.ppf(fit_quantile, np.maximum(dof, 1)), np.inf)
+        limit = np.where(dof > 0, _chi2_quantiles(fit_quantile, int(dof.max()))[np.maximum(dof, 0)], np.inf)
         return prior_sq, chi, consistent, consistent & (chi <= limit)
 
     finals: dict[bytes, tuple[NDArray, NDArray, float, float]] = {}
@@ -663,7 +664,7 @@ def associate_robust(
 
     def decide() -> tuple[list[tuple], str | None]:
         """Score the finals, search the winner's rivals, apply the ambiguity rule."""
-        scored = sorted(score(list(finals.values())), key=lambda h: h[0])
+        scored = ranked()
         for _ in range(max_rival_rounds):
             best_a, best_T = scored[0][1], scored[0][2]
             rivals = translation_hypotheses(
@@ -684,11 +685,20 @@ def associate_robust(
                 break
         return scored, ambiguity([h[:3] for h in scored], landmarks_xyz, K, pixel_sigma, ambiguity_margin)
 
+    cache: dict[int, list[tuple]] = {}
+
+    def ranked() -> list[tuple]:
+        """The finals scored, best first (scored again only when finals changed)."""
+        if len(finals) not in cache:
+            cache.clear()
+            cache[len(finals)] = sorted(score(list(finals.values())), key=lambda h: h[0])
+        return cache[len(finals)]
+
     def weak() -> bool:
         """No final, or the best leaves a quarter of the detections or of the expected unmatched."""
         if not finals:
             return True
-        _, a, _, missed = min(score(list(finals.values())), key=lambda h: h[0])
+        _, a, _, missed = ranked()[0]
         pairs = int((a >= 0).sum())
         return good.size - pairs > 0.25 * good.size or missed > 0.25 * (pairs + missed)
 
@@ -756,6 +766,12 @@ def associate_robust(
     m = a >= 0
     res, _ = reprojection_residuals(K, T, landmarks_xyz[a[m]], det[m])
     return Association(a, T, float(np.sum(res**2)), float(score_best), len(finals), None)
+
+
+@functools.lru_cache(maxsize=64)
+def _chi2_quantiles(quantile: float, max_dof: int) -> NDArray[np.float64]:
+    """Chi-square ``quantile`` for 0 .. ``max_dof`` degrees of freedom (inf at 0), cached."""
+    return np.concatenate([[np.inf], chi2.ppf(quantile, np.arange(1, max(max_dof, 1) + 1))])
 
 
 def _anchor_pairs(det: NDArray, k: int = 4) -> list[tuple[int, int]]:
