@@ -677,7 +677,7 @@ def associate_robust(
                 a = np.full(n, -1, dtype=np.int64)
                 a[good[local >= 0]] = idx_r[local[local >= 0]]
                 chunk.append((a, start))
-            new = explore([c for c in chunk if (c[0] >= 0).sum() >= need], False)
+            new = explore([c for c in chunk if (c[0] >= 0).sum() >= need], True)
             if not new:
                 break
             scored = sorted(scored + score(new), key=lambda h: h[0])
