@@ -20,15 +20,16 @@ Two methods:
        poses beyond the prior's Mahalanobis gate are dropped, and the rest are ranked by the
        detections they explain within the coarse gate (then by the capped squared distances).
        The best distinct ones each give a gated assignment. When the best refined hypothesis
-       leaves a quarter of the detections or of the predicted landmarks unmatched (or is
-       ambiguous), the older layout vote adds its hypotheses: the prior camera centre moved on
-       the grid {-1, 0, +1 sigma}^3, and for each, every (detection, projected landmark) pair
-       proposes a 2D shift ranked by how many other pairs agree with it (a Hough vote). Small
-       problems (a slab's four corners) enumerate every one-to-one assignment instead.
+       leaves more than one (and a tenth) of the detections or a quarter of the landmarks it
+       predicts unmatched (or is ambiguous), the layout vote adds its
+       hypotheses: the prior camera centre moved on the grid {-1, 0, +1 sigma}^3, and for each,
+       every (detection, projected landmark) pair proposes a 2D shift ranked by how many other
+       pairs agree with it (a Hough vote). Small problems (a slab's four corners) enumerate
+       every one-to-one assignment instead.
     2. *Re-association.* Each hypothesis is refined from its start pose (Levenberg-Marquardt
        with Cauchy weights first, as coarse pairs may hold wrong ones), the landmarks are
-       re-projected with that pose and re-assigned with the inlier gate ``gate_px`` (rivals and
-       enumerated assignments, whose starts need no robust step, with a gate tightening from
+       re-projected with that pose and re-assigned with the inlier gate ``gate_px`` (enumerated
+       assignments, whose starts fit their pairs exactly, with a gate tightening from
        ``coarse_gate_px / 4``), until the assignment is stable. All hypotheses go through these steps together
        (:mod:`localization.batch`): one set of numpy calls per step, not one per hypothesis.
     3. *Scoring.* Each final hypothesis is scored by a negative log-likelihood: squared residuals
@@ -695,12 +696,16 @@ def associate_robust(
         return cache[len(finals)]
 
     def weak() -> bool:
-        """No final, or the best leaves a quarter of the detections or of the expected unmatched."""
+        """Whether the upright hypotheses need the layout vote's help.
+
+        True when there is no final, or the best leaves more than one (and a tenth) of the
+        detections or a quarter of the landmarks it predicts in the image unmatched.
+        """
         if not finals:
             return True
         _, a, _, missed = ranked()[0]
         pairs = int((a >= 0).sum())
-        return good.size - pairs > 0.25 * good.size or missed > 0.25 * (pairs + missed)
+        return good.size - pairs > max(1.0, 0.1 * good.size) or missed > 0.25 * (pairs + missed)
 
     def layouts() -> list[tuple[NDArray, NDArray]]:
         return full(
