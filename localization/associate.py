@@ -20,8 +20,9 @@ Two methods:
        poses beyond the prior's Mahalanobis gate are dropped, and the rest are ranked by the
        detections they explain within the coarse gate (then by the capped squared distances).
        The best distinct ones each give a gated assignment. When the best refined hypothesis
-       leaves more than one (and a tenth) of the detections or a quarter of the landmarks it
-       predicts unmatched (or is ambiguous), the layout vote adds its
+       leaves a quarter of the landmarks it predicts in the image unmatched, or more than one
+       (and a tenth) of the detections and some such landmark (or is ambiguous), the layout
+       vote adds its
        hypotheses: the prior camera centre moved on the grid {-1, 0, +1 sigma}^3, and for each,
        every (detection, projected landmark) pair proposes a 2D shift ranked by how many other
        pairs agree with it (a Hough vote). Small problems (a slab's four corners) enumerate
@@ -698,14 +699,16 @@ def associate_robust(
     def weak() -> bool:
         """Whether the upright hypotheses need the layout vote's help.
 
-        True when there is no final, or the best leaves more than one (and a tenth) of the
-        detections or a quarter of the landmarks it predicts in the image unmatched.
+        True when there is no final, or the best leaves a quarter of the landmarks it predicts
+        in the image unmatched, or more than one (and a tenth) of the detections and at least
+        one such landmark (clutter alone leaves detections, not landmarks, unmatched).
         """
         if not finals:
             return True
         _, a, _, missed = ranked()[0]
         pairs = int((a >= 0).sum())
-        return good.size - pairs > max(1.0, 0.1 * good.size) or missed > 0.25 * (pairs + missed)
+        unexplained = good.size - pairs > max(1.0, 0.1 * good.size)
+        return (unexplained and missed > 0) or missed > 0.25 * (pairs + missed)
 
     def layouts() -> list[tuple[NDArray, NDArray]]:
         return full(
