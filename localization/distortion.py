@@ -9,8 +9,9 @@ The model is OpenCV's (``cv2.projectPoints``): a point ``(x, y)`` on the normali
 
 and at pixel ``K @ (x_d, y_d, 1)``. "Pinhole pixels" below are ``K @ (x, y, 1)``: where the point
 would appear without distortion. :func:`undistort_points` inverts the model by Newton's method
-to 1e-12 of the normalized plane (``cv2.undistortPoints`` stops after 5 fixed-point iterations,
-which leaves up to 0.1 px at the corners of a strongly distorted wide image).
+to 1e-12 of the normalized plane (``cv2.undistortPoints`` stops after a few fixed-point
+iterations: 0.02 px off at the corners of the Mavic 2 Pro preset's 1280 x 720 frame, 15 px just
+outside it).
 
 The localization pipeline takes distortion once, at its entry: detected points are undistorted
 to pinhole pixels and everything downstream is the pinhole model (docs/design.md, Conventions).

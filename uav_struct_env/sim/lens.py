@@ -238,6 +238,10 @@ class LensView:
                 f"camera {model.name!r}: the distortion {model.distortion} cannot be inverted over "
                 f"a {W} x {H} image (the model folds over inside the frame)"
             )
+        # The lens's field: a little beyond the image's widest ray, and never past the radius where
+        # the radial polynomial folds over (points beyond it would "appear" at wrong places).
+        r2_image = float(np.max(np.sum(rays**2, axis=-1)))
+        self._r2_max = min(1.44 * r2_image, _fold_r2(self.distortion))
         fx, fy = self.camera.fx, self.camera.fy
         lo = rays.reshape(-1, 2).min(axis=0) * (fx, fy)
         hi = rays.reshape(-1, 2).max(axis=0) * (fx, fy)
@@ -289,7 +293,9 @@ class LensView:
         """Where world points (N, 3) appear in the delivered image: ``(uv (N, 2), depth (N,))``.
 
         Distortion exact; rolling shutter by fixed-point iteration on the row (to 1e-6 px); depth
-        along the optical axis at the step's pose (NaN ``uv`` at or behind the camera).
+        along the optical axis at the step's pose. ``uv`` is NaN at or behind the camera and
+        outside the lens's field (more than 1.2 times the image corner's angle off-axis, or where
+        the distortion polynomial folds over).
         """
         T = check_transform("cam_from_world", cam_from_world)
         X0 = np.asarray(xyz, dtype=np.float64).reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]
@@ -299,16 +305,18 @@ class LensView:
         w_cam = T[:3, :3] @ motion.angular_velocity if moving else None
         t = np.zeros(len(X0))
         uv = np.full((len(X0), 2), np.nan)
-        for _ in range(8 if moving else 1):
+        for iteration in range(10 if moving else 1):
             Xt = X0 if not moving else _rotate(-w_cam * t[:, None], X0 - v_cam * t[:, None])
             with np.errstate(divide="ignore", invalid="ignore"):
                 xy = Xt[:, :2] / Xt[:, 2:3]
+            with np.errstate(invalid="ignore"):
+                xy[np.sum(xy**2, axis=1) > self._r2_max] = np.nan
             xy_d = distort_normalized(xy, self.distortion)
             K = self.camera.K
             new = np.stack([K[0, 0] * xy_d[:, 0] + K[0, 1] * xy_d[:, 1] + K[0, 2],
                             K[1, 1] * xy_d[:, 1] + K[1, 2]], axis=1)
             with np.errstate(invalid="ignore"):
-                done = np.nanmax(np.abs(new - uv), initial=0.0) < 1e-6
+                done = iteration > 0 and np.nanmax(np.abs(new - uv), initial=0.0) < 1e-6
             uv = new
             if done or not moving:
                 break
@@ -357,6 +365,26 @@ class LensView:
         up = cv2.resize(grid.astype(np.float32), (gw * g, gh * g), interpolation=cv2.INTER_LINEAR)
         return up[: self.camera.height, : self.camera.width]
 
+    def landmark_truth(
+        self, wide: dict[str, NDArray], cam_from_world: ArrayLike, motion: Motion | None = None
+    ) -> dict[str, NDArray]:
+        """Landmark truth of the delivered image from the truth of the wide render.
+
+        ``wide`` is ``SiteWorld.landmark_truth`` (or ``landmark_truth_raycast``) with
+        :attr:`render_camera`: its occlusion test (at the step's pose) is kept; ``uv`` becomes
+        where each landmark appears in the delivered image (:meth:`project`) and ``in_frame``
+        tests that position against the delivered image.
+        """
+        uv, z = self.project(cam_from_world, wide["xyz"], motion)
+        W, H = self.camera.size
+        with np.errstate(invalid="ignore"):
+            in_frame = (
+                (z > self.camera.near)
+                & (uv[:, 0] >= -0.5) & (uv[:, 0] < W - 0.5)
+                & (uv[:, 1] >= -0.5) & (uv[:, 1] < H - 0.5)
+            )
+        return {**wide, "uv": uv, "in_frame": in_frame, "visible": wide["visible"] & in_frame}
+
     # ------------------------------------------------------------------ rendering
     def warp(
         self,
@@ -398,6 +426,15 @@ class LensView:
             blur = np.nanmedian((b - a).reshape(-1, 2), axis=0) / self.render_scale
             out = line_blur(out, blur)
         return out, dep
+
+
+def _fold_r2(coefficients: NDArray[np.float64]) -> float:
+    """Squared normalized radius where ``r (1 + k1 r^2 + k2 r^4 + k3 r^6)`` stops increasing (inf: never)."""
+    k1, k2, _, _, k3 = coefficients
+    r2 = np.linspace(0.0, 16.0, 160001)
+    slope = 1.0 + 3.0 * k1 * r2 + 5.0 * k2 * r2**2 + 7.0 * k3 * r2**3  # d r_d / d r
+    bad = np.flatnonzero(slope <= 0)
+    return float(r2[bad[0]]) if len(bad) else float("inf")
 
 
 def line_blur(image: NDArray[np.uint8], vector: ArrayLike) -> NDArray[np.uint8]:
