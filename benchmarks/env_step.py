@@ -9,8 +9,10 @@ For each configuration: the time of one ``reset`` (the first one also builds the
 ``--steps`` steps with random actions (gentle, so the UAVs stay up), reporting env steps/s (one
 step = all four UAVs), the time inside ``SiteWorld.render`` (four images per step) and inside
 ``SiteWorld.landmark_truth`` (or ``landmark_truth_raycast`` without images) as shares of the step
-time, and the rest (kinematics, sensors,
-projections, dict building).
+time, and the rest (kinematics, sensors, projections, dict building; with ``camera="mavic2pro"``
+also the distortion / rolling-shutter warp and blur of :mod:`uav_struct_env.sim.lens`).
+The ``mavic2pro`` row against the first is issue 15's camera-cost figure (random actions, so
+every frame has motion: the full rolling-shutter path).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import uav_struct_env
 CONFIGS = {
     "paper 1280x720": ("paper", {}),
     "paper 1280x720, no landmark info": ("paper", {"landmark_sets": ()}),
+    "paper 1280x720, mavic2pro camera": ("paper", {"camera": "mavic2pro"}),
     "train 128x72": ("train", {}),
     "train 128x72 + landmark info": ("train", {"landmark_sets": ("column_tops", "slab_corners")}),
     "train, no image + landmark info (ray-cast)": (

@@ -76,12 +76,6 @@ class EnvConfig:
         marker_size: ArUco marker side (m), or None for no markers.
         image_size: ``(W, H)`` of the observed images. The intrinsics are the ``camera``'s
             scaled to this size (same field of view).
-        camera: the camera (:mod:`uav_struct_env.sim.lens`): ``"paper"`` (the paper's ideal
-            pinhole, the default), ``"mavic2pro"`` (the Mavic 2 Pro's Hasselblad L1D-20c: its
-            intrinsics, lens distortion, 47 ms rolling-shutter readout and 1/500 s exposure with
-            the UAV's motion) or a ``CameraModel``. ``info["intrinsics"]`` and
-            ``info["distortion"]`` are its K and ``(k1, k2, p1, p2, k3)``; landmark ``uv`` is where
-            each landmark appears in the delivered image.
         imaging: camera effects on the observed image (:mod:`uav_struct_env.sim.imaging`):
             ``"ideal"`` (none, the default), ``"camera"`` (blur, noise, JPEG) or an
             ``ImagingModel``. Landmark truth is unaffected.
@@ -126,13 +120,18 @@ class EnvConfig:
             ``"aci117"``): the rendered building, the collision obstacles and the landmark truth
             in ``info`` are the as-built building; ``env.site`` (what a localizer uses) stays
             the design.
+        camera: the camera (:mod:`uav_struct_env.sim.lens`): ``"paper"`` (the paper's ideal
+            pinhole, the default), ``"mavic2pro"`` (the Mavic 2 Pro's Hasselblad L1D-20c: its
+            intrinsics, lens distortion, 47 ms rolling-shutter readout and 1/500 s exposure with
+            the UAV's motion) or a ``CameraModel``. ``info["intrinsics"]`` and
+            ``info["distortion"]`` are its K and ``(k1, k2, p1, p2, k3)``; landmark ``uv`` is where
+            each landmark appears in the delivered image.
     """
 
     stage: str | None = None
     site: str | Site = "paper"
     marker_size: float | None = 1.0
     image_size: tuple[int, int] = PAPER_IMAGE_SIZE
-    camera: str | CameraModel = "paper"
     noise: str | SensorModel = "paper"
     imaging: str | ImagingModel = "ideal"
     renderer: str = "auto"
@@ -155,6 +154,7 @@ class EnvConfig:
     start_yaw_jitter: float = 0.0
     lighting: str = "fixed"
     as_built: AsBuilt | str | None = None
+    camera: str | CameraModel = "paper"
 
     def __post_init__(self) -> None:
         if not (isinstance(self.site, Site) or self.site in ("paper", "random") or _is_site_file(self.site)):
