@@ -136,7 +136,7 @@ class CameraModel:
     distortion: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
     readout_time: float = 0.0
     exposure_time: float = 0.0
-    max_render_ratio: float = 1.6
+    max_render_ratio: float = 1.1
     grid_px: int = 4
 
     def __post_init__(self) -> None:
@@ -222,7 +222,7 @@ class LensView:
     """
 
     #: Margin of the wide render for the motion during readout, as a fraction of the image side.
-    MOTION_MARGIN = 0.03
+    MOTION_MARGIN = 0.02
 
     def __init__(self, model: CameraModel, width: int, height: int) -> None:
         self.model = model
