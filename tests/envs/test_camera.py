@@ -96,3 +96,26 @@ def test_aruco_finds_the_corners_where_the_info_says(mavic_step) -> None:
     # through the ideal pinhole too (same views, camera="paper"): that tail is the detector's.
     assert np.median(errors) <= 0.5 and errors.max() <= 2.0, errors.round(2)
     assert np.concatenate(shutter).max() > 5.0  # the readout moved them: the truth followed
+
+
+def test_learned_detector_output_localizes_through_the_distorting_lens(mavic_step) -> None:
+    """The learned detector's points (distorted pixels) localize once the localizer undistorts."""
+    from localization import Localizer
+    from localization.geometry import camera_center
+    from localization.learned import LearnedDetector
+
+    _, _, env = mavic_step
+    obs, infos = env.reset(seed=0, options={"viewpoint": 3})  # hovering: no rolling shutter
+    detector = LearnedDetector.for_localizer("slab_corners", 1280, "robust", None, True)
+    model = env.site.landmarks("slab_corners")
+    with_d, without = [], []
+    for agent in env.agents:
+        info = infos[agent]
+        found = detector.detect(obs[agent]["image"], {"image_size": (1280, 720)})
+        truth = camera_center(invert(info["world_from_cam"]))
+        for distortion, errors in ((info["distortion"], with_d), (None, without)):
+            est = Localizer(model.xyz, info["intrinsics"], distortion=distortion).localize(
+                found, invert(info["prior_world_from_cam"]))
+            assert est.success, est.failure_reason
+            errors.append(np.linalg.norm(camera_center(est.cam_from_world) - truth))
+    assert np.median(with_d) < 0.2 and np.median(without) > 1.5 * np.median(with_d), (with_d, without)

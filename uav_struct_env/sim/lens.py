@@ -264,8 +264,9 @@ class LensView:
         gc, gr = np.meshgrid((np.arange(gw) + 0.5) * g - 0.5, (np.arange(gh) + 0.5) * g - 0.5)
         self._grid_shape = (gh, gw)
         self._grid_rows = gr
-        self._grid_rays = self._rays_at(gc, gr)
-        self._grid_static = np.stack(self._to_render(self._grid_rays[..., 0], self._grid_rays[..., 1]), -1)
+        grid_rays = self._rays_at(gc, gr)
+        self._grid_rays = grid_rays.astype(np.float32)
+        self._grid_static = np.stack(self._to_render(grid_rays[..., 0], grid_rays[..., 1]), -1)
 
     # ------------------------------------------------------------------ geometry
     def _rays_at(self, cols: NDArray, rows: NDArray) -> NDArray[np.float64]:
@@ -341,22 +342,24 @@ class LensView:
         k = w_cam / theta if theta > 0 else np.zeros(3)
         Kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
         a = (theta * t)[:, None, None]
-        Rt = np.eye(3) + np.sin(a) * Kx + (1.0 - np.cos(a)) * (Kx @ Kx)
-        p = (rays[..., 0, None] * Rt[:, None, :, 0] + rays[..., 1, None] * Rt[:, None, :, 1]
-             + Rt[:, None, :, 2])
-        origin = (v_cam[None, :] * t[:, None])[:, None, :]
-        Kr = self.render_camera.K
+        Rt = (np.eye(3) + np.sin(a) * Kx + (1.0 - np.cos(a)) * (Kx @ Kx)).astype(np.float32)
+        # float32 throughout (1e-4 px at these coordinates): the warp's cost is this function.
+        rx, ry = rays[..., 0], rays[..., 1]
+        px, py, pz = (rx * Rt[:, None, i, 0] + ry * Rt[:, None, i, 1] + Rt[:, None, i, 2] for i in range(3))
+        o = (v_cam[None, :] * t[:, None]).astype(np.float32)
+        ox, oy, oz = o[:, 0, None], o[:, 1, None], o[:, 2, None]
+        fx, sk, cx, fy, cy = (np.float32(v) for v in self.render_camera.K[[0, 0, 0, 1, 1], [0, 1, 2, 1, 2]])
         Hr, Wr = depth.shape
-        x, y = p[..., 0] / p[..., 2], p[..., 1] / p[..., 2]
-        qx, qy = self._to_render(x, y)
+        x, y = px / pz, py / pz
+        qx, qy = fx * x + sk * y + cx, fy * y + cy
         for _ in range(2):  # meet the rendered surface: depth at the current guess, then re-project
-            col = np.clip(np.rint(qx).astype(np.intp), 0, Wr - 1)
-            row = np.clip(np.rint(qy).astype(np.intp), 0, Hr - 1)
-            s = (depth[row, col] - origin[..., 2]) / p[..., 2]
-            X = origin + s[..., None] * p
-            x, y = X[..., 0] / X[..., 2], X[..., 1] / X[..., 2]
-            qx, qy = Kr[0, 0] * x + Kr[0, 1] * y + Kr[0, 2], Kr[1, 1] * y + Kr[1, 2]
-        return np.stack([qx, qy], axis=-1)
+            col = np.clip(qx + 0.5, 0, Wr - 1).astype(np.int32)
+            row = np.clip(qy + 0.5, 0, Hr - 1).astype(np.int32)
+            s = (depth[row, col] - oz) / pz
+            z = oz + s * pz
+            x, y = (ox + s * px) / z, (oy + s * py) / z
+            qx, qy = fx * x + sk * y + cx, fy * y + cy
+        return np.stack([qx, qy], axis=-1).astype(np.float64)
 
     def _full(self, grid: NDArray[np.float64]) -> NDArray[np.float32]:
         """A grid field (gh, gw) upsampled to the delivered image (H, W), block centres aligned."""
