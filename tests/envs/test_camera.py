@@ -119,3 +119,30 @@ def test_learned_detector_output_localizes_through_the_distorting_lens(mavic_ste
             assert est.success, est.failure_reason
             errors.append(np.linalg.norm(camera_center(est.cam_from_world) - truth))
     assert np.median(with_d) < 0.2 and np.median(without) > 1.5 * np.median(with_d), (with_d, without)
+
+
+def test_mavic_depth_raycast_and_render_paths() -> None:
+    """Depth is warped with the image; without images the truth is ray-cast through the lens too."""
+    env = small_parallel_env(camera="mavic2pro", observe_depth=True, render_mode="rgb_array")
+    rays = small_parallel_env(camera="mavic2pro", observe_image=False, render_mode="rgb_array")
+    try:
+        obs, infos = env.reset(seed=1, options={"viewpoint": 1})
+        _, ray_infos = rays.reset(seed=1, options={"viewpoint": 1})
+        for agent in env.agents:
+            depth = obs[agent]["depth"]
+            assert depth.shape == (72, 128) and env.observation_space(agent).contains(obs[agent])
+            a, b = infos[agent]["landmarks"]["all"], ray_infos[agent]["landmarks"]["all"]
+            np.testing.assert_allclose(a["uv"], b["uv"])  # the same lens projection
+            assert np.mean(a["visible"] == b["visible"]) > 0.95
+            # the depth at a marker corner's pixel (on the ground) is its depth: warped as the image
+            m = infos[agent]["landmarks"]["aruco"]
+            k = np.flatnonzero(m["visible"])
+            cols, rows = np.clip(np.rint(m["uv"][k]).astype(int).T, 0, [[127], [71]])
+            T = infos[agent]["world_from_cam"]
+            z = (m["xyz"][k] - T[:3, 3]) @ T[:3, 2]
+            assert len(k) >= 8 and np.median(np.abs(depth[rows, cols] - z) / z) < 0.03
+        frame = rays.render()
+        assert frame.ndim == 3 and frame.dtype == np.uint8 and frame.std() > 5
+    finally:
+        env.close()
+        rays.close()
