@@ -76,7 +76,7 @@ def test_aruco_finds_the_corners_where_the_info_says(mavic_step) -> None:
         truth = infos[agent]["landmarks"]["aruco"]
         detector = ArucoLocalizer(env.site.markers, infos[agent]["intrinsics"])
         ids, corners = detector.detect(obs[agent]["image"])
-        static, _ = view.project(invert(infos[agent]["world_from_cam"]), truth["xyz"])
+        static, *_ = view.project(invert(infos[agent]["world_from_cam"]), truth["xyz"])
         for marker_id, found in zip(ids, corners, strict=True):
             k = detector._index.get(int(marker_id))
             if k is None:  # a false detection (an id the site does not have)
@@ -146,3 +146,15 @@ def test_mavic_depth_raycast_and_render_paths() -> None:
     finally:
         env.close()
         rays.close()
+
+
+def test_mavic_env_passes_pettingzoo_api_and_seed_tests() -> None:
+    """Moving frames warp by the step's motion; the same seed gives the same frames."""
+    from functools import partial
+
+    from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+    env = small_parallel_env(camera="mavic2pro")
+    parallel_api_test(env, num_cycles=10)
+    env.close()
+    parallel_seed_test(partial(small_parallel_env, camera="mavic2pro"), num_cycles=10)

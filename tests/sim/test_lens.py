@@ -104,12 +104,12 @@ def test_warped_blobs_land_on_the_truth(mavic: LensView, motion: Motion | None) 
     X = np.stack([gx.ravel() * 25.0, gy.ravel() * 25.0, np.full(gx.size, 25.0)], axis=1)
     depth = np.full((mavic.render_camera.height, mavic.render_camera.width), 25.0, np.float32)
     out, _ = mavic.warp(_blob_render(mavic, X), depth, cam_from_world, motion)
-    truth, _ = mavic.project(cam_from_world, X, motion)
+    truth, *_ = mavic.project(cam_from_world, X, motion)
     if motion is None:
         expected = cv2.projectPoints(X, np.zeros(3), np.zeros(3), mavic.camera.K, D)[0][:, 0]
         np.testing.assert_allclose(truth, expected, atol=1e-6)
     else:  # the readout moves the points by pixels: the test can tell
-        static, _ = mavic.project(cam_from_world, X)
+        static, *_ = mavic.project(cam_from_world, X)
         assert np.abs(truth - static).max() > 10.0
     err = np.linalg.norm(_centroids(out, truth) - truth, axis=1)
     assert err.max() <= 0.1, err.round(3)

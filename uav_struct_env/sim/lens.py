@@ -292,13 +292,17 @@ class LensView:
 
     def project(
         self, cam_from_world: ArrayLike, xyz: ArrayLike, motion: Motion | None = None
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Where world points (N, 3) appear in the delivered image: ``(uv (N, 2), depth (N,))``.
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """Where world points (N, 3) appear in the delivered image: ``(uv, depth, in_field)``.
+
+        ``uv`` (N, 2) px, ``depth`` (N,) m, ``in_field`` (N,) bool.
 
         Distortion exact; rolling shutter by fixed-point iteration on the row (to 1e-6 px); depth
-        along the optical axis at the step's pose. ``uv`` is NaN at or behind the camera and
-        outside the lens's field (more than 1.2 times the image corner's angle off-axis, or where
-        the distortion polynomial folds over).
+        along the optical axis at the step's pose. ``in_field`` is False behind the camera and
+        outside the lens's field (more than 1.2 times the image corner's tangent off-axis, or
+        where the distortion polynomial folds over). ``uv`` is NaN at or behind the camera (as
+        the pinhole truth of :mod:`uav_struct_env.sim.visibility`); outside the field it is the
+        undistorted pinhole projection at the step's pose (finite, not in the image).
         """
         T = check_transform("cam_from_world", cam_from_world)
         X0 = np.asarray(xyz, dtype=np.float64).reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]
@@ -324,8 +328,15 @@ class LensView:
             if done or not moving:
                 break
             t = np.where(np.isfinite(uv[:, 1]), self.row_time(uv[:, 1]), 0.0)
+        in_field = (depth > 0) & np.all(np.isfinite(uv), axis=1)
+        K = self.camera.K
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xy = X0[:, :2] / X0[:, 2:3]
+        pinhole = np.stack([K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2],
+                            K[1, 1] * xy[:, 1] + K[1, 2]], axis=1)
+        uv = np.where(in_field[:, None], uv, pinhole)
         uv[depth <= 0] = np.nan
-        return uv, depth
+        return uv, depth, in_field
 
     def _motion_map(
         self, cam_from_world: NDArray, motion: Motion, depth: NDArray[np.float32], dt: float = 0.0,
@@ -380,11 +391,11 @@ class LensView:
         where each landmark appears in the delivered image (:meth:`project`) and ``in_frame``
         tests that position against the delivered image.
         """
-        uv, z = self.project(cam_from_world, wide["xyz"], motion)
+        uv, z, in_field = self.project(cam_from_world, wide["xyz"], motion)
         W, H = self.camera.size
         with np.errstate(invalid="ignore"):
             in_frame = (
-                (z > self.camera.near)
+                in_field & (z > self.camera.near)
                 & (uv[:, 0] >= -0.5) & (uv[:, 0] < W - 0.5)
                 & (uv[:, 1] >= -0.5) & (uv[:, 1] < H - 0.5)
             )
