@@ -155,6 +155,6 @@ def test_mavic_env_passes_pettingzoo_api_and_seed_tests() -> None:
     from pettingzoo.test import parallel_api_test, parallel_seed_test
 
     env = small_parallel_env(camera="mavic2pro")
-    parallel_api_test(env, num_cycles=10)
+    parallel_api_test(env, num_cycles=4)
     env.close()
-    parallel_seed_test(partial(small_parallel_env, camera="mavic2pro"), num_cycles=10)
+    parallel_seed_test(partial(small_parallel_env, camera="mavic2pro"), num_cycles=4)

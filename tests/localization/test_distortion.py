@@ -22,7 +22,7 @@ K = np.array([[995.0, 0.0, 639.5], [0.0, 995.0, 359.5], [0.0, 0.0, 1.0]])
 D = np.array([-0.269478, 0.115681, -8.75619e-5, -3.06177e-4, -0.0357628])
 
 
-def _views(X: np.ndarray, center: np.ndarray, n: int = 24):
+def _views(X: np.ndarray, center: np.ndarray, n: int = 16):
     """(true pose, pinhole uv, distorted uv) of ``n`` views; the same 1 px noise on both."""
     rng = np.random.default_rng(3)
     out = []
