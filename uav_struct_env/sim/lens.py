@@ -178,7 +178,11 @@ class CameraModel:
 #:   sensor class; ``DewarpData`` in every image's XMP, order fx, fy, cx, cy, k1, k2, p1, p2, k3
 #:   per DJI's manuals): k1 = -0.269478, k2 = 0.115681, p1 = -8.75619e-5, p2 = -3.06177e-4,
 #:   k3 = -0.0357628 (normalized-plane coefficients; a 12 % barrel at this frame's corners).
-#:   A calibrated unit's own coefficients replace them: ``CameraModel(..., distortion=...)``.
+#:   That the L1D-20c's uncorrected frames are strongly distorted is on record (Lensfun
+#:   calibration request #474: "really huge distortion"; DJI's Mobile SDK undistorts its live
+#:   video, DJIWidget's ``DJIMavic2ProCameraImageCalibrateFilterDataSource``), but not in
+#:   OpenCV's terms. A calibrated unit's own coefficients replace these:
+#:   ``CameraModel(..., distortion=...)``.
 #: * Rolling shutter: OpenDroneMap's measured readout table (``opendm/rollingshutter.py``,
 #:   ``RS_DATABASE['hasselblad l1d-20c']``, measured with the RSCalibration LED method): 47 ms at
 #:   16:10 (16.8 MP), 56 ms at 3:2 (19.9 MP, 3648 rows, so 15.4 us per row); a 16:9 frame reads
