@@ -234,7 +234,6 @@ class LensView:
         self.camera = model.camera(width, height)
         self.distortion = np.array(model.distortion)
         W, H = self.camera.width, self.camera.height
-        self._Kinv = np.linalg.inv(self.camera.K)
         # The undistorted normalized ray of every delivered pixel centre.
         cols, rows = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
         rays = self._rays_at(cols, rows)
