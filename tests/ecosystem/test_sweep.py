@@ -120,3 +120,15 @@ def test_the_command_writes_one_table_and_refuses_study_only_options(tmp_path, c
     assert main(["--sites", "random:9-1", "--out", str(tmp_path / "y")]) == 2
     assert "is empty: 1 < 9" in capsys.readouterr().err
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+
+
+def test_ray_without_ray_installed_is_refused_before_anything_runs(tmp_path, capsys):
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        pytest.skip("Ray is installed here")
+    assert main(["--sites", "paper", "--ray", "--out", str(tmp_path / "r")]) == 2
+    assert "--ray needs Ray: pip install 'uav-struct-env[ray]'" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()

@@ -48,6 +48,7 @@ __all__ = [
     "main",
     "parse_seeds",
     "parse_sites",
+    "require_ray",
     "run_sweep",
     "sweep",
     "sweep_results",
@@ -118,25 +119,46 @@ class SweepRun:
     rows: tuple[ImageResult, ...]
 
 
+#: This process's site files of ``random:N`` sites (in a temp folder removed at exit).
+_SITE_FILES: dict[str, str] = {}
+
+
 def _site_file(site: str) -> str:
     """The ``StudyConfig.site`` of a sweep site: a random site is written to a site file first.
 
     ``random:N`` is :func:`~uav_struct_env.site.random_site` drawn from ``default_rng(N)``, saved
-    once per machine under the temp folder (atomically; every process writes the same bytes), so
-    a run's own seed is free to vary and every Ray node makes its own copy.
+    once per process into a temp folder (removed when the process exits), so that a run's own
+    seed is free to vary and every Ray node makes its own copy from the code it runs.
     """
     m = _RANDOM.match(site)
     if m is None:
         return site
-    from uav_struct_env.site import random_site
-    from uav_struct_env.site.io import save_site
+    if site not in _SITE_FILES:
+        import atexit
+        import shutil
 
-    path = Path(tempfile.gettempdir()) / "uav-struct-sweep" / f"random_{int(m.group(1))}.json"
-    if not path.is_file():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as tmp:
-            save_site(random_site(np.random.default_rng(int(m.group(1)))), tmp)
-    return str(path)
+        from uav_struct_env.site import random_site
+        from uav_struct_env.site.io import save_site
+
+        if not _SITE_FILES:
+            folder = tempfile.mkdtemp(prefix="uav-struct-sweep-")
+            atexit.register(shutil.rmtree, folder, ignore_errors=True)
+            _SITE_FILES[""] = folder
+        path = Path(_SITE_FILES[""]) / f"random_{int(m.group(1))}.json"
+        save_site(random_site(np.random.default_rng(int(m.group(1)))), path)
+        _SITE_FILES[site] = str(path)
+    return _SITE_FILES[site]
+
+
+def require_ray():
+    """The ``ray`` module, or a ConfigError that says how to install it."""
+    try:
+        import ray
+    except ImportError as err:
+        raise ConfigError(
+            "--ray needs Ray: pip install 'uav-struct-env[ray]' (or run without --ray on a process pool)"
+        ) from err
+    return ray
 
 
 def _run(task: tuple[StudyConfig, str, int]) -> SweepRun:
@@ -154,12 +176,7 @@ def _pool(tasks: list, workers: int) -> Iterator[SweepRun]:
 
 def _ray(tasks: list, address: str, workers: int) -> Iterator[SweepRun]:
     """Run ``tasks`` as Ray tasks of one CPU each; ``address`` ``"local"`` starts a local instance."""
-    try:
-        import ray
-    except ImportError as err:
-        raise ConfigError(
-            "--ray needs Ray: pip install 'uav-struct-env[ray]' (or run without --ray on a process pool)"
-        ) from err
+    ray = require_ray()
     started = not ray.is_initialized()
     if started:
         local = address == "local"
@@ -392,6 +409,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         sites = parse_sites(args.sites)
         seeds = parse_seeds(args.seeds)
         check_option("--workers", args.workers, 1, integer=True)
+        if args.ray is not None:
+            require_ray()
         for site in sites:
             if not site.startswith("random:") and site != "paper":
                 check_site(site, study_args.stage)
@@ -401,8 +420,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         results = sweep(base, sites, seeds, args.out, workers=args.workers, ray=args.ray,
                         progress=not args.no_progress, overwrite=args.overwrite)
-    except ConfigError as err:  # --ray without Ray installed
-        return refuse(prog, err)
     except (WorkerDied, OSError) as err:
         return refuse(prog, f"{err}; nothing written to {args.out}", status=1)
     out = Path(args.out)
