@@ -374,7 +374,7 @@ def _parser() -> CommandParser:
     )
     p.add_argument("--sites", required=True,
                    help="comma-separated: paper, random:N, random:A-B (inclusive), site files (*.json), "
-                   "IFC files (*.ifc)")
+                   "IFC files (*.ifc); required, no default")
     p.add_argument("--seeds", default="0", help="study seeds of every site: N, A-B or a comma list")
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
                    help="run on Ray: alone, a local Ray instance with --workers CPUs; with an address "
