@@ -69,8 +69,10 @@ def test_skrl_mappo_trains_one_shared_policy_with_a_state_critic():
              **{k: {a: {} for a in agents} for k in SKRL_PER_AGENT_KWARGS}},
     )
     before = [p.detach().clone() for p in policy.parameters()]
+    # the test closes the env itself (skrl's at-exit close logs to pytest's closed streams)
     trainer = SequentialTrainer(env=env, agents=mappo, cfg={"timesteps": 48, "headless": True,
-                                                             "disable_progressbar": True})
+                                                             "disable_progressbar": True,
+                                                             "close_environment_at_exit": False})
     trainer.train()
     # three PPO updates ran on the one shared policy
     assert any(not torch.equal(a, b) for a, b in zip(before, policy.parameters(), strict=True))
