@@ -3,7 +3,10 @@ PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-EXTRAS ?= dev,rl,train,ifc,docs
+# rl-extra (TorchRL, skrl: +42 MB, seconds to install) and ray (Ray RLlib 2.60: +0.55 GB beside the
+# rest, ~2 min from PyPI; pins gymnasium 1.2.2) are in, so that `make test` runs the RL-library and
+# Ray tests (tests/ecosystem, ~1.5 min) instead of skipping them.
+EXTRAS ?= dev,rl,train,ifc,docs,rl-extra,ray
 
 .PHONY: demo test test-slow lint bench docs docs-serve detector clean
 
