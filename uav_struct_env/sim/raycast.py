@@ -94,13 +94,17 @@ class RayScene:
             tri = first + np.arange(len(ray))
             t = _moller_trumbore(o, d[ray], self._v0[tri], self._e1[tri], self._e2[tri], t_min)
             np.minimum.at(best, ray, t)
-        for world_from_box, half in self.boxes:
-            R, c = world_from_box[:3, :3], world_from_box[:3, 3]
-            ob, db = R.T @ (o - c), d @ R  # origin and directions in the box frame
-            lo, hi = _slab(ob, db, -half[None], half[None])
-            entry = np.where(lo[:, 0] >= t_min, lo[:, 0], np.inf)
-            hit = (hi[:, 0] >= lo[:, 0]) & (entry < best)
-            best[hit] = entry[hit]
+        if self.boxes:
+            # all boxes at once: origin and directions in each box's frame, one slab test each
+            Rb = np.stack([np.asarray(T, dtype=np.float64)[:3, :3] for T, _ in self.boxes])  # (B, 3, 3)
+            cb = np.stack([np.asarray(T, dtype=np.float64)[:3, 3] for T, _ in self.boxes])
+            half = np.stack([np.asarray(h, dtype=np.float64).reshape(3) for _, h in self.boxes])
+            ob = ((o - cb)[:, None, :] @ Rb)[:, 0]  # (B, 3): R^T (o - c)
+            db = d[None] @ Rb  # (B, R, 3)
+            lo, hi = _slab_boxes(ob, db, half)  # (B, R)
+            entry = np.where(lo >= t_min, lo, np.inf)
+            entry[~(hi >= lo)] = np.inf
+            best = np.minimum(best, entry.min(axis=0))
         return best
 
 
@@ -114,11 +118,30 @@ def _slab(o: NDArray, d: NDArray, lo: NDArray, hi: NDArray) -> tuple[NDArray, ND
         inv = 1.0 / d  # (R, 3); +-inf along an axis the ray does not move on
         t1 = (lo[None] - o) * inv[:, None]
         t2 = (hi[None] - o) * inv[:, None]
+    zero = d == 0
+    if not zero.any():
+        return np.minimum(t1, t2).max(axis=2), np.maximum(t1, t2).min(axis=2)
     # A ray parallel to a slab: inside it (0 * inf = nan) never limits, outside it misses.
-    parallel = (d == 0)[:, None, :]
+    parallel = zero[:, None, :]
     inside = (o >= lo) & (o <= hi)  # (G, 3)
     t_lo = np.where(parallel, np.where(inside[None], -np.inf, np.inf), np.minimum(t1, t2))
     t_hi = np.where(parallel, np.where(inside[None], np.inf, -np.inf), np.maximum(t1, t2))
+    return t_lo.max(axis=2), t_hi.min(axis=2)
+
+
+def _slab_boxes(o: NDArray, d: NDArray, half: NDArray) -> tuple[NDArray, NDArray]:
+    """Entry and exit parameters (B, R) of rays ``d`` (B, R, 3) from ``o`` (B, 3) through the boxes
+    ``[-half, half]`` (B, 3), each in its own frame (:func:`_slab`'s test, one box per origin)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        t1 = (-half - o)[:, None, :] * inv
+        t2 = (half - o)[:, None, :] * inv
+    t_lo, t_hi = np.minimum(t1, t2), np.maximum(t1, t2)
+    zero = d == 0
+    if zero.any():
+        inside = (np.abs(o) <= half)[:, None, :]  # (B, 1, 3)
+        t_lo = np.where(zero, np.where(inside, -np.inf, np.inf), t_lo)
+        t_hi = np.where(zero, np.where(inside, np.inf, -np.inf), t_hi)
     return t_lo.max(axis=2), t_hi.min(axis=2)
 
 
