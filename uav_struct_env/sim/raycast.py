@@ -130,8 +130,10 @@ def _slab(o: NDArray, d: NDArray, lo: NDArray, hi: NDArray) -> tuple[NDArray, ND
 
 
 def _slab_boxes(o: NDArray, d: NDArray, half: NDArray) -> tuple[NDArray, NDArray]:
-    """Entry and exit parameters (B, R) of rays ``d`` (B, R, 3) from ``o`` (B, 3) through the boxes
-    ``[-half, half]`` (B, 3), each in its own frame (:func:`_slab`'s test, one box per origin)."""
+    """Entry and exit parameters (B, R) of rays ``d`` (B, R, 3) from ``o`` (B, 3) through boxes.
+
+    Box ``b`` is ``[-half[b], half[b]]`` in its own frame: :func:`_slab`'s test, one box per origin.
+    """
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = 1.0 / d
         t1 = (-half - o)[:, None, :] * inv
