@@ -39,13 +39,18 @@ def gate(probability: float, dof: int) -> float:
 
 @dataclass(frozen=True)
 class Candidate:
-    """Two detections that one worker explains: ``(view a, index i)``, ``(view b, index j)``, cost."""
+    """Two detections that one worker explains: ``(view a, index i)``, ``(view b, index j)``.
+
+    ``chi2`` is the pair's fit; ``support`` the number of other views holding a detection that
+    the same worker explains too (a three-view fit within the gate).
+    """
 
     a: str
     i: int
     b: str
     j: int
     chi2: float
+    support: int
 
 
 def _fit(
@@ -88,7 +93,11 @@ def candidates(
     min_ray_angle_deg: float,
     height_range: tuple[float, float] | None,
 ) -> list[Candidate]:
-    """Every consistent pair of detections in two cameras, best (lowest chi2) first.
+    """Every consistent pair of detections in two cameras, best first.
+
+    Best is most supported by the other views, then lowest chi-square. On a flat site two rays
+    from two cameras often meet by chance (a "ghost" worker that fits two views better than a true
+    pair does); a ghost is rarely confirmed by a third view, a true pair usually is.
 
     Args:
         views: camera views by name.
@@ -99,7 +108,8 @@ def candidates(
         height_range: accepted head-above-feet heights, m, or None.
     """
     out: list[Candidate] = []
-    for a, b in combinations([name for name in views if len(uv[name])], 2):
+    names = [name for name in views if len(uv[name])]
+    for a, b in combinations(names, 2):
         ii, jj = np.meshgrid(np.arange(len(uv[a])), np.arange(len(uv[b])), indexing="ij")
         ii, jj = ii.ravel(), jj.ravel()
         pair = (views[a], views[b])
@@ -111,9 +121,21 @@ def candidates(
             max_ray_angle_deg(pair, obs[:, :, 0]), max_ray_angle_deg(pair, obs[:, :, 1])
         )
         ok &= angle >= min_ray_angle_deg
-        keep = zip(ii[ok], jj[ok], chi2[ok], strict=True)
-        out.extend(Candidate(a, int(i), b, int(j), float(c)) for i, j, c in keep)
-    out.sort(key=lambda c: c.chi2)
+        ii, jj, chi2 = ii[ok], jj[ok], chi2[ok]
+        support = np.zeros(len(ii), dtype=int)
+        for c in names:
+            if c in (a, b) or not len(ii):
+                continue
+            kk = np.arange(len(uv[c]))
+            obs3 = np.concatenate(
+                [np.repeat(obs[ok], len(kk), axis=0), np.tile(uv[c][kk], (len(ii), 1, 1))[:, None]], axis=1
+            )  # (B * K, 3 views, 2 points, 2)
+            sig3 = np.column_stack([np.repeat(sig[ok], len(kk), axis=0), np.tile(sigma[c][kk], len(ii))])
+            fit = _consistent(*_fit((*pair, views[c]), obs3, sig3), 3, probability, height_range)
+            support += np.any(fit.reshape(len(ii), len(kk)), axis=1)
+        keep = zip(ii, jj, chi2, support, strict=True)
+        out.extend(Candidate(a, int(i), b, int(j), float(c), int(s)) for i, j, c, s in keep)
+    out.sort(key=lambda c: (-c.support, c.chi2))
     return out
 
 
