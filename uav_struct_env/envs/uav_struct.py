@@ -49,10 +49,11 @@ from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 
 from localization.checks import check_number
-from localization.geometry import invert, quat_wxyz_from_matrix
+from localization.geometry import invert, project, quat_wxyz_from_matrix
 from uav_struct_env.envs.config import EnvConfig, make_config
 from uav_struct_env.envs.render import MapView, UavMarker, compose_frame, draw_site_map
 from uav_struct_env.errors import ClosedError, ResetNeededError
+from uav_struct_env.sim.activity import ActivityBodies
 from uav_struct_env.sim.airframes import Airframes
 from uav_struct_env.sim.attitude import world_from_cam_from_attitude
 from uav_struct_env.sim.camera import Camera
@@ -65,6 +66,7 @@ from uav_struct_env.sim.schedule import (
 from uav_struct_env.sim.sensors import Reading
 from uav_struct_env.sim.uav import ACTION_COMPONENTS, Obstacles, UavState, step_uav
 from uav_struct_env.site import Site, make_site
+from uav_struct_env.site.activity import WORKER_SAMPLE_HEIGHTS, SiteActivity, worker_sample_points
 
 __all__ = ["ACTION_COMPONENTS", "RESET_OPTIONS", "UavStructParallelEnv"]
 
@@ -116,6 +118,7 @@ class UavStructParallelEnv(ParallelEnv):
         w, h = cfg.image_size
         self.camera = Camera().scaled(w, h)
         self.obstacles = Obstacles.from_site(self.built_site)
+        self._site_obstacles = self.obstacles  # the building; reset adds the activity's boxes
         # The schedule's ranges and the geofence fitted to the building (sim.schedule.fit_schedule).
         self.viewpoint_schedule: ViewpointSchedule
         self.viewpoint_schedule, scale = fit_schedule(self.site, cfg.n_agents, cfg.schedule)
@@ -149,6 +152,11 @@ class UavStructParallelEnv(ParallelEnv):
         self._alive: dict[str, bool] = {}
         self._map_view: MapView | None = None
         self._airframes: Airframes | None = None
+        #: Site activity: this episode's layout and its bodies (None with activity "none").
+        self.activity_layout: SiteActivity | None = None
+        self._activity_bodies: ActivityBodies | None = None
+        self._activity_seed: list[int] = []
+        self._activity_episode = 0
 
     # ------------------------------------------------------------------ spaces
     def _check_agent(self, agent: str) -> None:
@@ -244,6 +252,7 @@ class UavStructParallelEnv(ParallelEnv):
         if seed is not None:
             check_number("seed", seed, 0, integer=True, type_error=ValueError)
             self._rng = np.random.default_rng(seed)
+            self._activity_seed, self._activity_episode = [int(seed)], 0
         if options is not None and not isinstance(options, dict):
             raise ValueError(f"options must be a dict (keys {RESET_OPTIONS}) or None, got {options!r}")
         unknown = sorted(set(options or ()) - set(RESET_OPTIONS) - {"options"}, key=str)
@@ -281,6 +290,7 @@ class UavStructParallelEnv(ParallelEnv):
             self._viewpoint_base = 0
             self._scripted_viewpoint = -1
         self._sensor_state = self.config.noise.start(self._rng, n)
+        self._lay_out_activity()
         if self.config.lighting == "random":  # a new sun for the episode
             from uav_struct_env.sim.world import random_light
 
@@ -291,6 +301,81 @@ class UavStructParallelEnv(ParallelEnv):
         self.num_cycles = 0
         observations, infos = self._observe(self.agents, dt=0.0, reasons=dict.fromkeys(self.agents))
         return observations, infos
+
+    def _lay_out_activity(self) -> None:
+        """Lay out this episode's site activity (none: remove the last one's bodies).
+
+        Its seed is (reset seed, episodes since that seed), or fresh entropy before any seed;
+        the env's generator is not drawn from, so every other draw of the episode is unchanged.
+        """
+        if self._activity_bodies is not None:
+            self._activity_bodies.remove()
+            self._activity_bodies = None
+        if self.config.activity.is_none:
+            return
+        if not self._activity_seed:
+            self._activity_seed = [int(np.random.SeedSequence().entropy)]
+        self.activity_layout = SiteActivity(
+            self.built_site, self.config.activity, [*self._activity_seed, self._activity_episode]
+        )
+        self._activity_episode += 1
+        self._activity_bodies = ActivityBodies(self.world, self.activity_layout)
+        self.obstacles = self._site_obstacles.with_boxes(*self.activity_layout.static_aabbs())
+
+    def _activity_time(self) -> float:
+        """Seconds since the episode's reset (the workers' clock)."""
+        return self.num_cycles * self.config.control_period
+
+    def worker_points(self) -> dict[str, NDArray[np.float64]]:
+        """Every worker's ``(2, 3)`` float64 points now, by name (empty without site activity).
+
+        Row 0 is the feet (ground contact, centre), row 1 the head top; project frame.
+
+        Raises:
+            ResetNeededError: before the first :meth:`reset`.
+        """
+        self._check_open()
+        if not self._was_reset:
+            raise ResetNeededError("worker_points() before reset(): call env.reset(seed=...) first")
+        if self.activity_layout is None or self.config.activity.is_none:
+            return {}
+        return self.activity_layout.worker_points(self._activity_time())
+
+    def worker_visibility(self, agent: str) -> dict[str, float]:
+        """Per worker, the fraction (0..1) of its sample points ``agent``'s camera sees now.
+
+        The points are five along the worker's vertical axis (10 %, 30 %, ..., 90 % of its
+        height, :data:`~uav_struct_env.site.activity.WORKER_SAMPLE_HEIGHTS`). A point counts
+        when it projects inside the image in front of the camera and the ray from the camera
+        centre to it hits nothing else first (building, other activity bodies, other UAVs'
+        airframes; the worker's own body is passed through, the camera's own airframe is
+        hidden): ray casting, so it works with ``observe_image=False``.
+
+        Raises:
+            ValueError: for an unknown agent.
+            ResetNeededError: before the first :meth:`reset`.
+        """
+        self._check_agent(agent)
+        points = self.worker_points()
+        if not points:
+            return {}
+        names = list(points)
+        samples = np.concatenate([worker_sample_points(points[n]) for n in names])  # (5N, 3)
+        per = len(WORKER_SAMPLE_HEIGHTS)
+        world_from_cam = self._states[agent].world_from_cam
+        uv, depth = project(self.camera.K, invert(world_from_cam), samples)
+        w, h = self.camera.width, self.camera.height
+        in_image = ((depth > self.camera.near) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5)
+                    & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5))
+        origin = world_from_cam[:3, 3]
+        rays = samples - origin
+        skip = np.repeat(self._activity_bodies.worker_body_ids(), per)
+        with self._own_airframe_hidden(agent):
+            t = self.world.first_hits(origin, rays, 0.0, skip_bodies=skip)
+        # 2 cm of slack for a surface exactly at the point
+        clear = t >= 1.0 - 0.02 / np.linalg.norm(rays, axis=1)
+        seen = (in_image & clear).reshape(len(names), per).mean(axis=1)
+        return {n: float(v) for n, v in zip(names, seen, strict=True)}
 
     def _validate_action(self, agent: Any, action: Any) -> NDArray[np.float64]:
         if agent not in self._index:
@@ -405,6 +490,8 @@ class UavStructParallelEnv(ParallelEnv):
         clearance = self.obstacles.distances(np.array([self._states[a].xyz for a in agents]))
         if self._airframes is not None:  # draw the flying UAVs, hide the finished ones
             self._airframes.place({a: self._states[a] for a in agents})
+        if self._activity_bodies is not None:
+            self._activity_bodies.update(self._activity_time())
         for k, agent in enumerate(agents):
             i = self._index[agent]
             state = self._states[agent]
@@ -522,6 +609,7 @@ class UavStructParallelEnv(ParallelEnv):
         """
         self._closed = True
         self._airframes = None
+        self._activity_bodies = None
         if self._world is not None:
             self._world.close()
             self._world = None

@@ -69,10 +69,18 @@ class RayScene:
         """Triangles tested one by one (flat rectangles excluded)."""
         return len(self._v0)
 
-    def first_hit(self, origin: ArrayLike, directions: ArrayLike, t_min: float = 0.0) -> NDArray[np.float64]:
+    def first_hit(
+        self,
+        origin: ArrayLike,
+        directions: ArrayLike,
+        t_min: float = 0.0,
+        skip_box: ArrayLike | None = None,
+    ) -> NDArray[np.float64]:
         """Ray parameter ``t`` of the first surface hit at ``t >= t_min`` (``inf`` for none).
 
         The rays are ``origin + t * directions[i]``; ``t`` is in units of each direction's length.
+        ``skip_box`` (R,) ints: for each ray, the index in :attr:`boxes` of a box that ray passes
+        through unseen (-1: none), e.g. the body whose own visibility is asked.
         """
         o = np.asarray(origin, dtype=np.float64).reshape(3)
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
@@ -94,13 +102,25 @@ class RayScene:
             tri = first + np.arange(len(ray))
             t = _moller_trumbore(o, d[ray], self._v0[tri], self._e1[tri], self._e2[tri], t_min)
             np.minimum.at(best, ray, t)
-        for world_from_box, half in self.boxes:
-            R, c = world_from_box[:3, :3], world_from_box[:3, 3]
-            ob, db = R.T @ (o - c), d @ R  # origin and directions in the box frame
-            lo, hi = _slab(ob, db, -half[None], half[None])
-            entry = np.where(lo[:, 0] >= t_min, lo[:, 0], np.inf)
-            hit = (hi[:, 0] >= lo[:, 0]) & (entry < best)
-            best[hit] = entry[hit]
+        if self.boxes:
+            R = np.stack([T[:3, :3] for T, _ in self.boxes])  # (B, 3, 3)
+            c = np.stack([T[:3, 3] for T, _ in self.boxes])
+            half = np.stack([np.asarray(h, dtype=np.float64) for _, h in self.boxes])
+            ob = np.einsum("bij,bi->bj", R, o - c)  # origin in each box frame, (B, 3)
+            db = np.einsum("ni,bij->nbj", d, R)  # directions in each box frame, (R, B, 3)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                inv = 1.0 / db
+                t1, t2 = (-half - ob) * inv, (half - ob) * inv
+            inside = np.abs(ob) <= half  # (B, 3): a ray parallel to a slab limits only outside it
+            parallel = db == 0
+            t_lo = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2)).max(axis=2)
+            t_hi = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2)).min(axis=2)
+            entry = np.where((t_hi >= t_lo) & (t_lo >= t_min), t_lo, np.inf)  # (R, B)
+            if skip_box is not None:
+                skip = np.asarray(skip_box, dtype=np.int64).reshape(-1)
+                rows = np.flatnonzero(skip >= 0)
+                entry[rows, skip[rows]] = np.inf
+            best = np.minimum(best, entry.min(axis=1))
         return best
 
 
