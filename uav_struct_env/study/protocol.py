@@ -20,6 +20,7 @@ from uav_struct_env.errors import ConfigError
 from uav_struct_env.site import make_site
 from uav_struct_env.site.as_built import MAX_SCALE, TOLERANCE_MODELS, AsBuilt
 from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS, check_weights
+from uav_struct_env.study.tracking import TRACKING_ACTIVITY
 
 __all__ = [
     "ASSOCIATIONS",
@@ -187,6 +188,9 @@ class StudyConfig:
         as_built_scale: factor on every tolerance of ``as_built`` (0: the design).
         lighting: ``"fixed"`` (the default sun) or ``"random"`` (a sun drawn per scene and
             viewpoint from the seed, :func:`uav_struct_env.sim.world.random_light`).
+        track_workers: also track the site's workers from the four cameras at true, estimated
+            and prior poses (:mod:`uav_struct_env.study.tracking`); the scenes then carry site
+            activity (:attr:`scene_activity`), whose workers and bodies also hide landmarks.
     """
 
     seed: int = 0
@@ -210,6 +214,7 @@ class StudyConfig:
     as_built: str | None = None
     as_built_scale: float = 1.0
     lighting: str = "fixed"
+    track_workers: bool = False
 
     def __post_init__(self) -> None:
         for name, options in (
@@ -240,6 +245,8 @@ class StudyConfig:
         ):
             check_number(name, getattr(self, name), lo, hi, error=ConfigError, type_error=ConfigError)
         check_choice("lighting", self.lighting, LIGHTINGS, error=ConfigError)
+        if not isinstance(self.track_workers, bool):
+            raise ConfigError(f"track_workers must be True or False, got {self.track_workers!r}")
         if self.as_built is not None:
             check_choice("as_built", self.as_built, tuple(TOLERANCE_MODELS), error=ConfigError)
         check_number("as_built_scale", self.as_built_scale, 0.0, MAX_SCALE, error=ConfigError,
@@ -273,6 +280,11 @@ class StudyConfig:
         if self.as_built is None:
             return None
         return AsBuilt(self.as_built, self.as_built_scale, seed=self.seed)
+
+    @property
+    def scene_activity(self) -> str:
+        """The site activity of the study's scenes: workers to track need some."""
+        return TRACKING_ACTIVITY if self.track_workers else "none"
 
     def scene_stage(self, scene: Scene) -> str:
         """The site's stage name that ``scene`` is rendered at."""

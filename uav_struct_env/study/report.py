@@ -228,6 +228,8 @@ def settings_line(results: dict) -> str:
         f"seed {c.pop('seed')}",
         protocol,
     ]
+    if c.pop("track_workers", False):
+        parts.append("worker tracking (light site activity)")
     parts += [f"{k} {v}" for k, v in sorted(c.items()) if k not in _UNSTATED]
     return " · ".join(parts)
 

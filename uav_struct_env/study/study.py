@@ -18,6 +18,7 @@ from uav_struct_env.site.as_built import TOLERANCE_MODELS
 from uav_struct_env.study.figures import plot_error_cdfs, plot_fig2, plot_viewpoint_map
 from uav_struct_env.study.protocol import ASSOCIATIONS, DETECTORS, NOISES, StudyConfig
 from uav_struct_env.study.report import (
+    _clean,
     results_dict,
     settings_line,
     table1_markdown,
@@ -25,7 +26,8 @@ from uav_struct_env.study.report import (
     write_csv,
     write_results_json,
 )
-from uav_struct_env.study.run import StudyInterrupted, run_units
+from uav_struct_env.study.run import StudyInterrupted, run_units_tracked
+from uav_struct_env.study.tracking import tracking_markdown, tracking_summary
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_output_dir, check_site, refuse
 
 __all__ = ["main", "run_study"]
@@ -35,7 +37,7 @@ QUICK_VIEWPOINTS = 2
 
 #: What the study writes; ``results.json`` (written last) says that a set is complete.
 STUDY_FILES = ("results.json", "table1.md", "table2.md", "per_image.csv", "fig2_associations.png",
-               "error_cdf.png", "viewpoint_map.png")
+               "error_cdf.png", "viewpoint_map.png", "worker_tracking.md")
 
 
 def run_study(
@@ -48,7 +50,8 @@ def run_study(
 ) -> dict:
     """Run the study into ``out`` and return the ``results.json`` document.
 
-    Writes ``results.json``, ``table1.md``, ``table2.md``, ``per_image.csv`` and (with
+    Writes ``results.json``, ``table1.md``, ``table2.md``, ``per_image.csv``, with
+    ``config.track_workers`` ``worker_tracking.md`` (and ``worker_tracking`` in the JSON), and (with
     ``figures``) ``fig2_associations.png``, ``error_cdf.png`` and ``viewpoint_map.png``, all at
     once when the study has finished (:class:`uav_struct_env.outputs.StagedOutput`): an
     interrupted run leaves ``out`` as it was.
@@ -73,12 +76,15 @@ def run_study(
             bar.update(done - bar.n)
 
         try:
-            rows, overlays = run_units(config, progress=tick)
+            rows, overlays, tracking = run_units_tracked(config, progress=tick)
         finally:
             bar.close()
         elapsed = time.perf_counter() - t0
         results = results_dict(config, rows, {"elapsed_s": round(elapsed, 1)})
         stage = staged.stage
+        if config.track_workers:
+            results["worker_tracking"] = _clean(tracking_summary(tracking))
+            (stage / "worker_tracking.md").write_text(tracking_markdown(results, settings_line(results)))
         write_results_json(stage / "results.json", results)
         (stage / "table1.md").write_text(table1_markdown(results))
         (stage / "table2.md").write_text(table2_markdown(results))
@@ -176,6 +182,12 @@ def _parser() -> CommandParser:
         metavar="ONNX",
         help="with --detector learned: patch-refiner weights (default: the committed refiner)",
     )
+    p.add_argument(
+        "--track-workers",
+        action="store_true",
+        help="also track the site's workers (light site activity) from the four cameras at true, "
+        "estimated and prior poses: results.json gains worker_tracking, worker_tracking.md",
+    )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
@@ -205,6 +217,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             as_built=args.as_built,
             as_built_scale=args.as_built_scale,
             lighting=args.lighting,
+            track_workers=args.track_workers,
         )
         check_site(args.site, args.stage, seed=args.seed)
         check_output_dir(args.out, overwrite=args.overwrite)
@@ -233,6 +246,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     print((out / "table2.md").read_text())
     print("Table I — detection and association (same settings):\n")
     print((out / "table1.md").read_text().split("\n\n", 1)[1])  # its settings line printed above
+    if config.track_workers:
+        print("Worker tracking — 3D worker error by camera poses:\n")
+        print((out / "worker_tracking.md").read_text().split("\n\n", 1)[1])
     written = "results.json, table1.md, table2.md, per_image.csv" + ("" if args.no_figures else ", figures")
     print(f"Wrote {out.resolve()}/ ({written}) in {results['config']['elapsed_s']} s")
     return 0
