@@ -21,6 +21,7 @@ from uav_struct_env.site import make_site
 from uav_struct_env.site.as_built import MAX_SCALE, TOLERANCE_MODELS, AsBuilt
 from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS, check_weights
 from uav_struct_env.study.tracking import TRACKING_ACTIVITY
+from uav_struct_env.tracking_sim import DEFAULT_WORKER_SIGMA_PX
 
 __all__ = [
     "ASSOCIATIONS",
@@ -191,6 +192,8 @@ class StudyConfig:
         track_workers: also track the site's workers from the four cameras at true, estimated
             and prior poses (:mod:`uav_struct_env.study.tracking`); the scenes then carry site
             activity (:attr:`scene_activity`), whose workers and bodies also hide landmarks.
+        worker_pixel_sigma: with ``track_workers``, the simulated worker detector's feet /
+            head-top noise, px of the images.
     """
 
     seed: int = 0
@@ -215,6 +218,7 @@ class StudyConfig:
     as_built_scale: float = 1.0
     lighting: str = "fixed"
     track_workers: bool = False
+    worker_pixel_sigma: float = DEFAULT_WORKER_SIGMA_PX
 
     def __post_init__(self) -> None:
         for name, options in (
@@ -247,6 +251,8 @@ class StudyConfig:
         check_choice("lighting", self.lighting, LIGHTINGS, error=ConfigError)
         if not isinstance(self.track_workers, bool):
             raise ConfigError(f"track_workers must be True or False, got {self.track_workers!r}")
+        check_number("worker_pixel_sigma", self.worker_pixel_sigma, 0.0, lo_open=True, error=ConfigError,
+                     type_error=ConfigError)
         if self.as_built is not None:
             check_choice("as_built", self.as_built, tuple(TOLERANCE_MODELS), error=ConfigError)
         check_number("as_built_scale", self.as_built_scale, 0.0, MAX_SCALE, error=ConfigError,

@@ -228,8 +228,9 @@ def settings_line(results: dict) -> str:
         f"seed {c.pop('seed')}",
         protocol,
     ]
+    worker_sigma = c.pop("worker_pixel_sigma", None)
     if c.pop("track_workers", False):
-        parts.append("worker tracking (light site activity)")
+        parts.append(f"worker tracking (light site activity, {worker_sigma} px keypoint noise)")
     parts += [f"{k} {v}" for k, v in sorted(c.items()) if k not in _UNSTATED]
     return " · ".join(parts)
 

@@ -28,6 +28,7 @@ from uav_struct_env.study.report import (
 )
 from uav_struct_env.study.run import StudyInterrupted, run_units_tracked
 from uav_struct_env.study.tracking import tracking_markdown, tracking_summary
+from uav_struct_env.tracking_sim import DEFAULT_WORKER_SIGMA_PX
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_output_dir, check_site, refuse
 
 __all__ = ["main", "run_study"]
@@ -83,7 +84,7 @@ def run_study(
         results = results_dict(config, rows, {"elapsed_s": round(elapsed, 1)})
         stage = staged.stage
         if config.track_workers:
-            results["worker_tracking"] = _clean(tracking_summary(tracking))
+            results["worker_tracking"] = _clean(tracking_summary(tracking, config.worker_pixel_sigma))
             (stage / "worker_tracking.md").write_text(tracking_markdown(results, settings_line(results)))
         write_results_json(stage / "results.json", results)
         (stage / "table1.md").write_text(table1_markdown(results))
@@ -188,6 +189,13 @@ def _parser() -> CommandParser:
         help="also track the site's workers (light site activity) from the four cameras at true, "
         "estimated and prior poses: results.json gains worker_tracking, worker_tracking.md",
     )
+    p.add_argument(
+        "--worker-pixel-sigma",
+        type=float,
+        default=DEFAULT_WORKER_SIGMA_PX,
+        help="with --track-workers: the worker detector's feet / head-top noise, px (default "
+        f"{DEFAULT_WORKER_SIGMA_PX:g})",
+    )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
@@ -218,6 +226,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             as_built_scale=args.as_built_scale,
             lighting=args.lighting,
             track_workers=args.track_workers,
+            worker_pixel_sigma=args.worker_pixel_sigma,
         )
         check_site(args.site, args.stage, seed=args.seed)
         check_output_dir(args.out, overwrite=args.overwrite)

@@ -95,6 +95,7 @@ def track_viewpoint(
     viewpoint: int,
     rng: np.random.Generator,
     prior_sigmas: Any = None,
+    pixel_sigma: float = DEFAULT_WORKER_SIGMA_PX,
 ) -> ViewpointTracking:
     """The workers and worker observations of one rendered viewpoint (module docstring).
 
@@ -106,9 +107,10 @@ def track_viewpoint(
         viewpoint: the viewpoint index.
         rng: the detector's generator for this viewpoint.
         prior_sigmas: the localizer's prior sigmas (None: the paper's).
+        pixel_sigma: the worker detector's keypoint noise, px of the env's images.
     """
     points = env.worker_points()
-    detector = SimulatedWorkerDetector(miss_rate=MISS_RATE, rng=rng)
+    detector = SimulatedWorkerDetector(pixel_sigma, miss_rate=MISS_RATE, rng=rng)
     size = tuple(env.config.image_size)
     detections = {
         agent: detector.detect(points, env.worker_visibility(agent), info["intrinsics"],
@@ -131,8 +133,11 @@ def track_viewpoint(
     return ViewpointTracking(stage, viewpoint, len(points), tuple(out))
 
 
-def tracking_summary(viewpoints: Sequence[ViewpointTracking]) -> dict:
-    """The ``worker_tracking`` entry of ``results.json`` (NaN where undefined; null once written)."""
+def tracking_summary(viewpoints: Sequence[ViewpointTracking], pixel_sigma: float) -> dict:
+    """The ``worker_tracking`` entry of ``results.json`` (NaN where undefined; null once written).
+
+    ``pixel_sigma`` is the worker detector's noise (px of the images), recorded beside the numbers.
+    """
     observations = [o for v in viewpoints for o in v.observations]
 
     def summary(rows):
@@ -149,7 +154,7 @@ def tracking_summary(viewpoints: Sequence[ViewpointTracking]) -> dict:
         "estimated_methods": dict(sorted({(r.stage, r.method) for r in estimated if r.tracking})),
         "workers_present": sum(v.n_workers for v in viewpoints),
         "activity": TRACKING_ACTIVITY,
-        "detector_pixel_sigma_px": DEFAULT_WORKER_SIGMA_PX,
+        "detector_pixel_sigma_px": float(pixel_sigma),
         "detector_miss_rate": MISS_RATE,
     }
 
@@ -176,7 +181,7 @@ def tracking_markdown(results: dict, settings: str) -> str:
     lines += [
         "",
         f"Workers: {t['activity']} site activity, {t['workers_present']} worker-viewpoints present; "
-        f"simulated feet / head-top detector, {t['detector_pixel_sigma_px']} px noise at 1280 px, "
+        f"simulated feet / head-top detector, {t['detector_pixel_sigma_px']} px noise, "
         f"{t['detector_miss_rate']:.0%} misses, occlusion-tested. An observation is a worker "
         "triangulated from >= 2 cameras at one viewpoint; its error is the larger of its feet and "
         "head-top errors. Target: P95 <= 0.15 m with estimated poses.",
