@@ -4,6 +4,7 @@ Usage::
 
     .venv/bin/python benchmarks/env_step.py                  # paper 1280x720 and train 128x72
     .venv/bin/python benchmarks/env_step.py --steps 50 --renderer tiny
+    .venv/bin/python benchmarks/env_step.py --config "paper 1280x720" --config "paper 1280x720, busy activity"
 
 For each configuration: the time of one ``reset`` (the first one also builds the world), then
 ``--steps`` steps with random actions (gentle, so the UAVs stay up), reporting env steps/s (one
@@ -25,10 +26,15 @@ import uav_struct_env
 CONFIGS = {
     "paper 1280x720": ("paper", {}),
     "paper 1280x720, no landmark info": ("paper", {"landmark_sets": ()}),
+    "paper 1280x720, light activity": ("paper", {"activity": "light"}),
+    "paper 1280x720, busy activity": ("paper", {"activity": "busy"}),
     "train 128x72": ("train", {}),
     "train 128x72 + landmark info": ("train", {"landmark_sets": ("column_tops", "slab_corners")}),
     "train, no image + landmark info (ray-cast)": (
         "train", {"landmark_sets": ("column_tops", "slab_corners"), "observe_image": False}),
+    "train, no image + ray-cast, busy activity": (
+        "train", {"landmark_sets": ("column_tops", "slab_corners"), "observe_image": False,
+                  "activity": "busy"}),
 }
 
 
