@@ -18,6 +18,7 @@ from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.site import make_site
+from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.site.as_built import MAX_SCALE, TOLERANCE_MODELS, AsBuilt
 from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS, check_weights
 
@@ -187,6 +188,9 @@ class StudyConfig:
         as_built_scale: factor on every tolerance of ``as_built`` (0: the design).
         lighting: ``"fixed"`` (the default sun) or ``"random"`` (a sun drawn per scene and
             viewpoint from the seed, :func:`uav_struct_env.sim.world.random_light`).
+        activity: site activity (:mod:`uav_struct_env.site.activity`): ``"none"``, ``"light"``
+            or ``"busy"``: workers, equipment, materials and scaffolding laid out per viewpoint
+            from the env's reset seed; they hide landmarks in the images and in the truth.
     """
 
     seed: int = 0
@@ -210,6 +214,7 @@ class StudyConfig:
     as_built: str | None = None
     as_built_scale: float = 1.0
     lighting: str = "fixed"
+    activity: str = "none"
 
     def __post_init__(self) -> None:
         for name, options in (
@@ -240,6 +245,7 @@ class StudyConfig:
         ):
             check_number(name, getattr(self, name), lo, hi, error=ConfigError, type_error=ConfigError)
         check_choice("lighting", self.lighting, LIGHTINGS, error=ConfigError)
+        check_choice("activity", self.activity, tuple(ACTIVITY_PRESETS), error=ConfigError)
         if self.as_built is not None:
             check_choice("as_built", self.as_built, tuple(TOLERANCE_MODELS), error=ConfigError)
         check_number("as_built_scale", self.as_built_scale, 0.0, MAX_SCALE, error=ConfigError,

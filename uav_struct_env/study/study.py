@@ -14,6 +14,7 @@ from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.outputs import OutputExistsError, StagedOutput
 from uav_struct_env.processes import WorkerDied
 from uav_struct_env.site import make_site
+from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.site.as_built import TOLERANCE_MODELS
 from uav_struct_env.study.figures import plot_error_cdfs, plot_fig2, plot_viewpoint_map
 from uav_struct_env.study.protocol import ASSOCIATIONS, DETECTORS, NOISES, StudyConfig
@@ -165,6 +166,13 @@ def _parser() -> CommandParser:
         help="the sun: fixed, or random (direction and intensity drawn per viewpoint from --seed)",
     )
     p.add_argument(
+        "--activity",
+        default="none",
+        choices=tuple(ACTIVITY_PRESETS),
+        help="site activity: none (a bare site), light or busy (workers, equipment, materials, "
+        "scaffolding, laid out per viewpoint from --seed; they hide landmarks)",
+    )
+    p.add_argument(
         "--detector-model",
         default=None,
         metavar="ONNX",
@@ -205,6 +213,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             as_built=args.as_built,
             as_built_scale=args.as_built_scale,
             lighting=args.lighting,
+            activity=args.activity,
         )
         check_site(args.site, args.stage, seed=args.seed)
         check_output_dir(args.out, overwrite=args.overwrite)
