@@ -89,3 +89,27 @@ def test_a_worker_behind_a_column_is_invisible_and_beside_it_fully_visible(world
     finally:
         bodies.remove()
     assert not world._extra_bodies
+
+
+def test_bodies_outside_the_view_leave_the_near_plane_alone(world):
+    """A big box beside or below the camera must not pull the near plane (16-bit EGL depth) in."""
+    camera = Camera().scaled(320, 180)
+    eye = np.array([-20.0, 5.5, 12.0])
+    cam_from_world = look_at(eye, world.site.center)
+    before = world._near_plane(cam_from_world, camera)
+    assert before > 5.0
+    beside = np.eye(4)
+    beside[:3, 3] = eye + [0.0, 6.0, -10.0]  # a truck-sized box under and to the left of the UAV
+    body = world.add_body((4.0, 1.25, 1.5), world_from_body=beside)
+    try:
+        assert world._near_plane(cam_from_world, camera) == before
+        ahead = np.eye(4)
+        ahead[:3, 3] = eye + 0.5 * (world.site.center - eye)  # on the line of sight, 11 m out
+        world.move_body(body, ahead)
+        signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T
+        corners = ahead[:3, 3] + signs * [4.0, 1.25, 1.5]
+        nearest = float((corners @ cam_from_world[2, :3] + cam_from_world[2, 3]).min())
+        assert nearest < before / 0.8  # the box is the nearest geometry in view
+        assert world._near_plane(cam_from_world, camera) == pytest.approx(0.8 * nearest)
+    finally:
+        world.remove_body(body)
