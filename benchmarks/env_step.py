@@ -4,12 +4,14 @@ Usage::
 
     .venv/bin/python benchmarks/env_step.py                  # paper 1280x720 and train 128x72
     .venv/bin/python benchmarks/env_step.py --steps 50 --renderer tiny
+    .venv/bin/python benchmarks/env_step.py --config "paper 1280x720" --config "paper 1280x720, busy activity"
 
 For each configuration: the time of one ``reset`` (the first one also builds the world), then
 ``--steps`` steps with random actions (gentle, so the UAVs stay up), reporting env steps/s (one
 step = all four UAVs), the time inside ``SiteWorld.render`` (four images per step) and inside
 ``SiteWorld.landmark_truth`` (or ``landmark_truth_raycast`` without images) as shares of the step
-time, and the rest (kinematics, sensors,
+time, the process CPU time per step (all threads; steadier than wall time on a loaded machine),
+and the rest (kinematics, sensors,
 projections, dict building).
 """
 
@@ -25,10 +27,15 @@ import uav_struct_env
 CONFIGS = {
     "paper 1280x720": ("paper", {}),
     "paper 1280x720, no landmark info": ("paper", {"landmark_sets": ()}),
+    "paper 1280x720, light activity": ("paper", {"activity": "light"}),
+    "paper 1280x720, busy activity": ("paper", {"activity": "busy"}),
     "train 128x72": ("train", {}),
     "train 128x72 + landmark info": ("train", {"landmark_sets": ("column_tops", "slab_corners")}),
     "train, no image + landmark info (ray-cast)": (
         "train", {"landmark_sets": ("column_tops", "slab_corners"), "observe_image": False}),
+    "train, no image + ray-cast, busy activity": (
+        "train", {"landmark_sets": ("column_tops", "slab_corners"), "observe_image": False,
+                  "activity": "busy"}),
 }
 
 
@@ -60,20 +67,21 @@ def bench(preset: str, overrides: dict, steps: int, renderer: str) -> dict:
     rays = _Timed(world.landmark_truth_raycast)
     world.render, world.landmark_truth, world.landmark_truth_raycast = render, truth, rays
     rng = np.random.default_rng(0)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     n = 0
     for _ in range(steps):
         if not env.agents:
             env.reset()
         env.step({a: rng.uniform(-0.3, 0.3, 5).astype(np.float32) for a in env.agents})
         n += 1
-    elapsed = time.perf_counter() - t0
+    elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
     out = {
         "backend": world.backend,
         "first_reset_s": first_reset,
         "reset_s": reset,
         "steps_per_s": n / elapsed,
         "step_ms": 1e3 * elapsed / n,
+        "cpu_ms_per_step": 1e3 * cpu / n,
         "render_ms_per_image": 1e3 * render.total / max(render.calls, 1),
         "render_share": render.total / elapsed,
         "truth_share": (truth.total + rays.total) / elapsed,
@@ -86,7 +94,7 @@ def main(steps: int = 20, renderer: str = "auto", configs: list[str] | None = No
     results = {}
     print(
         f"{'config':44s} {'backend':7s} {'1st reset':>9s} {'reset':>7s} {'steps/s':>8s} "
-        f"{'ms/step':>8s} {'ms/img':>7s} {'render':>7s} {'truth':>6s} {'other':>6s}"
+        f"{'ms/step':>8s} {'cpu ms':>7s} {'ms/img':>7s} {'render':>7s} {'truth':>6s} {'other':>6s}"
     )
     for name in configs or list(CONFIGS):
         preset, overrides = CONFIGS[name]
@@ -95,7 +103,8 @@ def main(steps: int = 20, renderer: str = "auto", configs: list[str] | None = No
         other = 1.0 - r["render_share"] - r["truth_share"]
         print(
             f"{name:44s} {r['backend']:7s} {r['first_reset_s']:8.2f}s {r['reset_s']:6.3f}s "
-            f"{r['steps_per_s']:8.2f} {r['step_ms']:8.1f} {r['render_ms_per_image']:7.1f} "
+            f"{r['steps_per_s']:8.2f} {r['step_ms']:8.1f} {r['cpu_ms_per_step']:7.1f} "
+            f"{r['render_ms_per_image']:7.1f} "
             f"{r['render_share']:6.0%} {r['truth_share']:6.0%} {other:6.0%}",
             flush=True,
         )

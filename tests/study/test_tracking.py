@@ -36,7 +36,8 @@ def test_worker_tracking_entry_with_the_three_pose_sources(tracked):
     assert t["estimated"]["median_m"] < 2 * t["truth"]["median_m"] + 0.05
     assert t["prior"]["median_m"] > 1.0
     table = (out / "worker_tracking.md").read_text()
-    assert "| Ground truth (floor) |" in table and "worker tracking (light site activity, 2.0 px keypoint noise)" in table
+    assert "| Ground truth (floor) |" in table and "site activity light" in table
+    assert "worker tracking (2.0 px keypoint noise)" in table
 
 
 def test_track_workers_must_be_a_bool():
@@ -44,5 +45,7 @@ def test_track_workers_must_be_a_bool():
         StudyConfig(track_workers="yes")
     with pytest.raises(ConfigError, match="worker_pixel_sigma must be finite and > 0, got 0"):
         StudyConfig(worker_pixel_sigma=0)
-    assert StudyConfig().scene_activity == "none"
-    assert StudyConfig(track_workers=True).scene_activity == TRACKING_ACTIVITY
+    # workers need site activity: light unless another was chosen
+    assert StudyConfig().activity == "none"
+    assert StudyConfig(track_workers=True).activity == TRACKING_ACTIVITY == "light"
+    assert StudyConfig(track_workers=True, activity="busy").activity == "busy"

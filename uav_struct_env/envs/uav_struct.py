@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from typing import Any
 
 import numpy as np
@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 
 from localization.checks import check_number
-from localization.geometry import invert, project, quat_wxyz_from_matrix
+from localization.geometry import invert, quat_wxyz_from_matrix
 from uav_struct_env.envs.config import EnvConfig, make_config
 from uav_struct_env.envs.render import MapView, UavMarker, compose_frame, draw_site_map
 from uav_struct_env.errors import ClosedError, ResetNeededError
@@ -66,7 +66,7 @@ from uav_struct_env.sim.schedule import (
 from uav_struct_env.sim.sensors import Reading
 from uav_struct_env.sim.uav import ACTION_COMPONENTS, Obstacles, UavState, step_uav
 from uav_struct_env.site import Site, make_site
-from uav_struct_env.site.activity import WORKER_SAMPLE_HEIGHTS, SiteActivity, worker_sample_points
+from uav_struct_env.site.activity import SiteActivity
 
 __all__ = ["ACTION_COMPONENTS", "RESET_OPTIONS", "UavStructParallelEnv"]
 
@@ -356,26 +356,14 @@ class UavStructParallelEnv(ParallelEnv):
             ResetNeededError: before the first :meth:`reset`.
         """
         self._check_agent(agent)
-        points = self.worker_points()
-        if not points:
+        if not self.worker_points():
             return {}
-        names = list(points)
-        samples = np.concatenate([worker_sample_points(points[n]) for n in names])  # (5N, 3)
-        per = len(WORKER_SAMPLE_HEIGHTS)
-        world_from_cam = self._states[agent].world_from_cam
-        uv, depth = project(self.camera.K, invert(world_from_cam), samples)
-        w, h = self.camera.width, self.camera.height
-        in_image = ((depth > self.camera.near) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5)
-                    & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5))
-        origin = world_from_cam[:3, 3]
-        rays = samples - origin
-        skip = np.repeat(self._activity_bodies.worker_body_ids(), per)
-        with self._own_airframe_hidden(agent):
-            t = self.world.first_hits(origin, rays, 0.0, skip_bodies=skip)
-        # 2 cm of slack for a surface exactly at the point
-        clear = t >= 1.0 - 0.02 / np.linalg.norm(rays, axis=1)
-        seen = (in_image & clear).reshape(len(names), per).mean(axis=1)
-        return {n: float(v) for n, v in zip(names, seen, strict=True)}
+        # a finished agent's airframe is hidden already
+        hidden = self._own_airframe_hidden(agent) if agent in self.agents else nullcontext()
+        with hidden:
+            return self._activity_bodies.worker_visibility(
+                self._activity_time(), invert(self._states[agent].world_from_cam), self.camera
+            )
 
     def _validate_action(self, agent: Any, action: Any) -> NDArray[np.float64]:
         if agent not in self._index:

@@ -11,8 +11,19 @@ environment lays out a new site activity at each reset).
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from uav_struct_env.site.activity import WORKER_HALF_EXTENTS, SiteActivity
+from localization.geometry import check_transform, project
+from uav_struct_env.sim.camera import Camera
+from uav_struct_env.site.activity import (
+    WORKER_HALF_EXTENTS,
+    WORKER_SAMPLE_HEIGHTS,
+    SiteActivity,
+    worker_sample_points,
+)
+
+#: Slack (m) before a surface in front of a worker's sample point hides it.
+_VISIBILITY_SLACK = 0.02
 
 __all__ = ["ActivityBodies"]
 
@@ -49,6 +60,34 @@ class ActivityBodies:
     def worker_body_ids(self) -> np.ndarray:
         """(N,) body ids of the workers, in layout order."""
         return np.array([self.worker_ids[w.name] for w in self.layout.workers], dtype=np.int64)
+
+    def worker_visibility(self, t: float, cam_from_world: ArrayLike, camera: Camera) -> dict[str, float]:
+        """Per worker, the fraction of its sample points a camera sees at time ``t`` (ray casting).
+
+        The points are :func:`~uav_struct_env.site.activity.worker_sample_points` (five along the
+        worker's vertical axis). One counts when it projects inside the image in front of the
+        near plane and the ray from the camera centre to it meets nothing first but the worker's
+        own body (within 2 cm): the building, the other activity bodies and every other body in
+        the world (airframes: hide the camera's own first) hide it. The workers are moved to ``t``.
+        """
+        T = check_transform("cam_from_world", cam_from_world)
+        self.update(t)
+        workers = self.layout.workers
+        if not workers:
+            return {}
+        per = len(WORKER_SAMPLE_HEIGHTS)
+        samples = np.concatenate([worker_sample_points(w.points_at(t)) for w in workers])  # (5N, 3)
+        uv, depth = project(camera.K, T, samples)
+        w, h = camera.width, camera.height
+        in_image = ((depth > camera.near) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5)
+                    & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5))
+        origin = -T[:3, :3].T @ T[:3, 3]
+        rays = samples - origin
+        skip = np.repeat(self.worker_body_ids(), per)
+        hit = self._world.first_hits(origin, rays, 0.0, skip_bodies=skip)
+        clear = hit >= 1.0 - _VISIBILITY_SLACK / np.linalg.norm(rays, axis=1)
+        seen = (in_image & clear).reshape(len(workers), per).mean(axis=1)
+        return {wk.name: float(v) for wk, v in zip(workers, seen, strict=True)}
 
     def remove(self) -> None:
         """Remove every body of this layout from the world (idempotent; a closed world is skipped)."""

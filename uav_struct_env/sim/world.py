@@ -268,7 +268,18 @@ class SiteWorld:
             signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T
             local = signs[None] * halves[:, None, :]  # (B, 8, 3)
             extra = np.einsum("bij,bkj->bki", poses[:, :3, :3], local) + poses[:, None, :3, 3]
-            corners = np.concatenate([corners, extra])
+            # Added bodies wholly outside the view (site activity beside or under the camera)
+            # must not pull the near plane in: cull them against the image's side planes.
+            cam = extra @ R.T + t  # (B, 8, 3) camera frame
+            K = camera.K
+            lo_x, hi_x = (-0.5 - K[0, 2]) / K[0, 0], (camera.width - 0.5 - K[0, 2]) / K[0, 0]
+            lo_y, hi_y = (-0.5 - K[1, 2]) / K[1, 1], (camera.height - 0.5 - K[1, 2]) / K[1, 1]
+            x, y, zc = cam[..., 0], cam[..., 1], cam[..., 2]
+            outside = (
+                np.all(x < lo_x * zc, axis=1) | np.all(x > hi_x * zc, axis=1)
+                | np.all(y < lo_y * zc, axis=1) | np.all(y > hi_y * zc, axis=1)
+            )
+            corners = np.concatenate([corners, extra[~outside]])
         z = corners @ R[2] + t[2]  # (boxes, 8) depth of every box corner
         in_front = z.max(axis=1) > 0
         if np.any(z[in_front].min(axis=1) <= camera.near):

@@ -18,6 +18,7 @@ from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.site import make_site
+from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.site.as_built import MAX_SCALE, TOLERANCE_MODELS, AsBuilt
 from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS, check_weights
 from uav_struct_env.study.tracking import TRACKING_ACTIVITY
@@ -189,9 +190,12 @@ class StudyConfig:
         as_built_scale: factor on every tolerance of ``as_built`` (0: the design).
         lighting: ``"fixed"`` (the default sun) or ``"random"`` (a sun drawn per scene and
             viewpoint from the seed, :func:`uav_struct_env.sim.world.random_light`).
+        activity: site activity (:mod:`uav_struct_env.site.activity`): ``"none"``, ``"light"``
+            or ``"busy"``: workers, equipment, materials and scaffolding laid out per viewpoint
+            from the env's reset seed; they hide landmarks in the images and in the truth.
         track_workers: also track the site's workers from the four cameras at true, estimated
-            and prior poses (:mod:`uav_struct_env.study.tracking`); the scenes then carry site
-            activity (:attr:`scene_activity`), whose workers and bodies also hide landmarks.
+            and prior poses (:mod:`uav_struct_env.study.tracking`). Workers need site activity:
+            with ``activity="none"`` it is set to ``"light"`` (whose bodies also hide landmarks).
         worker_pixel_sigma: with ``track_workers``, the simulated worker detector's feet /
             head-top noise, px of the images.
     """
@@ -217,6 +221,7 @@ class StudyConfig:
     as_built: str | None = None
     as_built_scale: float = 1.0
     lighting: str = "fixed"
+    activity: str = "none"
     track_workers: bool = False
     worker_pixel_sigma: float = DEFAULT_WORKER_SIGMA_PX
 
@@ -249,10 +254,13 @@ class StudyConfig:
         ):
             check_number(name, getattr(self, name), lo, hi, error=ConfigError, type_error=ConfigError)
         check_choice("lighting", self.lighting, LIGHTINGS, error=ConfigError)
+        check_choice("activity", self.activity, tuple(ACTIVITY_PRESETS), error=ConfigError)
         if not isinstance(self.track_workers, bool):
             raise ConfigError(f"track_workers must be True or False, got {self.track_workers!r}")
         check_number("worker_pixel_sigma", self.worker_pixel_sigma, 0.0, lo_open=True, error=ConfigError,
                      type_error=ConfigError)
+        if self.track_workers and self.activity == "none":
+            object.__setattr__(self, "activity", TRACKING_ACTIVITY)
         if self.as_built is not None:
             check_choice("as_built", self.as_built, tuple(TOLERANCE_MODELS), error=ConfigError)
         check_number("as_built_scale", self.as_built_scale, 0.0, MAX_SCALE, error=ConfigError,
@@ -286,11 +294,6 @@ class StudyConfig:
         if self.as_built is None:
             return None
         return AsBuilt(self.as_built, self.as_built_scale, seed=self.seed)
-
-    @property
-    def scene_activity(self) -> str:
-        """The site activity of the study's scenes: workers to track need some."""
-        return TRACKING_ACTIVITY if self.track_workers else "none"
 
     def scene_stage(self, scene: Scene) -> str:
         """The site's stage name that ``scene`` is rendered at."""

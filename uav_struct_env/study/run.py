@@ -122,7 +122,7 @@ def _env_for(config: StudyConfig, scene: Scene):
             texture_seed=config.seed,
             as_built=config.as_built_model,
             lighting=config.lighting,
-            activity=config.scene_activity,
+            activity=config.activity,
         )
         _ENVS[scene] = env
     return env

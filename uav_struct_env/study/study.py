@@ -14,6 +14,7 @@ from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.outputs import OutputExistsError, StagedOutput
 from uav_struct_env.processes import WorkerDied
 from uav_struct_env.site import make_site
+from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.site.as_built import TOLERANCE_MODELS
 from uav_struct_env.study.figures import plot_error_cdfs, plot_fig2, plot_viewpoint_map
 from uav_struct_env.study.protocol import ASSOCIATIONS, DETECTORS, NOISES, StudyConfig
@@ -84,7 +85,8 @@ def run_study(
         results = results_dict(config, rows, {"elapsed_s": round(elapsed, 1)})
         stage = staged.stage
         if config.track_workers:
-            results["worker_tracking"] = _clean(tracking_summary(tracking, config.worker_pixel_sigma))
+            summary = tracking_summary(tracking, config.worker_pixel_sigma, config.activity)
+            results["worker_tracking"] = _clean(summary)
             (stage / "worker_tracking.md").write_text(tracking_markdown(results, settings_line(results)))
         write_results_json(stage / "results.json", results)
         (stage / "table1.md").write_text(table1_markdown(results))
@@ -172,6 +174,13 @@ def _parser() -> CommandParser:
         help="the sun: fixed, or random (direction and intensity drawn per viewpoint from --seed)",
     )
     p.add_argument(
+        "--activity",
+        default="none",
+        choices=tuple(ACTIVITY_PRESETS),
+        help="site activity: none (a bare site), light or busy (workers, equipment, materials, "
+        "scaffolding, laid out per viewpoint from --seed; they hide landmarks)",
+    )
+    p.add_argument(
         "--detector-model",
         default=None,
         metavar="ONNX",
@@ -186,7 +195,7 @@ def _parser() -> CommandParser:
     p.add_argument(
         "--track-workers",
         action="store_true",
-        help="also track the site's workers (light site activity) from the four cameras at true, "
+        help="also track the site's workers (with --activity, light if none) from the four cameras at true, "
         "estimated and prior poses: results.json gains worker_tracking, worker_tracking.md",
     )
     p.add_argument(
@@ -227,6 +236,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             lighting=args.lighting,
             track_workers=args.track_workers,
             worker_pixel_sigma=args.worker_pixel_sigma,
+            activity=args.activity,
         )
         check_site(args.site, args.stage, seed=args.seed)
         check_output_dir(args.out, overwrite=args.overwrite)

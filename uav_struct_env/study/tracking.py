@@ -42,7 +42,7 @@ __all__ = [
     "tracking_summary",
 ]
 
-#: The site activity the study runs with when it tracks workers (there must be workers).
+#: The site activity the study runs with when it tracks workers and none was chosen.
 TRACKING_ACTIVITY = "light"
 #: The method whose estimated poses give the ``estimated`` figure, per scene stage role.
 TRACKING_METHODS = {"slab": "slab_corners", "columns": "all"}
@@ -133,10 +133,11 @@ def track_viewpoint(
     return ViewpointTracking(stage, viewpoint, len(points), tuple(out))
 
 
-def tracking_summary(viewpoints: Sequence[ViewpointTracking], pixel_sigma: float) -> dict:
+def tracking_summary(viewpoints: Sequence[ViewpointTracking], pixel_sigma: float, activity: str) -> dict:
     """The ``worker_tracking`` entry of ``results.json`` (NaN where undefined; null once written).
 
-    ``pixel_sigma`` is the worker detector's noise (px of the images), recorded beside the numbers.
+    ``pixel_sigma`` (the worker detector's noise, px of the images) and ``activity`` (the site
+    activity preset) are recorded beside the numbers.
     """
     observations = [o for v in viewpoints for o in v.observations]
 
@@ -153,7 +154,7 @@ def tracking_summary(viewpoints: Sequence[ViewpointTracking], pixel_sigma: float
         "estimated_by_method": {m: summary([r for r in estimated if r.method == m]) for m in methods},
         "estimated_methods": dict(sorted({(r.stage, r.method) for r in estimated if r.tracking})),
         "workers_present": sum(v.n_workers for v in viewpoints),
-        "activity": TRACKING_ACTIVITY,
+        "activity": activity,
         "detector_pixel_sigma_px": float(pixel_sigma),
         "detector_miss_rate": MISS_RATE,
     }
