@@ -115,14 +115,15 @@ def pixel_covariances(views: Sequence[CameraView], xyz: NDArray, sigma_px: NDArr
         pts = np.where(np.isfinite(xyz), xyz, 0.0)
         J, _ = pose_jacobian(view.K, view.cam_from_world, pts)
         J = J.reshape(B, 2, 6)
-        cov[:, j] += np.einsum("bij,jk,blk->bil", J, view.pose_covariance, J)
+        cov[:, j] += J @ view.pose_covariance @ J.transpose(0, 2, 1)
     return cov
 
 
 def _project(cam_from_world: NDArray, K: NDArray, xyz: NDArray) -> tuple[NDArray, NDArray, NDArray]:
     """Projections (B, n, 2), camera-frame points (B, n, 3) and d uv / d xyz (B, n, 2, 3)."""
     R = cam_from_world[:, :3, :3]
-    p = np.einsum("nij,bj->bni", R, xyz) + cam_from_world[None, :, :3, 3]
+    p = xyz @ R.transpose(0, 2, 1)  # (n, B, 3)
+    p = p.transpose(1, 0, 2) + cam_from_world[None, :, :3, 3]
     z = p[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         x, y = p[..., 0] / z, p[..., 1] / z
@@ -134,7 +135,7 @@ def _project(cam_from_world: NDArray, K: NDArray, xyz: NDArray) -> tuple[NDArray
         dp[..., 0, 2] = -(fx * x + s * y) / z
         dp[..., 1, 1] = fy / z
         dp[..., 1, 2] = -fy * y / z
-    J = np.einsum("bnij,njk->bnik", dp, R)
+    J = dp @ R[None]
     return uv, p, J
 
 
@@ -159,8 +160,9 @@ def refine(
     for _ in range(iterations):
         proj, _, J = _project(cam_from_world, K, xyz)
         r = proj - uv
-        H = np.einsum("bnji,bnjk,bnkl->bil", J, W, J)
-        g = np.einsum("bnji,bnjk,bnk->bi", J, W, r)
+        JtW = J.transpose(0, 1, 3, 2) @ W  # (B, n, 3, 2)
+        H = (JtW @ J).sum(axis=1)
+        g = (JtW @ r[..., None]).sum(axis=1)[..., 0]
         ok = np.all(np.isfinite(H), axis=(1, 2)) & np.all(np.isfinite(g), axis=1)
         ok &= np.abs(np.linalg.det(np.where(ok[:, None, None], H, np.eye(3)))) > 1e-300
         step = np.zeros_like(xyz)
@@ -169,8 +171,8 @@ def refine(
         xyz = xyz - step
     proj, p, J = _project(cam_from_world, K, xyz)
     r = proj - uv
-    chi2 = np.einsum("bni,bnij,bnj->b", r, W, r)
-    H = np.einsum("bnji,bnjk,bnkl->bil", J, W, J)
+    chi2 = (r[..., None, :] @ W @ r[..., None])[..., 0, 0].sum(axis=1)
+    H = (J.transpose(0, 1, 3, 2) @ W @ J).sum(axis=1)
     return xyz, chi2, H, p[..., 2]
 
 
