@@ -15,7 +15,7 @@ def tracked(tmp_path_factory):
     out = tmp_path_factory.mktemp("tracked")
     config = StudyConfig(track_workers=True, n_viewpoints=2, methods=("slab_corners", "all"),
                          image_size=(640, 360))
-    return run_study(config, out, progress=False, figures=False), out
+    return run_study(config, out, progress=False, figures=True), out
 
 
 def test_worker_tracking_entry_with_the_three_pose_sources(tracked):
@@ -35,6 +35,7 @@ def test_worker_tracking_entry_with_the_three_pose_sources(tracked):
     # estimated poses (decimetre camera errors) cost little; the 3 m / 5 deg prior costs metres
     assert t["estimated"]["median_m"] < 2 * t["truth"]["median_m"] + 0.05
     assert t["prior"]["median_m"] > 1.0
+    assert (out / "worker_tracking_cdf.png").stat().st_size > 10_000
     table = (out / "worker_tracking.md").read_text()
     assert "| Ground truth (floor) |" in table and "site activity light" in table
     assert "worker tracking (2.0 px keypoint noise)" in table

@@ -16,7 +16,12 @@ from uav_struct_env.processes import WorkerDied
 from uav_struct_env.site import make_site
 from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.site.as_built import TOLERANCE_MODELS
-from uav_struct_env.study.figures import plot_error_cdfs, plot_fig2, plot_viewpoint_map
+from uav_struct_env.study.figures import (
+    plot_error_cdfs,
+    plot_fig2,
+    plot_viewpoint_map,
+    plot_worker_tracking,
+)
 from uav_struct_env.study.protocol import ASSOCIATIONS, DETECTORS, NOISES, StudyConfig
 from uav_struct_env.study.report import (
     _clean,
@@ -39,7 +44,7 @@ QUICK_VIEWPOINTS = 2
 
 #: What the study writes; ``results.json`` (written last) says that a set is complete.
 STUDY_FILES = ("results.json", "table1.md", "table2.md", "per_image.csv", "fig2_associations.png",
-               "error_cdf.png", "viewpoint_map.png", "worker_tracking.md")
+               "error_cdf.png", "viewpoint_map.png", "worker_tracking.md", "worker_tracking_cdf.png")
 
 
 def run_study(
@@ -53,10 +58,10 @@ def run_study(
     """Run the study into ``out`` and return the ``results.json`` document.
 
     Writes ``results.json``, ``table1.md``, ``table2.md``, ``per_image.csv``, with
-    ``config.track_workers`` ``worker_tracking.md`` (and ``worker_tracking`` in the JSON), and (with
-    ``figures``) ``fig2_associations.png``, ``error_cdf.png`` and ``viewpoint_map.png``, all at
-    once when the study has finished (:class:`uav_struct_env.outputs.StagedOutput`): an
-    interrupted run leaves ``out`` as it was.
+    ``config.track_workers`` ``worker_tracking.md`` (and ``worker_tracking`` in the JSON), and
+    (with ``figures``) ``fig2_associations.png``, ``error_cdf.png`` and ``viewpoint_map.png`` (and
+    ``worker_tracking_cdf.png`` when tracking workers), all at once when the study has finished
+    (:class:`uav_struct_env.outputs.StagedOutput`): an interrupted run leaves ``out`` as it was.
 
     Raises:
         uav_struct_env.outputs.OutputExistsError: ``out`` already holds files and ``overwrite``
@@ -96,6 +101,8 @@ def run_study(
             settings = settings_line(results)
             plot_fig2(overlays, stage / "fig2_associations.png", settings)
             plot_error_cdfs(rows, stage / "error_cdf.png", settings)
+            if config.track_workers:
+                plot_worker_tracking(tracking, stage / "worker_tracking_cdf.png", settings)
             structural = [m for m in config.selected_methods if m.structural]
             if structural:
                 site = make_site(config.site, stage=config.scene_stage(structural[0].scene),
