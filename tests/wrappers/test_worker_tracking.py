@@ -100,3 +100,15 @@ def test_clear_errors():
 class _FakeEnv:
     unwrapped = property(lambda self: self)
     possible_agents = ["a"]
+
+
+def test_parallel_api_and_seed_conformance():
+    from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+    def make():
+        return WorkerTracking(_env(image_size=(128, 72), activity="light"), reward="tracking")
+
+    env = make()
+    parallel_api_test(env, num_cycles=6)
+    env.close()
+    parallel_seed_test(make, num_cycles=4)
