@@ -22,7 +22,12 @@ from numpy.typing import NDArray
 
 from localization.checks import check_number
 from tracking.associate import associate
-from tracking.triangulate import DEFAULT_MIN_RAY_ANGLE_DEG, PointEstimate, triangulate_point
+from tracking.triangulate import (
+    DEFAULT_MIN_RAY_ANGLE_DEG,
+    PointEstimate,
+    triangulate_point,
+    triangulate_upright,
+)
 from tracking.views import CameraView, WorkerDetection
 
 __all__ = ["TrackingResult", "WorkerEstimate", "track_workers"]
@@ -133,6 +138,7 @@ def track_workers(
     gate_probability: float = 0.999,
     min_ray_angle_deg: float = DEFAULT_MIN_RAY_ANGLE_DEG,
     height_range: tuple[float, float] | None = None,
+    upright: bool = False,
 ) -> TrackingResult:
     """Associate worker detections across ``views`` and triangulate every worker.
 
@@ -144,6 +150,9 @@ def track_workers(
         min_ray_angle_deg: a worker whose rays are closer to parallel is degenerate.
         height_range: ``(lo, hi)`` m the head top must lie above the feet in an association
             (None: no constraint); rejects pairs that fit two views only as a giant or a dwarf.
+        upright: triangulate each worker standing, head top straight above the feet
+            (:func:`~tracking.triangulate.triangulate_upright`; world z up); else feet and head
+            independently.
 
     Returns:
         A :class:`TrackingResult`.
@@ -179,10 +188,13 @@ def track_workers(
         group_views = [by_name[n] for n in names]
         obs = np.stack([uv[n][group[n]] for n in names])  # (n, 2 points, 2)
         sig = np.array([sigma[n][group[n]] for n in names])
-        feet, head = (
-            triangulate_point(group_views, obs[:, k], sig, min_ray_angle_deg=min_ray_angle_deg)
-            for k in (0, 1)
-        )
+        if upright:
+            feet, head = triangulate_upright(group_views, obs, sig, min_ray_angle_deg=min_ray_angle_deg)
+        else:
+            feet, head = (
+                triangulate_point(group_views, obs[:, k], sig, min_ray_angle_deg=min_ray_angle_deg)
+                for k in (0, 1)
+            )
         members = tuple((n, group[n]) for n in names)
         used.update(members)
         workers.append(WorkerEstimate(feet, head, members, tuple(detections[n][i].label for n, i in members)))

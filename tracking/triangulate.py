@@ -12,6 +12,8 @@ pose uncertainty of its view propagated to that point (``J Sigma J^T``, :mod:`tr
   ``scipy.optimize.least_squares`` on the whitened residuals, covariance ``(J^T W J)^-1`` and the
   chi-square of the fit; degenerate cases (one view, rays within ``min_ray_angle_deg`` of parallel,
   a point behind a camera) come back as a failed :class:`PointEstimate` with the reason.
+* :func:`triangulate_upright` -- a standing worker's feet and head top at one horizontal
+  position (four unknowns instead of six), an option of the tracker.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ __all__ = [
     "pixel_covariances",
     "refine",
     "triangulate_point",
+    "triangulate_upright",
 ]
 
 #: Below this largest angle between two viewing rays (deg) a point's depth is not observable.
@@ -263,3 +266,75 @@ def triangulate_point(
     return PointEstimate(
         True, xyz, np.linalg.inv(H), chi2, dof, float(np.sqrt(np.mean(np.sum(r**2, axis=1)))), angle
     )
+
+
+def triangulate_upright(
+    views: Sequence[CameraView],
+    uv: ArrayLike,
+    sigma_px: ArrayLike,
+    *,
+    min_ray_angle_deg: float = DEFAULT_MIN_RAY_ANGLE_DEG,
+) -> tuple[PointEstimate, PointEstimate]:
+    """Triangulate a standing worker: the head top straight above the feet (world z up).
+
+    The feet ``(x, y, z_feet)`` and head top ``(x, y, z_head)`` share their horizontal position:
+    four unknowns instead of six, fitted jointly by ``scipy.optimize.least_squares`` on the
+    whitened residuals of both points, from the information-weighted mean of the two independent
+    solutions (:func:`triangulate_point`, which also reports the degenerate cases). A worker who
+    leans or crouches violates the model; its chi-square shows it.
+
+    Args:
+        views: n >= 1 camera views.
+        uv: (n, 2, 2) undistorted feet (index 0) and head-top (index 1) pixels in each view.
+        sigma_px: (n,) detector noise of each view's detection, px (a scalar is broadcast).
+        min_ray_angle_deg: as :func:`triangulate_point`.
+
+    Returns:
+        ``(feet, head)``: :class:`PointEstimate` objects whose covariances are the blocks of the
+        joint 4x4 covariance; ``chi2`` and ``dof`` (``2 n - 2`` each) split the joint fit's.
+    """
+    n = len(views)
+    obs = np.asarray(uv, dtype=np.float64).reshape(n, 2, 2)
+    sig = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), (n,)).copy()
+    feet, head = (
+        triangulate_point(views, obs[:, k], sig, min_ray_angle_deg=min_ray_angle_deg) for k in (0, 1)
+    )
+    if not (feet.success and head.success):
+        return feet, head
+    info_f, info_h = np.linalg.inv(feet.covariance[:2, :2]), np.linalg.inv(head.covariance[:2, :2])
+    xy = np.linalg.solve(info_f + info_h, info_f @ feet.xyz[:2] + info_h @ head.xyz[:2])
+    q0 = np.array([xy[0], xy[1], feet.xyz[2], head.xyz[2]])
+    T, Ks = _stack(views)
+    points0 = np.stack([feet.xyz, head.xyz])
+    cov = pixel_covariances(views, points0, np.stack([sig, sig]))  # (2, n, 2, 2)
+    L = np.linalg.cholesky(np.linalg.inv(cov))
+    select = np.zeros((2, 3, 4))  # d point / d q
+    select[:, 0, 0] = select[:, 1, 1] = 1.0
+    select[0, 2, 2] = select[1, 2, 3] = 1.0
+
+    def points(q: NDArray) -> NDArray:
+        return np.array([[q[0], q[1], q[2]], [q[0], q[1], q[3]]])
+
+    def residuals(q: NDArray) -> NDArray:
+        proj, _, _ = _project(T, Ks, points(q))
+        return np.einsum("bnji,bnj->bni", L, proj - obs.transpose(1, 0, 2)).reshape(-1)
+
+    def jacobian(q: NDArray) -> NDArray:
+        _, _, J = _project(T, Ks, points(q))  # (2, n, 2, 3)
+        return np.einsum("bnji,bnjk,bkl->bnil", L, J, select).reshape(-1, 4)
+
+    sol = least_squares(residuals, q0, jac=jacobian, method="lm", xtol=1e-12)
+    cov_q = np.linalg.inv(jacobian(sol.x).T @ jacobian(sol.x))
+    r = sol.fun.reshape(2, n, 2)
+    proj, p, _ = _project(T, Ks, points(sol.x))
+    if np.any(p[..., 2] <= 0):
+        reason = "the upright worker is behind a camera"
+        return _failed(reason, 2 * n - 2, feet.ray_angle_deg), _failed(reason, 2 * n - 2, head.ray_angle_deg)
+    out = []
+    for k, (index, point) in enumerate((((0, 1, 2), feet), ((0, 1, 3), head))):
+        res_px = proj[k] - obs[:, k]
+        out.append(PointEstimate(
+            True, points(sol.x)[k], cov_q[np.ix_(index, index)], float(np.sum(r[k] ** 2)), 2 * n - 2,
+            float(np.sqrt(np.mean(np.sum(res_px**2, axis=1)))), point.ray_angle_deg,
+        ))
+    return out[0], out[1]
