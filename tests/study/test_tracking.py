@@ -28,7 +28,7 @@ def test_worker_tracking_entry_with_the_three_pose_sources(tracked):
     assert t["estimated_methods"] == {"columns": "all", "slab": "slab_corners"}
     assert set(t["estimated_by_method"]) == {"slab_corners", "all"}
     # light activity: 6 workers at each of 2 viewpoints of 2 scenes; most seen by >= 2 cameras
-    assert t["workers_present"] == 24 and t["activity"] == TRACKING_ACTIVITY
+    assert t["workers_present"] == 24 and t["activity"] == TRACKING_ACTIVITY and t["upright"] is False
     assert 12 <= t["truth"]["n_observations"] <= 24
     # 2 px keypoint noise at 640 px (4 px at the paper's 1280): decimetres with true poses
     assert 0.0 < t["truth"]["median_m"] < 0.3 and t["truth"]["median_m"] <= t["truth"]["p95_m"]
@@ -44,6 +44,8 @@ def test_worker_tracking_entry_with_the_three_pose_sources(tracked):
 def test_track_workers_must_be_a_bool():
     with pytest.raises(ConfigError, match="track_workers must be True or False, got 'yes'"):
         StudyConfig(track_workers="yes")
+    with pytest.raises(ConfigError, match="upright_workers must be True or False, got 1"):
+        StudyConfig(upright_workers=1)
     with pytest.raises(ConfigError, match="worker_pixel_sigma must be finite and > 0, got 0"):
         StudyConfig(worker_pixel_sigma=0)
     # workers need site activity: light unless another was chosen

@@ -198,6 +198,8 @@ class StudyConfig:
             with ``activity="none"`` it is set to ``"light"`` (whose bodies also hide landmarks).
         worker_pixel_sigma: with ``track_workers``, the simulated worker detector's feet /
             head-top noise, px of the images.
+        upright_workers: with ``track_workers``, triangulate workers standing (the head top
+            above the feet, :func:`tracking.triangulate.triangulate_upright`).
     """
 
     seed: int = 0
@@ -224,6 +226,7 @@ class StudyConfig:
     activity: str = "none"
     track_workers: bool = False
     worker_pixel_sigma: float = DEFAULT_WORKER_SIGMA_PX
+    upright_workers: bool = False
 
     def __post_init__(self) -> None:
         for name, options in (
@@ -255,8 +258,9 @@ class StudyConfig:
             check_number(name, getattr(self, name), lo, hi, error=ConfigError, type_error=ConfigError)
         check_choice("lighting", self.lighting, LIGHTINGS, error=ConfigError)
         check_choice("activity", self.activity, tuple(ACTIVITY_PRESETS), error=ConfigError)
-        if not isinstance(self.track_workers, bool):
-            raise ConfigError(f"track_workers must be True or False, got {self.track_workers!r}")
+        for name in ("track_workers", "upright_workers"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"{name} must be True or False, got {getattr(self, name)!r}")
         check_number("worker_pixel_sigma", self.worker_pixel_sigma, 0.0, lo_open=True, error=ConfigError,
                      type_error=ConfigError)
         if self.track_workers and self.activity == "none":

@@ -230,8 +230,9 @@ def settings_line(results: dict) -> str:
         protocol,
     ]
     worker_sigma = c.pop("worker_pixel_sigma", None)
+    upright = c.pop("upright_workers", False)
     if c.pop("track_workers", False):
-        parts.append(f"worker tracking ({worker_sigma} px keypoint noise)")
+        parts.append(f"worker tracking ({worker_sigma} px keypoint noise{', upright' if upright else ''})")
     parts += [f"{k} {v}" for k, v in sorted(c.items()) if k not in _UNSTATED]
     return " · ".join(parts)
 

@@ -227,7 +227,7 @@ def run_unit_tracked(config: StudyConfig, scene: Scene, viewpoint: int, overlay_
         tracking.append(track_viewpoint(
             env, infos, estimates, stage=scene.stage, viewpoint=viewpoint,
             rng=np.random.default_rng([config.seed, 0x7A4C, index, viewpoint]), prior_sigmas=prior_sigmas,
-            pixel_sigma=config.worker_pixel_sigma,
+            pixel_sigma=config.worker_pixel_sigma, upright=config.upright_workers,
         ))
     return results, overlays, tracking
 

@@ -90,7 +90,8 @@ def run_study(
         results = results_dict(config, rows, {"elapsed_s": round(elapsed, 1)})
         stage = staged.stage
         if config.track_workers:
-            summary = tracking_summary(tracking, config.worker_pixel_sigma, config.activity)
+            summary = tracking_summary(tracking, config.worker_pixel_sigma, config.activity,
+                                       config.upright_workers)
             results["worker_tracking"] = _clean(summary)
             (stage / "worker_tracking.md").write_text(tracking_markdown(results, settings_line(results)))
         write_results_json(stage / "results.json", results)
@@ -212,6 +213,11 @@ def _parser() -> CommandParser:
         help="with --track-workers: the worker detector's feet / head-top noise, px (default "
         f"{DEFAULT_WORKER_SIGMA_PX:g})",
     )
+    p.add_argument(
+        "--upright-workers",
+        action="store_true",
+        help="with --track-workers: triangulate workers standing (head top above the feet)",
+    )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
@@ -243,6 +249,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             lighting=args.lighting,
             track_workers=args.track_workers,
             worker_pixel_sigma=args.worker_pixel_sigma,
+            upright_workers=args.upright_workers,
             activity=args.activity,
         )
         check_site(args.site, args.stage, seed=args.seed)

@@ -96,6 +96,7 @@ def track_viewpoint(
     rng: np.random.Generator,
     prior_sigmas: Any = None,
     pixel_sigma: float = DEFAULT_WORKER_SIGMA_PX,
+    upright: bool = False,
 ) -> ViewpointTracking:
     """The workers and worker observations of one rendered viewpoint (module docstring).
 
@@ -108,6 +109,7 @@ def track_viewpoint(
         rng: the detector's generator for this viewpoint.
         prior_sigmas: the localizer's prior sigmas (None: the paper's).
         pixel_sigma: the worker detector's keypoint noise, px of the env's images.
+        upright: triangulate the workers standing (:func:`tracking.track_workers`).
     """
     points = env.worker_points()
     detector = SimulatedWorkerDetector(pixel_sigma, miss_rate=MISS_RATE, rng=rng)
@@ -125,7 +127,7 @@ def track_viewpoint(
         views = camera_views(infos, source, est, prior_sigmas)
         used = {v.name for v in views}
         result = track_workers(views, {a: d for a, d in detections.items() if a in used},
-                               height_range=HEIGHT_RANGE)
+                               height_range=HEIGHT_RANGE, upright=upright)
         errors = worker_errors(result, points)
         for w, e in zip(result.tracked, errors, strict=True):
             out.append(WorkerObservation(source, method, is_tracking, stage, viewpoint, str(w.label),
@@ -133,11 +135,13 @@ def track_viewpoint(
     return ViewpointTracking(stage, viewpoint, len(points), tuple(out))
 
 
-def tracking_summary(viewpoints: Sequence[ViewpointTracking], pixel_sigma: float, activity: str) -> dict:
+def tracking_summary(
+    viewpoints: Sequence[ViewpointTracking], pixel_sigma: float, activity: str, upright: bool = False
+) -> dict:
     """The ``worker_tracking`` entry of ``results.json`` (NaN where undefined; null once written).
 
     ``pixel_sigma`` (the worker detector's noise, px of the images) and ``activity`` (the site
-    activity preset) are recorded beside the numbers.
+    activity preset) and ``upright`` (workers triangulated standing) are recorded beside the numbers.
     """
     observations = [o for v in viewpoints for o in v.observations]
 
@@ -157,6 +161,7 @@ def tracking_summary(viewpoints: Sequence[ViewpointTracking], pixel_sigma: float
         "activity": activity,
         "detector_pixel_sigma_px": float(pixel_sigma),
         "detector_miss_rate": MISS_RATE,
+        "upright": bool(upright),
     }
 
 
@@ -183,8 +188,9 @@ def tracking_markdown(results: dict, settings: str) -> str:
         "",
         f"Workers: {t['activity']} site activity, {t['workers_present']} worker-viewpoints present; "
         f"simulated feet / head-top detector, {t['detector_pixel_sigma_px']} px noise, "
-        f"{t['detector_miss_rate']:.0%} misses, occlusion-tested. An observation is a worker "
-        "triangulated from >= 2 cameras at one viewpoint; its error is the larger of its feet and "
-        "head-top errors. Target: P95 <= 0.15 m with estimated poses.",
+        f"{t['detector_miss_rate']:.0%} misses, occlusion-tested"
+        f"{'; workers triangulated standing (upright)' if t.get('upright') else ''}. "
+        "An observation is a worker triangulated from >= 2 cameras at one viewpoint; its error is "
+        "the larger of its feet and head-top errors. Target: P95 <= 0.15 m with estimated poses.",
     ]
     return "\n".join(lines) + "\n"

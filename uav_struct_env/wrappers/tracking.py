@@ -131,6 +131,7 @@ class WorkerTracking(ParallelWrapper):
         min_visible: smallest visible fraction of a worker that gets it detected.
         gate_probability: chi-square quantile of the association gate.
         height_range: head-above-feet heights (m) accepted in an association (None: any).
+        upright: triangulate workers standing (head top above the feet; :func:`tracking.track_workers`).
         reward: None, ``"tracking"`` (:class:`TrackingReward` defaults) or a :class:`TrackingReward`.
 
     Raises:
@@ -148,6 +149,7 @@ class WorkerTracking(ParallelWrapper):
         min_visible: float = 0.5,
         gate_probability: float = 0.999,
         height_range: tuple[float, float] | None = (1.0, 2.3),
+        upright: bool = False,
         reward: str | TrackingReward | None = None,
     ) -> None:
         super().__init__(env)
@@ -164,6 +166,7 @@ class WorkerTracking(ParallelWrapper):
             "gate_probability", gate_probability, 0.0, 1.0, lo_open=True, hi_open=True, error=ConfigError
         )
         self.height_range = height_range
+        self.upright = bool(upright)
         if reward is None or isinstance(reward, TrackingReward):
             self.reward = reward
         elif reward == "tracking":
@@ -213,7 +216,7 @@ class WorkerTracking(ParallelWrapper):
         used = {v.name for v in views}
         result = track_workers(
             views, {a: d for a, d in detections.items() if a in used},
-            gate_probability=self.gate_probability, height_range=self.height_range,
+            gate_probability=self.gate_probability, height_range=self.height_range, upright=self.upright,
         )
         self.last_result = result
         errors = worker_errors(result, points)  # in the order of result.tracked, labels all known
