@@ -52,10 +52,10 @@ POSE_SOURCES = ("truth", "estimated", "prior")
 
 
 def check_worker_source(env: Any) -> Any:
-    """The base env if it provides ``worker_points()`` and ``worker_visibility(agent)``.
+    """The base env if it provides ``worker_points()`` and ``worker_visibility(agent)`` and has workers.
 
     Raises:
-        ConfigError: naming the missing methods.
+        ConfigError: naming the missing methods, or for an env without site activity.
     """
     base = env.unwrapped
     missing = [m for m in ("worker_points", "worker_visibility") if not callable(getattr(base, m, None))]
@@ -63,6 +63,12 @@ def check_worker_source(env: Any) -> Any:
         raise ConfigError(
             f"worker tracking needs an env with workers (methods {missing} missing on "
             f"{type(base).__name__}): build it with site activity, e.g. activity='light'"
+        )
+    activity = getattr(getattr(base, "config", None), "activity", None)
+    if activity is not None and activity.is_none:
+        raise ConfigError(
+            "worker tracking needs workers, but the env has no site activity (activity='none'): "
+            "build it with activity='light' or 'busy'"
         )
     return base
 

@@ -83,6 +83,10 @@ def test_tracking_reward_numbers():
 def test_clear_errors():
     with pytest.raises(ConfigError, match="worker_points', 'worker_visibility'|methods .* missing"):
         WorkerTracking(_FakeEnv())
+    bare = uav_struct_env.parallel_env(observe_image=False, image_size=(64, 36))
+    with pytest.raises(ConfigError, match=r"no site activity \(activity='none'\): build it with"):
+        WorkerTracking(bare)
+    bare.close()
     env = _env()
     with pytest.raises(ConfigError, match="poses='estimated' needs a LocalizePoses"):
         WorkerTracking(env, poses="estimated")
