@@ -31,7 +31,8 @@ def test_activity_key_resolves_and_rejects_bad_values():
 
 def test_activity_leaves_every_other_draw_unchanged_and_hides_landmarks():
     """Same seed: the sensors and starts are the same with and without activity; truth differs."""
-    plain, busy = _env(observe_image=False), _env(observe_image=False, activity="busy")
+    plain = _env(observe_image=False, noise="gnss_ins")
+    busy = _env(observe_image=False, noise="gnss_ins", activity="busy")
     hidden = 0
     for seed in range(4):
         obs_p, info_p = plain.reset(seed=seed)
