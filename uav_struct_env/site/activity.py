@@ -635,13 +635,19 @@ class SiteActivity:
             d = _ring_distance(xy, self._bounds)
             return (ok & (d >= _WORKER_RING[0]) & (d <= _WORKER_RING[1])).reshape(shape)
         m = reach + _EDGE_MARGIN
-        ring = m * np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [0.7, 0.7], [-0.7, 0.7], [0.7, -0.7],
-                             [-0.7, -0.7], [0, 0]])
-        ok &= slab.covers((xy[:, None, :] + ring[None]).reshape(-1, 2)).reshape(len(xy), -1).all(axis=1)
+        xmin, ymin, xmax, ymax = slab.bounds
+        ok &= (xy[:, 0] >= xmin + m) & (xy[:, 0] <= xmax - m)
+        ok &= (xy[:, 1] >= ymin + m) & (xy[:, 1] <= ymax - m)
         if self._column_boxes.size:
             lo, hi = self._column_boxes[:, :2], self._column_boxes[:, 2:]
             gap = np.maximum(np.maximum(lo[None] - xy[:, None], xy[:, None] - hi[None]), 0.0)
             ok &= np.hypot(gap[..., 0], gap[..., 1]).min(axis=1) >= m
+        ring = m * np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [0.7, 0.7], [-0.7, 0.7], [0.7, -0.7],
+                             [-0.7, -0.7], [0, 0]])
+        rows = np.flatnonzero(ok)  # the polygon test only where the cheap tests passed
+        if len(rows):
+            on = slab.covers((xy[rows, None, :] + ring[None]).reshape(-1, 2)).reshape(len(rows), -1)
+            ok[rows] = on.all(axis=1)
         return ok.reshape(shape)
 
     def _taken_arrays(self, z: float) -> tuple[NDArray, NDArray, NDArray]:
