@@ -72,6 +72,10 @@ def test_busy_layout_places_every_category_by_the_rules(name):
     kinds = {b.kind for b in layout.static}
     assert set(EQUIPMENT_KINDS) <= kinds, f"equipment missing on {name}: {kinds}"
     assert kinds & {"rebar", "formwork_panels", "pallet"}
+    longest = max(np.linalg.norm(np.diff(np.vstack([f.outline, f.outline[:1]]), axis=0), axis=1).max()
+                  for f in site.floor)
+    # a run needs 2 m between the corner clearances (2 m each): none on a small slab
+    assert ("scaffold" in kinds) == (longest >= 2 * layout.activity.landmark_clearance + 2.0), longest
     assert len(layout.workers) >= 12
     assert {w.surface for w in layout.workers} == {"slab", "ground"}
     # equipment stays low (under the schedule's 10 m lowest viewpoint) and outside the building

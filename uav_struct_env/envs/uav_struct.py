@@ -475,7 +475,8 @@ class UavStructParallelEnv(ParallelEnv):
         K = self.camera.K
         observations: dict[str, dict[str, NDArray]] = {}
         infos: dict[str, dict[str, Any]] = {}
-        clearance = self.obstacles.distances(np.array([self._states[a].xyz for a in agents]))
+        # The sensors' multipath / sky-blockage model sees the building, not the site activity.
+        clearance = self._site_obstacles.distances(np.array([self._states[a].xyz for a in agents]))
         if self._airframes is not None:  # draw the flying UAVs, hide the finished ones
             self._airframes.place({a: self._states[a] for a in agents})
         if self._activity_bodies is not None:

@@ -61,8 +61,21 @@ class RayScene:
         self._lo = np.array(lo).reshape(-1, 3) - pad
         self._hi = np.array(hi).reshape(-1, 3) + pad
         self._rects = np.array(rects, dtype=np.float64).reshape(-1, 5)
-        #: Oriented boxes: ``(world_from_box (4, 4), half_extents (3,))``; set before each query.
-        self.boxes: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+        self._box_poses, self._box_halves = np.zeros((0, 4, 4)), np.zeros((0, 3))
+
+    @property
+    def boxes(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """Oriented boxes ``(world_from_box (4, 4), half_extents (3,))``; set before each query."""
+        return list(zip(self._box_poses, self._box_halves, strict=True))
+
+    @boxes.setter
+    def boxes(self, boxes: Sequence[tuple[ArrayLike, ArrayLike]]) -> None:
+        self.set_boxes([T for T, _ in boxes], [h for _, h in boxes])
+
+    def set_boxes(self, poses: ArrayLike, half_extents: ArrayLike) -> None:
+        """Set the oriented boxes at once: ``poses`` (B, 4, 4), ``half_extents`` (B, 3)."""
+        self._box_poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        self._box_halves = np.asarray(half_extents, dtype=np.float64).reshape(-1, 3)
 
     @property
     def n_triangles(self) -> int:
@@ -102,25 +115,35 @@ class RayScene:
             tri = first + np.arange(len(ray))
             t = _moller_trumbore(o, d[ray], self._v0[tri], self._e1[tri], self._e2[tri], t_min)
             np.minimum.at(best, ray, t)
-        if self.boxes:
-            R = np.stack([T[:3, :3] for T, _ in self.boxes])  # (B, 3, 3)
-            c = np.stack([T[:3, 3] for T, _ in self.boxes])
-            half = np.stack([np.asarray(h, dtype=np.float64) for _, h in self.boxes])
-            ob = np.einsum("bij,bi->bj", R, o - c)  # origin in each box frame, (B, 3)
-            db = np.einsum("ni,bij->nbj", d, R)  # directions in each box frame, (R, B, 3)
+        if len(self._box_poses):
+            R, c, half = self._box_poses[:, :3, :3], self._box_poses[:, :3, 3], self._box_halves
+            # Cull ray-box pairs by the box's bounding sphere seen from the origin (one matrix
+            # product), then slab-test the pairs left.
+            oc = c - o
+            dist = np.linalg.norm(oc, axis=1)
+            radius = np.linalg.norm(half, axis=1)
             with np.errstate(divide="ignore", invalid="ignore"):
-                inv = 1.0 / db
-                t1, t2 = (-half - ob) * inv, (half - ob) * inv
-            inside = np.abs(ob) <= half  # (B, 3): a ray parallel to a slab limits only outside it
-            parallel = db == 0
-            t_lo = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2)).max(axis=2)
-            t_hi = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2)).min(axis=2)
-            entry = np.where((t_hi >= t_lo) & (t_lo >= t_min), t_lo, np.inf)  # (R, B)
-            if skip_box is not None:
-                skip = np.asarray(skip_box, dtype=np.int64).reshape(-1)
-                rows = np.flatnonzero(skip >= 0)
-                entry[rows, skip[rows]] = np.inf
-            best = np.minimum(best, entry.min(axis=1))
+                cone = np.sqrt(np.maximum(1.0 - (radius / dist) ** 2, 0.0))  # cos of the half angle
+                cos_limit = np.where(dist > radius, cone, -2.0)
+                unit = d / np.linalg.norm(d, axis=1, keepdims=True)
+                toward = oc / np.maximum(dist, 1e-12)[:, None]
+            ray, box = np.nonzero(unit @ toward.T >= cos_limit[None] - 1e-9)
+            if skip_box is not None and len(ray):
+                keep = np.asarray(skip_box, dtype=np.int64).reshape(-1)[ray] != box
+                ray, box = ray[keep], box[keep]
+            if len(ray):
+                ob = np.einsum("pij,pi->pj", R[box], o - c[box])  # origin in the box frame
+                db = np.einsum("pi,pij->pj", d[ray], R[box])  # direction in the box frame
+                hb = half[box]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    inv = 1.0 / db
+                    t1, t2 = (-hb - ob) * inv, (hb - ob) * inv
+                inside = np.abs(ob) <= hb  # a ray parallel to a slab is limited only outside it
+                parallel = db == 0
+                t_lo = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2)).max(axis=1)
+                t_hi = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2)).min(axis=1)
+                entry = np.where((t_hi >= t_lo) & (t_lo >= t_min), t_lo, np.inf)
+                np.minimum.at(best, ray, entry)
         return best
 
 

@@ -158,7 +158,9 @@ class SiteWorld:
             raise
         #: Bodies added with add_body: body id -> the box's half extents (m), and -> its pose.
         self._extra_bodies: dict[int, NDArray[np.float64]] = {}
-        self._body_poses: dict[int, NDArray[np.float64]] = {}
+        #: Their poses as rows of one array (ray casting and the near plane read them all at once).
+        self._body_row: dict[int, int] = {}
+        self._body_poses = np.zeros((0, 4, 4))
         #: The rendered triangles, for landmark visibility without rendering (:mod:`.raycast`).
         self._rays = RayScene([(e.mesh.vertices, e.mesh.faces) for e in elements])
         self._depth_meta: dict[int, tuple[weakref.ref, float, float, int]] = {}
@@ -378,15 +380,15 @@ class SiteWorld:
 
     def _added_boxes(self) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64]]:
         """``(body ids, world_from_body (B, 4, 4), half extents (B, 3))`` of the added bodies."""
-        ids = list(self._extra_bodies)
-        poses = np.array([self._body_poses[b] for b in ids]).reshape(-1, 4, 4)
-        halves = np.array([self._extra_bodies[b] for b in ids]).reshape(-1, 3)
+        ids = list(self._extra_bodies)  # insertion order = row order
+        poses = self._body_poses
+        halves = np.array(list(self._extra_bodies.values())).reshape(-1, 3)
         return ids, poses, halves
 
     def _sync_ray_boxes(self) -> list[int]:
         """Give the ray scene the added bodies at their current poses; their ids in box order."""
         ids, poses, halves = self._added_boxes()
-        self._rays.boxes = list(zip(poses, halves, strict=True))
+        self._rays.set_boxes(poses, halves)
         return ids
 
     # ------------------------------------------------------------------------------ extra bodies
@@ -410,7 +412,8 @@ class SiteWorld:
             physicsClientId=self.client_id,
         )
         self._extra_bodies[body] = np.asarray(half_extents, dtype=np.float64)
-        self._body_poses[body] = np.eye(4)
+        self._body_row[body] = len(self._body_poses)
+        self._body_poses = np.concatenate([self._body_poses, np.eye(4)[None]])
         if world_from_body is not None:
             self.move_body(body, world_from_body)
         return body
@@ -428,7 +431,7 @@ class SiteWorld:
         p.resetBasePositionAndOrientation(
             body_id, T[:3, 3].tolist(), [x, y, z, w], physicsClientId=self.client_id
         )
-        self._body_poses[body_id] = T.copy()
+        self._body_poses[self._body_row[body_id]] = T
 
     def place_body(self, body_id: int, position: tuple[float, float, float], yaw: float) -> None:
         """:meth:`move_body` for an upright pose turned ``yaw`` (rad) about z, without validation.
@@ -441,10 +444,9 @@ class SiteWorld:
         p.resetBasePositionAndOrientation(
             body_id, position, (0.0, 0.0, math.sin(h), math.cos(h)), physicsClientId=self.client_id
         )
-        self._body_poses[body_id] = np.array(
-            [[c, -s, 0.0, position[0]], [s, c, 0.0, position[1]], [0.0, 0.0, 1.0, position[2]],
-             [0.0, 0.0, 0.0, 1.0]]
-        )
+        pose = self._body_poses[self._body_row[body_id]]
+        pose[:3, :3] = ((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0))
+        pose[:3, 3] = position
 
     def remove_body(self, body_id: int) -> None:
         """Remove a body added with :meth:`add_body`."""
@@ -454,7 +456,8 @@ class SiteWorld:
         self._client.activate()
         p.removeBody(body_id, physicsClientId=self.client_id)
         del self._extra_bodies[body_id]
-        del self._body_poses[body_id]
+        self._body_poses = np.delete(self._body_poses, self._body_row.pop(body_id), axis=0)
+        self._body_row = {b: k for k, b in enumerate(self._extra_bodies)}
 
     # ------------------------------------------------------------------------------ lifetime
     def close(self) -> None:

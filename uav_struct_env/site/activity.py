@@ -28,7 +28,8 @@ Placement rules (the numbers are module constants):
   most :data:`MAX_EQUIPMENT_HEIGHT` high (below the lowest viewpoint of the schedule, so no UAV
   starts inside one);
 * scaffolding (two rows of standards, ledgers, a deck at slab level and a guard rail 1 m above
-  it) stands 0.3-1.3 m outside a floor slab's edge, leaving ``landmark_clearance`` free at both
+  it) stands 0.3 m outside a floor slab's edge (up to 2.3 m where walls or beams below stick
+  out; ground-level elements are stood on), leaving ``landmark_clearance`` free at both
   corners; formwork wraps the lower 60 % of a share of the exposed columns (their tops stay free).
 
 Sizes follow common equipment: a 50-t all-terrain crane carrier about 12 x 2.75 m, a 20-t
@@ -85,7 +86,7 @@ _WORKER_RING = (1.0, 15.0)
 #: another; scaffold from the slab edge (inner row) and its width.
 _EDGE_MARGIN = 0.4
 _ITEM_GAP = 0.3
-_SCAFFOLD_OFFSET, _SCAFFOLD_WIDTH = 0.3, 1.0
+_SCAFFOLD_OFFSETS, _SCAFFOLD_WIDTH = (0.3, 0.8, 1.3, 1.8, 2.3), 1.0
 _MAX_TRIES = 300
 #: Candidate points drawn at once for a worker's start and for each next waypoint.
 _CANDIDATES = 24
@@ -534,19 +535,20 @@ class SiteActivity:
                 continue
             along = (b - a) / length
             out = np.array([along[1], -along[0]])  # outward: outlines run counter-clockwise
-            mid = (a + b) / 2 + out * (_SCAFFOLD_OFFSET + _SCAFFOLD_WIDTH / 2)
             yaw = math.atan2(along[1], along[0])
-            rect = _Rect(float(mid[0]), float(mid[1]), run / 2, _SCAFFOLD_WIDTH / 2, yaw)
-            if not self._clear_of_building(rect, slab.z_top + 1.0) or not self._free(rect, 0.0):
-                continue
-            self._taken.append((rect, 0.0))
-            boxes += self._scaffold_run(f"scaffold {len(self._taken)}", rect, slab.z_top)
+            for offset in _SCAFFOLD_OFFSETS:  # the nearest standing place clear of the building
+                mid = (a + b) / 2 + out * (offset + _SCAFFOLD_WIDTH / 2)
+                rect = _Rect(float(mid[0]), float(mid[1]), run / 2, _SCAFFOLD_WIDTH / 2, yaw)
+                if self._clear_of_building(rect, slab.z_top + 1.0) and self._free(rect, 0.0):
+                    self._taken.append((rect, 0.0))
+                    boxes += self._scaffold_run(f"scaffold {len(self._taken)}", rect, slab.z_top)
+                    break
         return boxes
 
     def _clear_of_building(self, rect: _Rect, top: float) -> bool:
         """No built element's plan box below ``top`` overlaps the rectangle."""
         for e in self.site.built:
-            if e.z_bottom >= top:
+            if e.z_bottom >= top or e.z_top <= 0.05:  # above it, or at ground level (stood on)
                 continue
             xmin, ymin, xmax, ymax = e.bounds
             if isinstance(e, Slab) and e in self.site.floor and e.z_top <= top:
@@ -633,13 +635,19 @@ class SiteActivity:
             d = _ring_distance(xy, self._bounds)
             return (ok & (d >= _WORKER_RING[0]) & (d <= _WORKER_RING[1])).reshape(shape)
         m = reach + _EDGE_MARGIN
-        ring = m * np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [0.7, 0.7], [-0.7, 0.7], [0.7, -0.7],
-                             [-0.7, -0.7], [0, 0]])
-        ok &= slab.covers((xy[:, None, :] + ring[None]).reshape(-1, 2)).reshape(len(xy), -1).all(axis=1)
+        xmin, ymin, xmax, ymax = slab.bounds
+        ok &= (xy[:, 0] >= xmin + m) & (xy[:, 0] <= xmax - m)
+        ok &= (xy[:, 1] >= ymin + m) & (xy[:, 1] <= ymax - m)
         if self._column_boxes.size:
             lo, hi = self._column_boxes[:, :2], self._column_boxes[:, 2:]
             gap = np.maximum(np.maximum(lo[None] - xy[:, None], xy[:, None] - hi[None]), 0.0)
             ok &= np.hypot(gap[..., 0], gap[..., 1]).min(axis=1) >= m
+        ring = m * np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [0.7, 0.7], [-0.7, 0.7], [0.7, -0.7],
+                             [-0.7, -0.7], [0, 0]])
+        rows = np.flatnonzero(ok)  # the polygon test only where the cheap tests passed
+        if len(rows):
+            on = slab.covers((xy[rows, None, :] + ring[None]).reshape(-1, 2)).reshape(len(rows), -1)
+            ok[rows] = on.all(axis=1)
         return ok.reshape(shape)
 
     def _taken_arrays(self, z: float) -> tuple[NDArray, NDArray, NDArray]:

@@ -31,7 +31,8 @@ def test_activity_key_resolves_and_rejects_bad_values():
 
 def test_activity_leaves_every_other_draw_unchanged_and_hides_landmarks():
     """Same seed: the sensors and starts are the same with and without activity; truth differs."""
-    plain, busy = _env(observe_image=False), _env(observe_image=False, activity="busy")
+    plain = _env(observe_image=False, noise="gnss_ins")
+    busy = _env(observe_image=False, noise="gnss_ins", activity="busy")
     hidden = 0
     for seed in range(4):
         obs_p, info_p = plain.reset(seed=seed)
@@ -113,3 +114,15 @@ def test_static_activity_is_an_obstacle_and_no_viewpoint_starts_inside_it(site):
                          for i in range(sched.n_agents) for k in range(sched.n_viewpoints)])
         assert env.obstacles.distances(eyes).min() > env.config.uav_radius
     env.close()
+
+
+def test_pettingzoo_api_and_seed_tests_pass_with_a_busy_site():
+    from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+    def make():
+        return uav_struct_env.parallel_env("train", activity="busy", renderer="tiny")
+
+    env = make()
+    parallel_api_test(env, num_cycles=5)
+    env.close()
+    parallel_seed_test(make, num_cycles=5)
