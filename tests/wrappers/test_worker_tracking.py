@@ -94,6 +94,8 @@ def test_clear_errors():
         WorkerTracking(env, poses="gnss")
     with pytest.raises(ConfigError, match="reward must be None, 'tracking' or a TrackingReward, got 'error'"):
         WorkerTracking(env, reward="error")
+    with pytest.raises(ConfigError, match=r"height_range\[1\] must be finite and > 2, got 1"):
+        WorkerTracking(env, poses="truth", height_range=(2.0, 1.0))
     with pytest.raises(ConfigError, match="miss_rate must be a number in \\[0, 1\\], got 2"):
         WorkerTracking(env, miss_rate=2)
     with pytest.raises(ConfigError, match="error_cap must be finite and > 0, got 0"):

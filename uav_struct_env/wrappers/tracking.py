@@ -165,6 +165,11 @@ class WorkerTracking(ParallelWrapper):
         self.gate_probability = check_number(
             "gate_probability", gate_probability, 0.0, 1.0, lo_open=True, hi_open=True, error=ConfigError
         )
+        if height_range is not None:
+            lo = check_number("height_range[0]", height_range[0], error=ConfigError, type_error=ConfigError)
+            hi = check_number("height_range[1]", height_range[1], lo, lo_open=True, error=ConfigError,
+                              type_error=ConfigError)
+            height_range = (lo, hi)
         self.height_range = height_range
         self.upright = bool(upright)
         if reward is None or isinstance(reward, TrackingReward):
