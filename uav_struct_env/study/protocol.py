@@ -17,6 +17,7 @@ from localization.checks import check_choice, check_number
 from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.sim.lens import CAMERA_MODELS
 from uav_struct_env.site import make_site
 from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.site.as_built import MAX_SCALE, TOLERANCE_MODELS, AsBuilt
@@ -200,6 +201,11 @@ class StudyConfig:
             head-top noise, px of the images.
         upright_workers: with ``track_workers``, triangulate workers standing (the head top
             above the feet, :func:`tracking.triangulate.triangulate_upright`).
+        camera: the camera (:data:`uav_struct_env.sim.lens.CAMERA_MODELS`): ``"paper"`` (the
+            paper's ideal pinhole) or ``"mavic2pro"`` (the Mavic 2 Pro's intrinsics, lens
+            distortion, rolling shutter and exposure; the localizers get its distortion
+            coefficients). At the scripted viewpoints the UAVs hover, so the rolling shutter and
+            blur have no motion to show; the distortion always applies.
     """
 
     seed: int = 0
@@ -227,6 +233,7 @@ class StudyConfig:
     track_workers: bool = False
     worker_pixel_sigma: float = DEFAULT_WORKER_SIGMA_PX
     upright_workers: bool = False
+    camera: str = "paper"
 
     def __post_init__(self) -> None:
         for name, options in (
@@ -265,6 +272,7 @@ class StudyConfig:
                      type_error=ConfigError)
         if self.track_workers and self.activity == "none":
             object.__setattr__(self, "activity", TRACKING_ACTIVITY)
+        check_choice("camera", self.camera, tuple(CAMERA_MODELS), error=ConfigError)
         if self.as_built is not None:
             check_choice("as_built", self.as_built, tuple(TOLERANCE_MODELS), error=ConfigError)
         check_number("as_built_scale", self.as_built_scale, 0.0, MAX_SCALE, error=ConfigError,
