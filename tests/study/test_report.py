@@ -103,6 +103,11 @@ def test_settings_line_names_every_setting_and_the_version():
     assert "as designed, site activity busy" in settings_line(_results(activity="busy"))
     with pytest.raises(ConfigError, match=r"activity must be one of \('none', 'light', 'busy'\), got 'rush'"):
         StudyConfig(activity="rush")
+    assert "paper camera, camera imaging" in line
+    assert "mavic2pro camera, ideal imaging" in settings_line(_results(camera="mavic2pro"))
+    assert _results(camera="mavic2pro")["config"]["camera"] == "mavic2pro"
+    with pytest.raises(ConfigError, match=r"camera must be one of \('paper', 'mavic2pro'\), got 'gopro'"):
+        StudyConfig(camera="gopro")
     with pytest.raises(ConfigError, match=r"lighting must be one of \('fixed', 'random'\), got 'dusk'"):
         StudyConfig(lighting="dusk")
     results = _results()

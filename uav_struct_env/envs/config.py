@@ -28,6 +28,7 @@ from localization.checks import check_choice, check_number
 from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError, SiteGeometryError
 from uav_struct_env.sim.imaging import ImagingModel, make_imaging
+from uav_struct_env.sim.lens import CameraModel, make_camera_model
 from uav_struct_env.sim.schedule import ScheduleSpec
 from uav_struct_env.sim.sensors import SensorModel, make_noise
 from uav_struct_env.sim.uav import FlightLimits, Geofence
@@ -74,7 +75,7 @@ class EnvConfig:
             :class:`~uav_struct_env.site.Site`, or the path of a site file (``*.json``) or an
             IFC file (``*.ifc``, needs the ``ifc`` extra).
         marker_size: ArUco marker side (m), or None for no markers.
-        image_size: ``(W, H)`` of the observed images. The intrinsics are the paper's camera
+        image_size: ``(W, H)`` of the observed images. The intrinsics are the ``camera``'s
             scaled to this size (same field of view).
         imaging: camera effects on the observed image (:mod:`uav_struct_env.sim.imaging`):
             ``"ideal"`` (none, the default), ``"camera"`` (blur, noise, JPEG) or an
@@ -127,6 +128,12 @@ class EnvConfig:
             episode's other draws are unchanged): they are rendered, hide landmarks in the
             landmark truth (rendered and ray-cast), and the static ones are collision obstacles.
             ``env.worker_points()`` and ``env.worker_visibility(agent)`` report the workers.
+        camera: the camera (:mod:`uav_struct_env.sim.lens`): ``"paper"`` (the paper's ideal
+            pinhole, the default), ``"mavic2pro"`` (the Mavic 2 Pro's Hasselblad L1D-20c: its
+            intrinsics, lens distortion, 47 ms rolling-shutter readout and 1/500 s exposure with
+            the UAV's motion) or a ``CameraModel``. ``info["intrinsics"]`` and
+            ``info["distortion"]`` are its K and ``(k1, k2, p1, p2, k3)``; landmark ``uv`` is where
+            each landmark appears in the delivered image.
     """
 
     stage: str | None = None
@@ -156,6 +163,7 @@ class EnvConfig:
     lighting: str = "fixed"
     as_built: AsBuilt | str | None = None
     activity: str | Activity = "none"
+    camera: str | CameraModel = "paper"
 
     def __post_init__(self) -> None:
         if not (isinstance(self.site, Site) or self.site in ("paper", "random") or _is_site_file(self.site)):
@@ -185,6 +193,7 @@ class EnvConfig:
         object.__setattr__(self, "noise", make_noise(self.noise))
         object.__setattr__(self, "imaging", make_imaging(self.imaging))
         object.__setattr__(self, "activity", make_activity(self.activity))
+        object.__setattr__(self, "camera", make_camera_model(self.camera))
         check_choice("renderer", self.renderer, RENDERERS, error=ConfigError)
         for name, lo, hi in (("max_cycles", 1, None), ("n_agents", 1, MAX_AGENTS),
                              ("render_view_height", 16, MAX_IMAGE_SIDE), ("render_fps", 1, 1000),

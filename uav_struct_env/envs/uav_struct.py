@@ -15,8 +15,11 @@ Per agent and step:
   FLU, positive pitch looks down), each wrapped to [-pi, pi);
 * info ``world_from_cam`` (ground truth), ``prior_world_from_cam`` (exactly
   ``world_from_cam_from_attitude(obs["gnss"], obs["attitude"])`` in float64), ``intrinsics``
-  (3x3 K of the observed image), ``landmarks`` (per configured set: ids, xyz, uv, in_frame,
-  visible), ``viewpoint`` (k right after ``reset(options={"viewpoint": k})``, else -1),
+  (3x3 K of the observed image), ``distortion`` ((5,) its OpenCV ``k1, k2, p1, p2, k3``; zeros
+  for the paper's pinhole), ``landmarks`` (per configured set: ids, xyz, uv, in_frame,
+  visible; ``uv`` is where the landmark appears in the delivered image, distortion and rolling
+  shutter included, see :mod:`uav_struct_env.sim.lens`), ``viewpoint`` (k right after
+  ``reset(options={"viewpoint": k})``, else -1),
   ``noise_index`` (the viewpoint counter the paper noise's sign uses) and
   ``termination_reason`` (None, ``"collision_structure"``, ``"collision_uav"``,
   ``"below_min_altitude"``, ``"above_max_altitude"``, ``"beyond_max_distance"``) and
@@ -56,7 +59,7 @@ from uav_struct_env.errors import ClosedError, ResetNeededError
 from uav_struct_env.sim.activity import ActivityBodies
 from uav_struct_env.sim.airframes import Airframes
 from uav_struct_env.sim.attitude import world_from_cam_from_attitude
-from uav_struct_env.sim.camera import Camera
+from uav_struct_env.sim.lens import LensView, Motion
 from uav_struct_env.sim.schedule import (
     ViewpointSchedule,
     _ViewTargets,
@@ -116,7 +119,11 @@ class UavStructParallelEnv(ParallelEnv):
         # and the landmark truth); the localizer's BIM is ``self.site``.
         self.built_site: Site = self.site if cfg.as_built is None else cfg.as_built.apply(self.site)
         w, h = cfg.image_size
-        self.camera = Camera().scaled(w, h)
+        self.camera = cfg.camera.camera(w, h)
+        # A real camera renders wide and remaps (sim.lens); the paper's pinhole renders directly.
+        self._lens: LensView | None = None if cfg.camera.is_ideal else LensView(cfg.camera, w, h)
+        self._distortion = np.array(cfg.camera.distortion)
+        self._motions: dict[str, Motion] = {}
         self.obstacles = Obstacles.from_site(self.built_site)
         self._site_obstacles = self.obstacles  # the building; reset adds the activity's boxes
         # The schedule's ranges and the geofence fitted to the building (sim.schedule.fit_schedule).
@@ -290,6 +297,7 @@ class UavStructParallelEnv(ParallelEnv):
             self._viewpoint_base = 0
             self._scripted_viewpoint = -1
         self._sensor_state = self.config.noise.start(self._rng, n)
+        self._motions = {a: Motion() for a in self.possible_agents}  # hovering at the start
         self._lay_out_activity()
         if self.config.lighting == "random":  # a new sun for the episode
             from uav_struct_env.sim.world import random_light
@@ -346,7 +354,8 @@ class UavStructParallelEnv(ParallelEnv):
 
         The points are five along the worker's vertical axis (10 %, 30 %, ..., 90 % of its
         height, :data:`~uav_struct_env.site.activity.WORKER_SAMPLE_HEIGHTS`). A point counts
-        when it projects inside the image in front of the camera and the ray from the camera
+        when it appears inside the delivered image (through the ``camera``'s distortion and
+        rolling shutter) in front of the camera and the ray from the camera
         centre to it hits nothing else first (building, other activity bodies, other UAVs'
         airframes; the worker's own body is passed through, the camera's own airframe is
         hidden): ray casting, so it works with ``observe_image=False``.
@@ -358,11 +367,20 @@ class UavStructParallelEnv(ParallelEnv):
         self._check_agent(agent)
         if not self.worker_points():
             return {}
+        cam_from_world = invert(self._states[agent].world_from_cam)
+        project = None
+        if self._lens is not None:  # where the delivered image shows them (distortion, shutter)
+            lens, motion = self._lens, self._motions.get(agent)
+
+            def project(xyz):
+                uv, _, in_field = lens.project(cam_from_world, xyz, motion)
+                return uv, in_field
+
         # a finished agent's airframe is hidden already
         hidden = self._own_airframe_hidden(agent) if agent in self.agents else nullcontext()
         with hidden:
             return self._activity_bodies.worker_visibility(
-                self._activity_time(), invert(self._states[agent].world_from_cam), self.camera
+                self._activity_time(), cam_from_world, self.camera, project
             )
 
     def _validate_action(self, agent: Any, action: Any) -> NDArray[np.float64]:
@@ -417,9 +435,11 @@ class UavStructParallelEnv(ParallelEnv):
         cfg = self.config
         hover = np.zeros(len(ACTION_COMPONENTS))
         for agent in live:
+            before = self._states[agent]
             self._states[agent] = step_uav(
-                self._states[agent], cleaned.get(agent, hover), cfg.limits, cfg.control_period
+                before, cleaned.get(agent, hover), cfg.limits, cfg.control_period
             )
+            self._motions[agent] = Motion.between(before, self._states[agent], cfg.control_period)
         reasons = self._crashes(live)
         self.num_cycles += 1
         self._scripted_viewpoint = -1
@@ -496,7 +516,9 @@ class UavStructParallelEnv(ParallelEnv):
             cam_from_world = invert(world_from_cam)
             obs = {"gnss": gnss32, "attitude": att32}
             with self._own_airframe_hidden(agent):
-                if render:
+                if self._lens is not None:
+                    obs, landmarks = self._observe_lens(agent, cam_from_world, obs, render, need_depth)
+                elif render:
                     result = world.render(cam_from_world, self.camera, depth=need_depth)
                     image = cfg.imaging.apply(result.rgb, self._rng)
                     if cfg.observe_image:
@@ -521,6 +543,7 @@ class UavStructParallelEnv(ParallelEnv):
                 "world_from_cam": world_from_cam,
                 "prior_world_from_cam": prior,
                 "intrinsics": K.copy(),
+                "distortion": self._distortion.copy(),
                 "landmarks": landmarks,
                 "viewpoint": self._scripted_viewpoint,
                 "noise_index": noise_index,
@@ -530,6 +553,36 @@ class UavStructParallelEnv(ParallelEnv):
             }
             self._priors[agent] = prior
         return observations, infos
+
+    def _observe_lens(
+        self, agent: str, cam_from_world: NDArray[np.float64], obs: dict, render: bool, need_depth: bool
+    ) -> tuple[dict, dict]:
+        """:meth:`_observe`'s render and landmark truth through a real camera (``self._lens``)."""
+        cfg, world, lens = self.config, self.world, self._lens
+        motion = self._motions.get(agent)
+        if not render:
+            wide = {
+                name: world.landmark_truth_raycast(name, cam_from_world, lens.render_camera)
+                for name in cfg.landmark_sets
+            }
+        else:
+            moving = motion is not None and not motion.is_static
+            result = world.render(cam_from_world, lens.render_camera, depth=need_depth or moving)
+            rgb, depth = lens.warp(
+                result.rgb, result.depth, cam_from_world, motion, warp_depth=cfg.observe_depth
+            )
+            image = cfg.imaging.apply(rgb, self._rng)
+            if cfg.observe_image:
+                obs = {"image": image, **obs}
+                self._last_images[agent] = image
+            if cfg.observe_depth:
+                obs["depth"] = np.asarray(depth, dtype=np.float32)
+            wide = {
+                name: world.landmark_truth(name, cam_from_world, lens.render_camera, result)
+                for name in cfg.landmark_sets
+            }
+        landmarks = {name: lens.landmark_truth(w, cam_from_world, motion) for name, w in wide.items()}
+        return obs, landmarks
 
     # ------------------------------------------------------------------ render / close
     def render(self) -> NDArray[np.uint8] | None:
@@ -569,8 +622,12 @@ class UavStructParallelEnv(ParallelEnv):
 
     def _view(self, agent: str) -> NDArray[np.uint8]:
         """``agent``'s camera image now (its own airframe hidden), for :meth:`render`."""
+        cam_from_world = invert(self._states[agent].world_from_cam)
         with self._own_airframe_hidden(agent):
-            return self.world.render(invert(self._states[agent].world_from_cam), self.camera).rgb
+            if self._lens is None:
+                return self.world.render(cam_from_world, self.camera).rgb
+            wide = self.world.render(cam_from_world, self._lens.render_camera)
+            return self._lens.warp(wide.rgb, None, cam_from_world)[0]
 
     @contextmanager
     def _own_airframe_hidden(self, agent: str) -> Iterator[None]:

@@ -13,6 +13,7 @@ from tqdm import tqdm
 from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.outputs import OutputExistsError, StagedOutput
 from uav_struct_env.processes import WorkerDied
+from uav_struct_env.sim.lens import CAMERA_MODELS
 from uav_struct_env.site import make_site
 from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.site.as_built import TOLERANCE_MODELS
@@ -160,6 +161,13 @@ def _parser() -> CommandParser:
         help="camera effects on the rendered images: ideal (none) or camera (blur, noise, JPEG)",
     )
     p.add_argument(
+        "--camera",
+        default="paper",
+        choices=tuple(CAMERA_MODELS),
+        help="the camera: paper (ideal pinhole) or mavic2pro (lens distortion, rolling shutter, "
+        "motion blur; the localizers undistort with its coefficients)",
+    )
+    p.add_argument(
         "--lighting",
         default="fixed",
         choices=LIGHTINGS,
@@ -214,6 +222,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             as_built_scale=args.as_built_scale,
             lighting=args.lighting,
             activity=args.activity,
+            camera=args.camera,
         )
         check_site(args.site, args.stage, seed=args.seed)
         check_output_dir(args.out, overwrite=args.overwrite)
