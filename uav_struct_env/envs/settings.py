@@ -35,7 +35,7 @@ __all__ = ["NESTED", "Setting", "UndocumentedSettingError", "settings", "setting
 NESTED: dict[str, type] = {"limits": FlightLimits, "geofence": Geofence, "schedule": ScheduleSpec}
 
 #: Registries whose resolved objects are shown by name (``noise="gnss_ins"`` is stored resolved).
-_NAMED = (NOISE_MODELS, IMAGING_PRESETS, ACTIVITY_PRESETS, CAMERA_MODELS)
+_NAMED = (NOISE_MODELS, IMAGING_PRESETS, CAMERA_MODELS, ACTIVITY_PRESETS)
 
 
 class UndocumentedSettingError(ConfigError):

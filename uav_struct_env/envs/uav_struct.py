@@ -297,8 +297,8 @@ class UavStructParallelEnv(ParallelEnv):
             self._viewpoint_base = 0
             self._scripted_viewpoint = -1
         self._sensor_state = self.config.noise.start(self._rng, n)
-        self._lay_out_activity()
         self._motions = {a: Motion() for a in self.possible_agents}  # hovering at the start
+        self._lay_out_activity()
         if self.config.lighting == "random":  # a new sun for the episode
             from uav_struct_env.sim.world import random_light
 
@@ -354,7 +354,8 @@ class UavStructParallelEnv(ParallelEnv):
 
         The points are five along the worker's vertical axis (10 %, 30 %, ..., 90 % of its
         height, :data:`~uav_struct_env.site.activity.WORKER_SAMPLE_HEIGHTS`). A point counts
-        when it projects inside the image in front of the camera and the ray from the camera
+        when it appears inside the delivered image (through the ``camera``'s distortion and
+        rolling shutter) in front of the camera and the ray from the camera
         centre to it hits nothing else first (building, other activity bodies, other UAVs'
         airframes; the worker's own body is passed through, the camera's own airframe is
         hidden): ray casting, so it works with ``observe_image=False``.
@@ -366,11 +367,20 @@ class UavStructParallelEnv(ParallelEnv):
         self._check_agent(agent)
         if not self.worker_points():
             return {}
+        cam_from_world = invert(self._states[agent].world_from_cam)
+        project = None
+        if self._lens is not None:  # where the delivered image shows them (distortion, shutter)
+            lens, motion = self._lens, self._motions.get(agent)
+
+            def project(xyz):
+                uv, _, in_field = lens.project(cam_from_world, xyz, motion)
+                return uv, in_field
+
         # a finished agent's airframe is hidden already
         hidden = self._own_airframe_hidden(agent) if agent in self.agents else nullcontext()
         with hidden:
             return self._activity_bodies.worker_visibility(
-                self._activity_time(), invert(self._states[agent].world_from_cam), self.camera
+                self._activity_time(), cam_from_world, self.camera, project
             )
 
     def _validate_action(self, agent: Any, action: Any) -> NDArray[np.float64]:

@@ -10,10 +10,13 @@ environment lays out a new site activity at each reset).
 
 from __future__ import annotations
 
-import numpy as np
-from numpy.typing import ArrayLike
+from collections.abc import Callable
 
-from localization.geometry import check_transform, project
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from localization.geometry import check_transform
+from localization.geometry import project as pinhole_project
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.site.activity import (
     WORKER_HALF_EXTENTS,
@@ -61,7 +64,13 @@ class ActivityBodies:
         """(N,) body ids of the workers, in layout order."""
         return np.array([self.worker_ids[w.name] for w in self.layout.workers], dtype=np.int64)
 
-    def worker_visibility(self, t: float, cam_from_world: ArrayLike, camera: Camera) -> dict[str, float]:
+    def worker_visibility(
+        self,
+        t: float,
+        cam_from_world: ArrayLike,
+        camera: Camera,
+        project: Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.bool_]]] | None = None,
+    ) -> dict[str, float]:
         """Per worker, the fraction of its sample points a camera sees at time ``t`` (ray casting).
 
         The points are :func:`~uav_struct_env.site.activity.worker_sample_points` (five along the
@@ -69,6 +78,9 @@ class ActivityBodies:
         near plane and the ray from the camera centre to it meets nothing first but the worker's
         own body (within 2 cm): the building, the other activity bodies and every other body in
         the world (airframes: hide the camera's own first) hide it. The workers are moved to ``t``.
+        ``project`` maps world points (N, 3) to ``(uv (N, 2), usable (N,))`` in the delivered
+        image of a real camera (``sim.lens.LensView.project``: distortion, rolling shutter); the
+        default is ``camera``'s pinhole in front of its near plane.
         """
         T = check_transform("cam_from_world", cam_from_world)
         self.update(t)
@@ -77,10 +89,15 @@ class ActivityBodies:
             return {}
         per = len(WORKER_SAMPLE_HEIGHTS)
         samples = np.concatenate([worker_sample_points(w.points_at(t)) for w in workers])  # (5N, 3)
-        uv, depth = project(camera.K, T, samples)
+        if project is None:
+            uv, depth = pinhole_project(camera.K, T, samples)
+            usable = depth > camera.near
+        else:
+            uv, usable = project(samples)
         w, h = camera.width, camera.height
-        in_image = ((depth > camera.near) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5)
-                    & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5))
+        with np.errstate(invalid="ignore"):
+            in_image = (usable & (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5)
+                        & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5))
         origin = -T[:3, :3].T @ T[:3, 3]
         rays = samples - origin
         skip = np.repeat(self.worker_body_ids(), per)
