@@ -35,6 +35,7 @@ CONFIGS = {
     "paper 1280x720, light activity": ("paper", {"activity": "light"}),
     "paper 1280x720, busy activity": ("paper", {"activity": "busy"}),
     "paper 1280x720, mavic2pro camera": ("paper", {"camera": "mavic2pro"}),
+    "paper 1280x720, mavic2pro camera, busy activity": ("paper", {"camera": "mavic2pro", "activity": "busy"}),
     "train 128x72": ("train", {}),
     "train 128x72 + landmark info": ("train", {"landmark_sets": ("column_tops", "slab_corners")}),
     "train, no image + landmark info (ray-cast)": (

@@ -102,8 +102,9 @@ class EnvConfig:
         observe_depth: add ``obs["depth"]`` (float32 (H, W), metres along the optical axis).
         texture_seed: seed of the per-env concrete textures (and of ``site="random"``).
         on_crash: ``"agent"`` (a crash terminates only that agent, PettingZoo's usual
-            semantics) or ``"all"`` (it also truncates every other agent: the episode ends, as
-            SuperSuit's vector-env conversion needs).
+            semantics) or ``"all"`` (it also terminates every other agent, reason
+            ``"teammate_crash"``: the episode ends for everyone, as SuperSuit's vector-env
+            conversion and RLlib's PettingZoo wrappers need).
         show_uavs: draw every flying UAV's airframe (a 32 x 24 x 8 cm box) in the other
             UAVs' images.
         render_view_height: height in pixels of each agent's tile in ``render()``.

@@ -22,8 +22,8 @@ Per agent and step:
   ``reset(options={"viewpoint": k})``, else -1),
   ``noise_index`` (the viewpoint counter the paper noise's sign uses) and
   ``termination_reason`` (None, ``"collision_structure"``, ``"collision_uav"``,
-  ``"below_min_altitude"``, ``"above_max_altitude"``, ``"beyond_max_distance"``) and
-  ``truncation_reason`` (None, ``"max_cycles"``, ``"teammate_crash"``);
+  ``"below_min_altitude"``, ``"above_max_altitude"``, ``"beyond_max_distance"``,
+  ``"teammate_crash"``) and ``truncation_reason`` (None, ``"max_cycles"``);
 * reward ``0.0``: the base env has no localization and no task; the LocalizationWrapper adds
   the reward. ``info["reward_terms"]`` is an empty dict that sums to it.
 
@@ -34,9 +34,11 @@ the landmark truth in ``info`` are ``env.built_site``, the design moved within t
 Episode: a crash (structure within ``uav_radius``, another UAV within ``2 * uav_radius``) or
 leaving the geofence terminates that agent (it leaves ``env.agents``); after ``max_cycles``
 steps every remaining agent is truncated. With ``on_crash="all"`` (the ``train`` preset) a crash
-also truncates every other agent, ending the episode: SuperSuit's
+also terminates every other agent (``"teammate_crash"``), ending the episode: SuperSuit's
 ``pettingzoo_env_to_vec_env_v1`` cannot handle agents leaving mid-episode and its
-``black_death_v3`` wrapper does not support Dict observations.
+``black_death_v3`` wrapper does not support Dict observations; RLlib's PettingZoo wrappers end
+an episode only when all agents are terminated or all are truncated (one terminated and three
+truncated kept the finished env stepping), and the end is terminal for the team, not a time limit.
 """
 
 from __future__ import annotations
@@ -71,10 +73,14 @@ from uav_struct_env.sim.uav import ACTION_COMPONENTS, Obstacles, UavState, step_
 from uav_struct_env.site import Site, make_site
 from uav_struct_env.site.activity import SiteActivity
 
-__all__ = ["ACTION_COMPONENTS", "RESET_OPTIONS", "UavStructParallelEnv"]
+__all__ = ["ACTION_COMPONENTS", "RESET_OPTIONS", "TEAMMATE_CRASH", "UavStructParallelEnv"]
 
 #: The keys ``reset(options=...)`` accepts.
 RESET_OPTIONS = ("viewpoint",)
+
+#: ``termination_reason`` of the agents that did not crash when, with ``on_crash="all"``, a
+#: teammate's crash ended the episode (they are terminated, not truncated).
+TEAMMATE_CRASH = "teammate_crash"
 
 #: Bound on the gnss observation box (m); far outside any reachable geofence.
 GNSS_BOUND = 1.0e4
@@ -441,19 +447,20 @@ class UavStructParallelEnv(ParallelEnv):
             )
             self._motions[agent] = Motion.between(before, self._states[agent], cfg.control_period)
         reasons = self._crashes(live)
+        if cfg.on_crash == "all" and any(r is not None for r in reasons.values()):
+            # The team's episode ends here, by the dynamics and not by a time limit: everyone is
+            # terminated, so that no learner bootstraps past it and RLlib's PettingZoo wrappers
+            # (whose episode end needs all agents terminated or all truncated) see the end.
+            reasons = {a: TEAMMATE_CRASH if r is None else r for a, r in reasons.items()}
         self.num_cycles += 1
         self._scripted_viewpoint = -1
         observations, infos = self._observe(live, dt=cfg.control_period, reasons=reasons)
         terminations = {a: reasons[a] is not None for a in live}
-        crashed = [a for a in live if terminations[a]]
         truncations = {}
         for a in live:
             why = None
-            if not terminations[a]:
-                if cfg.on_crash == "all" and crashed:
-                    why = "teammate_crash"
-                elif self.num_cycles >= self.max_cycles:
-                    why = "max_cycles"
+            if not terminations[a] and self.num_cycles >= self.max_cycles:
+                why = "max_cycles"
             truncations[a] = why is not None
             infos[a]["truncation_reason"] = why
         rewards = dict.fromkeys(live, 0.0)

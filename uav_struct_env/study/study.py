@@ -231,36 +231,46 @@ def _parser() -> CommandParser:
     return p
 
 
+def study_config(args, **overrides) -> StudyConfig:
+    """The :class:`StudyConfig` of parsed ``uav-struct study`` options; ``overrides`` replace fields.
+
+    ``uav-struct sweep`` takes the same options and builds its runs' settings here too.
+    """
+    # The command's default is the full method from pixels (StudyConfig keeps "projection").
+    fields = dict(
+        seed=args.seed,
+        detector=args.detector,
+        association=args.association,
+        noise=args.noise,
+        site=args.site,
+        n_viewpoints=QUICK_VIEWPOINTS if args.quick else 10,
+        pixel_sigma=args.pixel_sigma,
+        miss_rate=args.miss_rate,
+        false_positives=args.false_positives,
+        renderer=args.renderer,
+        imaging=args.imaging,
+        detector_model=args.detector_model,
+        refiner_model=args.refiner_model,
+        workers=args.workers,
+        stage=args.stage,
+        as_built=args.as_built,
+        as_built_scale=args.as_built_scale,
+        lighting=args.lighting,
+        camera=args.camera,
+        activity=args.activity,
+        track_workers=args.track_workers,
+        worker_pixel_sigma=args.worker_pixel_sigma,
+        upright_workers=args.upright_workers,
+    )
+    fields.update(overrides)
+    return StudyConfig(**fields)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     args = _parser().parse_args(argv)
     try:
-        # The command's default is the full method from pixels (StudyConfig keeps "projection").
-        config = StudyConfig(
-            seed=args.seed,
-            detector=args.detector,
-            association=args.association,
-            noise=args.noise,
-            site=args.site,
-            n_viewpoints=QUICK_VIEWPOINTS if args.quick else 10,
-            pixel_sigma=args.pixel_sigma,
-            miss_rate=args.miss_rate,
-            false_positives=args.false_positives,
-            renderer=args.renderer,
-            imaging=args.imaging,
-            detector_model=args.detector_model,
-            refiner_model=args.refiner_model,
-            workers=args.workers,
-            stage=args.stage,
-            as_built=args.as_built,
-            as_built_scale=args.as_built_scale,
-            lighting=args.lighting,
-            track_workers=args.track_workers,
-            worker_pixel_sigma=args.worker_pixel_sigma,
-            upright_workers=args.upright_workers,
-            activity=args.activity,
-            camera=args.camera,
-        )
+        config = study_config(args)
         check_site(args.site, args.stage, seed=args.seed)
         check_output_dir(args.out, overwrite=args.overwrite)
     except INPUT_ERRORS as err:

@@ -8,6 +8,7 @@ wenv = make_train_env("state")                             # a documented traini
 :class:`LayoutObservation` (layout), :class:`RewardWrapper` (a reward object's terms) and
 :class:`DropKeys` (drop the image); :class:`FlattenObservation` turns the Dict into one vector;
 :class:`WorkerTracking` tracks the site's workers from all cameras (info and a reward option);
+:class:`TensorInfo` keeps only numeric, fixed-shape info entries (TorchRL);
 the stack itself is :mod:`uav_struct_env.stack`.
 """
 
@@ -36,6 +37,7 @@ from uav_struct_env.wrappers.rewards import (
     UncertaintyReward,
     make_reward,
 )
+from uav_struct_env.wrappers.tensor_info import TensorInfo
 from uav_struct_env.wrappers.tracking import TRACKING_INFO_KEYS, TrackingReward, WorkerTracking
 
 __all__ = [
@@ -55,6 +57,7 @@ __all__ = [
     "LocalizePoses",
     "Reward",
     "RewardWrapper",
+    "TensorInfo",
     "TrackingReward",
     "TrainConfig",
     "UncertaintyReward",
