@@ -74,6 +74,11 @@ class LocalizationWrapper(ParallelWrapper):
             committed one).
         privileged: put the simulator's true visible fraction in ``layout[0]`` (privileged
             information a real UAV does not have; default: the deployable inlier fraction).
+        temporal: filter each agent's pose over time (GNSS, attitude, commanded motion and the
+            visual fixes; :mod:`~uav_struct_env.wrappers.temporal`): ``pose`` is the filtered
+            pose at every step and its prediction is the next frame's association prior.
+        filter_noise: with ``temporal``, the filters' :class:`~localization.temporal.FilterNoise`
+            (default: matched to the env's sensor model).
 
     Raises:
         ConfigError: for an unknown option or when the env does not provide the landmark truth.
@@ -100,6 +105,8 @@ class LocalizationWrapper(ParallelWrapper):
         detector_model: str | Path | None = None,
         refiner_model: str | Path | None = None,
         privileged: bool = False,
+        temporal: bool = False,
+        filter_noise: Any = None,
     ) -> None:
         check_choice("mode", mode, MODES, error=ConfigError)
         reward_obj = make_reward(
@@ -121,7 +128,7 @@ class LocalizationWrapper(ParallelWrapper):
             refiner_model=refiner_model,
             localizer_kwargs=localizer_kwargs or {},
         )
-        chain: Any = LocalizePoses(env, spec)
+        chain: Any = LocalizePoses(env, spec, temporal=temporal, filter_noise=filter_noise)
         self.poses = chain
         chain = LayoutObservation(chain, privileged=privileged)
         chain = RewardWrapper(chain, reward_obj)
