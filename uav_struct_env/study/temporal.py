@@ -6,12 +6,15 @@
 Four UAVs fly a seeded scripted path around the paper's site (an orbit whose radius swings
 between ``--near`` and ``--far`` m from the site centre at a low altitude, so every UAV passes
 a few metres from the structure), each with its own phase. The same episode (same env seed,
-same actions, same detector seed) is localized twice, through
-:class:`~uav_struct_env.wrappers.LocalizationWrapper` without and with ``temporal=True``, for
-each sensor model (``gnss_ins``, ``gnss_degraded``). Per step and agent it records the
-translation and rotation error of the single-frame pose (None when the frame failed), of the
-filtered pose (every step) and of the onboard prior (GNSS + attitude; during an outage the
-last fix held), whether GNSS had a fix and whether the frame's fix was accepted.
+same actions, same detector seed) is localized three times through
+:class:`~uav_struct_env.wrappers.LocalizationWrapper` (:data:`RUNS`): frame by frame, with
+``temporal=True``, and with ``temporal=True`` but no GNSS / attitude bias states (the ablation),
+for each sensor model (``gnss_ins``, ``gnss_degraded``). The UAVs fly the commanded actions
+plus a seeded disturbance (:class:`ActionDisturbance`, wind), which the filter does not see.
+Per step and agent it records the translation and rotation error of the single-frame pose
+(NaN when the frame failed), of the filtered poses (every step) and of the onboard prior
+(GNSS + attitude; during an outage the last fix held), whether GNSS had a fix and whether the
+frame's fix was accepted.
 
 The scripted pilot steers by the simulator's true state (standing in for the UAV's own flight
 controller); the localizers and the filter never see it: the filter's motion input is the
@@ -25,6 +28,7 @@ and the recovery after missed fixes) and ``temporal.png`` (error over time of on
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -38,11 +42,15 @@ from uav_struct_env.outputs import prepare_output_dir, save_figure
 from uav_struct_env.provenance import software
 from uav_struct_env.sim.uav import ACTION_COMPONENTS, FlightLimits, UavState, wrap_angle
 from uav_struct_env.study.report import _clean, write_results_json
+from uav_struct_env.wrappers.base import ParallelWrapper
 
 __all__ = ["NOISES", "fly", "main", "pilot_action", "summarize", "target_position"]
 
 NOISES = ("gnss_ins", "gnss_degraded")
-METHODS = ("single_frame", "filtered", "prior")
+#: The localizations of each episode: frame by frame, filtered, filtered without bias states.
+RUNS = ("single_frame", "filtered", "filtered_no_bias")
+#: What results.json reports per sensor model: the runs and the onboard prior itself.
+METHODS = (*RUNS, "prior")
 #: A pose is "good" within these (translation m, rotation deg).
 GOOD = (0.5, 2.0)
 #: The filtered error counts as recovered below this, m.
@@ -77,30 +85,70 @@ def pilot_action(state: UavState, goal: np.ndarray, look_at: np.ndarray, limits:
     return np.clip(a, -1.0, 1.0).astype(np.float32)
 
 
-def _wrapped(noise: str, temporal: bool, steps: int, miss_rate: float, false_positives: float):
-    from uav_struct_env.wrappers import make_localization_env
+class ActionDisturbance(ParallelWrapper):
+    """Adds seeded white noise (sigma ``scale``) to the velocity components of the applied actions.
 
-    return make_localization_env(
-        "all",
-        preset="paper",
-        env_overrides=dict(noise=noise, observe_image=False, max_cycles=steps),
-        temporal=temporal,
+    Stands in for wind and tracking error: the UAV flies the disturbed command while everything
+    above this wrapper (the filter's motion input) knows only the commanded one. The kinematic
+    env alone would follow every command exactly. ``scale = 0.05`` is 0.5 m/s horizontally at
+    the default 10 m/s limit, the filter's ``velocity_sigma``. Yaw and gimbal rates, which the
+    autopilot and the gimbal hold tightly, are left as commanded.
+    """
+
+    def __init__(self, env, scale: float) -> None:
+        super().__init__(env)
+        self.scale = float(scale)
+        self._rng = np.random.default_rng()
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        """Reset the env; ``seed`` also seeds the disturbance."""
+        if seed is not None:
+            self._rng = np.random.default_rng([int(seed), 0xA1D])
+        return self.env.reset(seed=seed, options=options)
+
+    def step(self, actions: dict):
+        """Step with every action disturbed (agents in a fixed order: reproducible)."""
+        sigma = self.scale * np.array([1.0, 1.0, 1.0, 0.0, 0.0])  # forward, left, up
+        noisy = {a: np.asarray(actions[a], dtype=np.float64)
+                 + sigma * self._rng.standard_normal(len(ACTION_COMPONENTS)) for a in sorted(actions)}
+        return self.env.step({a: np.clip(v, -1.0, 1.0).astype(np.float32) for a, v in noisy.items()})
+
+
+def _wrapped(noise: str, run: str, steps: int, miss_rate: float, false_positives: float,
+             action_noise: float):
+    import uav_struct_env
+    from uav_struct_env.wrappers import LocalizationWrapper
+    from uav_struct_env.wrappers.temporal import filter_noise_for
+
+    env = uav_struct_env.parallel_env(
+        "paper", noise=noise, observe_image=False, max_cycles=steps, landmark_sets=("all",)
+    )
+    filter_noise = None
+    if run == "filtered_no_bias":
+        filter_noise = dataclasses.replace(
+            filter_noise_for(env.config.noise), estimate_gnss_bias=False, estimate_attitude_bias=False
+        )
+    return LocalizationWrapper(
+        ActionDisturbance(env, action_noise),
+        landmarks="all",
+        temporal=run != "single_frame",
+        filter_noise=filter_noise,
         miss_rate=miss_rate,
         false_positives=false_positives,
     )
 
 
 def fly(noise: str, seed: int, steps: int, *, near: float = 9.0, far: float = 30.0, altitude: float = 8.0,
-        miss_rate: float = 0.1, false_positives: float = 1.0, progress: bool = False) -> dict[str, dict]:
-    """One seeded episode localized single-frame and filtered; per agent, per-step records.
+        miss_rate: float = 0.1, false_positives: float = 1.0, action_noise: float = 0.05,
+        progress: bool = False) -> dict[str, dict]:
+    """One seeded episode localized by each of :data:`RUNS`; per agent, per-step records.
 
-    Returns ``{agent: {"t_single", "r_single", "t_filtered", "r_filtered", "t_prior", "r_prior",
-    "gnss_fix", "fix_accepted", "fix_gated"}}``, lists over the steps the agent flew (NaN:
-    no pose).
+    Returns ``{agent: {"t_<method>", "r_<method>" for every method of :data:`METHODS`,
+    "gnss_fix", "fix_accepted", "fix_gated"}}`` (the last three of the ``filtered`` run), lists
+    over the steps the agent flew (NaN: no pose).
     """
-    runs = {name: _wrapped(noise, name == "filtered", steps, miss_rate, false_positives)
-            for name in ("single", "filtered")}
-    base = runs["single"].unwrapped
+    runs = {name: _wrapped(noise, name, steps, miss_rate, false_positives, action_noise) for name in RUNS}
+    base = runs["single_frame"].unwrapped
     center = np.array([*base.site.center[:2], 0.5 * base.site.center[2]])
     cfg = base.config
     rec: dict[str, dict] = {}
@@ -111,7 +159,7 @@ def fly(noise: str, seed: int, steps: int, *, near: float = 9.0, far: float = 30
     for k in bar:
         for name in runs:
             _record(rec, name, infos[name])
-        agents = list(runs["single"].agents)
+        agents = list(runs["single_frame"].agents)
         if not agents:
             break
         t_next = (k + 1) * cfg.control_period
@@ -127,24 +175,26 @@ def fly(noise: str, seed: int, steps: int, *, near: float = 9.0, far: float = 30
     return rec
 
 
+_KEYS = (*(f"{x}_{m}" for m in METHODS for x in "tr"), "gnss_fix", "fix_accepted", "fix_gated")
+
+
 def _record(rec: dict, name: str, infos: dict) -> None:
     nan = float("nan")
     for agent, info in infos.items():
-        r = rec.setdefault(agent, {key: [] for key in (
-            "t_single", "r_single", "t_filtered", "r_filtered", "t_prior", "r_prior",
-            "gnss_fix", "fix_accepted", "fix_gated")})
+        r = rec.setdefault(agent, {key: [] for key in _KEYS})
         loc = info["localization"]
-        if name == "single":
+        if name == "single_frame":
             ok = loc["success"]
-            r["t_single"].append(loc["translation_error_m"] if ok else nan)
-            r["r_single"].append(loc["rotation_error_deg"] if ok else nan)
+            r["t_single_frame"].append(loc["translation_error_m"] if ok else nan)
+            r["r_single_frame"].append(loc["rotation_error_deg"] if ok else nan)
             gt = invert(info["world_from_cam"])
             t, d = pose_errors(invert(info["prior_world_from_cam"]), gt)
             r["t_prior"].append(float(t))
             r["r_prior"].append(float(d))
-        else:
-            r["t_filtered"].append(loc["filtered_translation_error_m"])
-            r["r_filtered"].append(loc["filtered_rotation_error_deg"])
+            continue
+        r[f"t_{name}"].append(loc["filtered_translation_error_m"])
+        r[f"r_{name}"].append(loc["filtered_rotation_error_deg"])
+        if name == "filtered":
             r["gnss_fix"].append(bool(loc["gnss_fix"]))
             r["fix_accepted"].append(bool(loc["fix_accepted"]))
             r["fix_gated"].append(bool(loc["success"] and not loc["fix_accepted"]))
@@ -180,13 +230,12 @@ def recovery(t_filtered: Sequence[float], accepted: Sequence[bool], threshold: f
 
 def summarize(records: Sequence[dict]) -> dict:
     """The results of one sensor model over episodes (``fly`` outputs)."""
-    cat = {key: np.concatenate([np.asarray(r[key], dtype=np.float64) for rec in records for r in rec.values()])
-           for key in ("t_single", "r_single", "t_filtered", "r_filtered", "t_prior", "r_prior",
-                       "gnss_fix", "fix_accepted", "fix_gated")}
+    rows = [r for rec in records for r in rec.values()]
+    cat = {key: np.concatenate([np.asarray(r[key], dtype=np.float64) for r in rows]) for key in _KEYS}
     n = len(cat["t_prior"])
     out: dict = {"steps": n, "gnss_fix_share": float(cat["gnss_fix"].mean())}
-    for m, key in (("single_frame", "single"), ("filtered", "filtered"), ("prior", "prior")):
-        t, r = cat[f"t_{key}"], cat[f"r_{key}"]
+    for m in METHODS:
+        t, r = cat[f"t_{m}"], cat[f"r_{m}"]
         has = np.isfinite(t)
         good = has & (t < GOOD[0]) & (r < GOOD[1])
         out[m] = {
@@ -223,8 +272,12 @@ def plot(records: dict[str, dict], path: Path, agent: str = "uav_0") -> Path:
         r = rec[agent]
         k = np.arange(len(r["t_prior"]))
         ax.semilogy(k, r["t_prior"], color="0.6", lw=1, label="onboard prior (GNSS + attitude)")
-        ax.semilogy(k, r["t_single"], "o", ms=3, color="tab:orange", label="single frame (failed: no dot)")
+        ax.semilogy(k, r["t_single_frame"], "o", ms=3, color="tab:orange",
+                    label="single frame (failed: no dot)")
         ax.semilogy(k, r["t_filtered"], color="tab:blue", lw=1.5, label="filtered")
+        acc = np.asarray(r["fix_accepted"])
+        ax.semilogy(k[acc], np.asarray(r["t_filtered"])[acc], "|", ms=7, color="tab:blue",
+                    label="filtered: fix accepted")
         for j in np.flatnonzero(~np.asarray(r["gnss_fix"])):
             ax.axvspan(j - 0.5, j + 0.5, color="tab:red", alpha=0.12, lw=0)
         ax.set_ylabel("translation error (m)")
@@ -240,24 +293,30 @@ def plot(records: dict[str, dict], path: Path, agent: str = "uav_0") -> Path:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line: fly, localize, write ``results.json`` and ``temporal.png`` into ``--out``."""
-    p = argparse.ArgumentParser(prog="python -m uav_struct_env.study.temporal", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(
+        prog="python -m uav_struct_env.study.temporal", description=__doc__.split("\n")[0]
+    )
     p.add_argument("--out", required=True, type=Path)
     p.add_argument("--seeds", type=int, default=3, help="episodes per sensor model (seeds 0..N-1)")
     p.add_argument("--steps", type=int, default=160, help="steps per episode (0.5 s each)")
     p.add_argument("--noise", nargs="+", choices=NOISES, default=list(NOISES))
+    p.add_argument("--action-noise", type=float, default=0.05,
+                   help="sigma of the disturbance added to each applied action component (wind)")
     p.add_argument("--overwrite", action="store_true")
     p.add_argument("--no-progress", action="store_true")
     args = p.parse_args(argv)
     out = prepare_output_dir(args.out, overwrite=args.overwrite)
     results = {"config": {"seeds": args.seeds, "steps": args.steps, "noise": args.noise, "landmarks": "all",
                           "preset": "paper", "observe_image": False, "miss_rate": 0.1, "false_positives": 1.0,
+                          "action_noise": args.action_noise,
                           "path": {"near_m": 9.0, "far_m": 30.0, "altitude_m": 8.0}},
                "software": software(), "noise": {}}
     first = {}
     for noise in args.noise:
         recs = []
         for seed in range(args.seeds):
-            recs.append(fly(noise, seed, args.steps, progress=not args.no_progress))
+            recs.append(fly(noise, seed, args.steps, action_noise=args.action_noise,
+                            progress=not args.no_progress))
         first[noise] = recs[0]
         results["noise"][noise] = summarize(recs)
     write_results_json(out / "results.json", _clean(results))
@@ -266,9 +325,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{noise}: steps {r['steps']}, GNSS fix {100 * r['gnss_fix_share']:.0f} %")
         for m in METHODS:
             x = r[m]
-            print(f"  {m:13s} pose {100 * x['pose_share']:5.1f} %  good {100 * x[f'within_{GOOD[0]}m_{GOOD[1]}deg_share']:5.1f} %"
-                  f"  t {x['translation_error_m']['median']:.3f} / {x['translation_error_m']['p90']:.3f} m"
-                  f"  r {x['rotation_error_deg']['median']:.2f} / {x['rotation_error_deg']['p90']:.2f} deg")
+            t, d = x["translation_error_m"], x["rotation_error_deg"]
+            good = x[f"within_{GOOD[0]}m_{GOOD[1]}deg_share"]
+            print(f"  {m:16s} pose {100 * x['pose_share']:5.1f} %  good {100 * good:5.1f} %"
+                  f"  t {t['median']:.3f} / {t['p90']:.3f} m  r {d['median']:.2f} / {d['p90']:.2f} deg")
+        rec = r["filtered"]["recovery"]
+        print(f"  filtered: {r['filtered']['fixes_gated']} fixes gated; {rec['gaps']} gaps without a fix, "
+              f"max error in a gap median {rec['max_error_in_gap_m']['median']:.3f} m, steps to recover "
+              f"below {RECOVERED_M} m median {rec['steps_to_recover']['median']} "
+              f"max {rec['steps_to_recover']['max']}")
     print(f"wrote {out / 'results.json'} and {out / 'temporal.png'}")
     return 0
 
