@@ -40,6 +40,7 @@ and a multipath jump of the GNSS are rejected this way.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,7 +52,7 @@ from localization.checks import check_number
 from localization.geometry import check_transform, invert, so3_exp
 from localization.pnp import PriorSigmas, pose_difference
 
-__all__ = ["FilterNoise", "PoseFilter", "Update"]
+__all__ = ["FilterNoise", "PoseFilter", "Update", "attitude_of"]
 
 _N = 12  # error-state dimension
 _C, _TH, _BG, _BA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
@@ -71,6 +72,17 @@ def _triple(owner: str, name: str, value: ArrayLike) -> tuple[float, float, floa
 
 def _wrap(a: NDArray[np.float64]) -> NDArray[np.float64]:
     return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def attitude_of(world_from_cam: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`~localization.attitude.attitude_from_world_from_cam` without scipy's gimbal-lock warning.
+
+    At pitch +-90 deg (a camera looking straight down) roll and yaw are not separable; the
+    filter then skips the attitude update and says so (:meth:`PoseFilter.update_attitude`).
+    """
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Gimbal lock detected", category=UserWarning)
+        return attitude_from_world_from_cam(world_from_cam)
 
 
 @dataclass(frozen=True)
@@ -317,7 +329,7 @@ class PoseFilter:
         """Fuse one (roll, pitch, yaw) reading, rad (:mod:`localization.attitude`)."""
         self._check_started()
         z = self._vector("attitude", attitude)
-        _, est = attitude_from_world_from_cam(self.world_from_cam)
+        _, est = attitude_of(self.world_from_cam)
         if abs(math.cos(est[1])) < _GIMBAL_LOCK_COS:
             return Update("attitude", False, float("nan"), self.noise.gate(3),
                           f"pitch {math.degrees(est[1]):.1f} deg is at gimbal lock: roll and yaw undefined")
@@ -389,7 +401,7 @@ class PoseFilter:
             Tp, Tm = T.copy(), T.copy()
             Tp[:3, :3] = so3_exp(e) @ self.rotation
             Tm[:3, :3] = so3_exp(-e) @ self.rotation
-            diff = attitude_from_world_from_cam(Tp)[1] - attitude_from_world_from_cam(Tm)[1]
+            diff = attitude_of(Tp)[1] - attitude_of(Tm)[1]
             J[:, k] = _wrap(diff) / (2 * h)
         return J
 

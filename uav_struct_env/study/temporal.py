@@ -155,12 +155,12 @@ def fly(noise: str, seed: int, steps: int, *, near: float = 9.0, far: float = 30
     infos = {}
     for name, w in runs.items():
         _, infos[name] = w.reset(seed=seed)
-    bar = tqdm(range(steps), desc=f"{noise} seed {seed}", unit="step", disable=not progress, leave=False)
+    bar = tqdm(range(steps + 1), desc=f"{noise} seed {seed}", unit="step", disable=not progress, leave=False)
     for k in bar:
         for name in runs:
             _record(rec, name, infos[name])
         agents = list(runs["single_frame"].agents)
-        if not agents:
+        if not agents or k == steps:
             break
         t_next = (k + 1) * cfg.control_period
         actions = {}

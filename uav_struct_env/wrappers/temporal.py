@@ -23,9 +23,8 @@ from typing import Any
 import numpy as np
 
 from localization import PoseEstimate, PriorSigmas
-from localization.attitude import attitude_from_world_from_cam
 from localization.geometry import so3_log
-from localization.temporal import FilterNoise, PoseFilter, Update
+from localization.temporal import FilterNoise, PoseFilter, Update, attitude_of
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.sensors import DegradedGnssNoise, GnssInsNoise, NoNoise, PaperNoise
 from uav_struct_env.sim.uav import ACTION_COMPONENTS, Obstacles, UavState, step_uav
@@ -150,7 +149,7 @@ class PoseTracks:
         """World-frame displacement and rotation vector of ``action`` from the filtered pose."""
         a = np.zeros(len(ACTION_COMPONENTS)) if action is None else np.asarray(action, dtype=np.float64)
         a = np.clip(a, -1.0, 1.0)
-        position, (_, pitch, yaw) = attitude_from_world_from_cam(filt.world_from_cam)
+        position, (_, pitch, yaw) = attitude_of(filt.world_from_cam)
         now = UavState.make(position, yaw, pitch)
         nxt = step_uav(now, a, self._limits, self._dt)
         R0, R1 = now.world_from_cam[:3, :3], nxt.world_from_cam[:3, :3]
