@@ -104,6 +104,11 @@ class FilterNoise:
             GNSS reading's noise as if it were white (the ablation of docs/temporal.md).
         estimate_attitude_bias: likewise for ``b_a``.
         gate_probability: chi-square quantile of every update's gate.
+        max_rejections: after this many consecutive rejected GNSS or attitude readings the next
+            one is fused ungated, the part of the pose it measures (position or rotation) reset
+            to unknown first: the filter is then more likely wrong than the sensor (a wrong
+            visual fix accepted, a disturbance beyond the motion noise). An accepted visual fix
+            restarts the count (it confirms the filter). Visual fixes are always gated.
         min_prior_sigmas: floors of :meth:`PoseFilter.prior_sigmas`: (position m, rotation rad).
     """
 
@@ -117,6 +122,7 @@ class FilterNoise:
     estimate_gnss_bias: bool = True
     estimate_attitude_bias: bool = True
     gate_probability: float = 0.999
+    max_rejections: int = 10
     min_prior_sigmas: tuple[float, float] = (0.05, math.radians(0.1))
 
     def __post_init__(self) -> None:
@@ -126,6 +132,7 @@ class FilterNoise:
             object.__setattr__(self, name, _triple("FilterNoise", name, getattr(self, name)))
         check_number("FilterNoise.gnss_bias_tau", self.gnss_bias_tau, 0, lo_open=True)
         check_number("FilterNoise.gate_probability", self.gate_probability, 0, 1, lo_open=True, hi_open=True)
+        check_number("FilterNoise.max_rejections", self.max_rejections, 1, integer=True)
         floors = tuple(self.min_prior_sigmas)
         if len(floors) != 2:
             raise ValueError(
@@ -153,7 +160,8 @@ class Update:
         accepted: the update was applied (NIS within the gate).
         nis: normalized innovation squared ``y^T S^-1 y`` (NaN when not computed).
         gate: the chi-square gate it was compared with.
-        reason: why it was rejected (with the numbers), or None.
+        reason: why it was rejected (with the numbers), or why an inconsistent reading was
+            fused anyway (``max_rejections``); None for a consistent accepted update.
     """
 
     kind: str
@@ -185,6 +193,7 @@ class PoseFilter:
         self.attitude_bias = np.zeros(3)
         self.covariance = np.zeros((_N, _N))
         self._bias_scale = 1.0
+        self._rejections = {"gnss": 0, "attitude": 0}
 
     # ------------------------------------------------------------------ state
     @property
@@ -242,6 +251,7 @@ class PoseFilter:
         self.gnss_bias = np.zeros(3)
         self.attitude_bias = np.zeros(3)
         self._bias_scale = 1.0
+        self._rejections = {"gnss": 0, "attitude": 0}
         n = self.noise
         self.covariance = np.diag(np.concatenate([
             pos_sig**2,
@@ -377,10 +387,31 @@ class PoseFilter:
             return Update(
                 kind, False, nis, gate, f"the {kind} innovation covariance is not positive definite"
             )
+        reason = None
         if nis > gate:
-            return Update(kind, False, nis, gate,
-                          f"{kind} inconsistent with the prediction: NIS {nis:.3g} > gate {gate:.3g} "
-                          f"(chi-square {len(y)} dof, p = {self.noise.gate_probability})")
+            reason = (f"{kind} inconsistent with the prediction: NIS {nis:.3g} > gate {gate:.3g} "
+                      f"(chi-square {len(y)} dof, p = {self.noise.gate_probability})")
+            streak = self._rejections.get(kind)
+            if streak is None or streak < self.noise.max_rejections:
+                if streak is not None:
+                    self._rejections[kind] = streak + 1
+                return Update(kind, False, nis, gate, reason)
+            reason = f"fused after {streak} rejections in a row, the pose part it measures reset: {reason}"
+            # the pose was wrong, not the sensor: what this sensor measures of the pose (position
+            # or rotation) starts again unknown, so the reading sets it and the biases keep theirs
+            dims = [d for d in range(6) if np.any(H[:, d])]
+            P = self.covariance.copy()
+            P[dims, :] = 0.0
+            P[:, dims] = 0.0
+            unknown = _UNKNOWN_POSITION_M if dims[0] < 3 else _UNKNOWN_ROTATION_RAD
+            P[dims, dims] = unknown**2
+            self.covariance = P
+            S = H @ P @ H.T + R
+            K = np.linalg.solve(S, H @ P).T
+        if kind in self._rejections:
+            self._rejections[kind] = 0
+        else:  # an accepted visual fix confirms the filter: the sensors' streaks start again
+            self._rejections = dict.fromkeys(self._rejections, 0)
         dx = K @ y
         I_KH = np.eye(_N) - K @ H
         self.covariance = I_KH @ P @ I_KH.T + K @ R @ K.T  # Joseph form
@@ -389,7 +420,7 @@ class PoseFilter:
         self.gnss_bias = self.gnss_bias + dx[_BG]
         self.attitude_bias = self.attitude_bias + dx[_BA]
         self._symmetrize()
-        return Update(kind, True, nis, gate)
+        return Update(kind, True, nis, gate, reason)
 
     def _euler_jacobian(self, euler: NDArray[np.float64], h: float = 1e-6) -> NDArray[np.float64]:
         """Jacobian of ``euler(exp(dtheta) R)`` in ``dtheta`` at 0 (central differences)."""

@@ -142,11 +142,17 @@ def test_prediction_through_an_outage_grows_the_covariance_then_a_fix_shrinks_it
     assert np.all(filt.pose_std[:3] < 0.11)
 
 
-def test_gnss_jump_is_gated():
+def test_gnss_jump_is_gated_as_long_as_fixes_confirm_the_filter():
     _, _, filt, truth = run(3, n_steps=40)
     jump = truth[-1][:3, 3] + filt.gnss_bias + np.array([0.0, 15.0, 0.0])
-    upd = filt.update_gnss(jump)
-    assert not upd.accepted and upd.kind == "gnss"
+    rng = np.random.default_rng(0)
+    for _ in range(2 * NOISE.max_rejections):
+        upd = filt.update_gnss(jump)
+        assert not upd.accepted and upd.kind == "gnss"
+        assert filt.update_pose(fix_from(truth[-1], FIX_COV, rng), FIX_COV).accepted
+    # without fixes the jump persists beyond max_rejections: the GNSS is believed again
+    ups = [filt.update_gnss(jump) for _ in range(NOISE.max_rejections + 1)]
+    assert [u.accepted for u in ups] == [False] * NOISE.max_rejections + [True]
 
 
 def test_bias_estimation_recovers_the_gnss_bias():
@@ -191,3 +197,19 @@ def test_bad_input_is_named():
         FilterNoise(gnss_bias_sigma=(1.0, 2.0))
     with pytest.raises(TypeError, match="FilterNoise"):
         PoseFilter(noise={"velocity_sigma": 1})
+
+
+def test_a_wrong_filter_recovers_through_repeated_sensor_readings():
+    """A filter sure of a pose 20 deg off in yaw: attitude readings are gated, then fused."""
+    truth = orbit(1)[0]
+    _, att = attitude_from_world_from_cam(truth)
+    wrong = world_from_cam_from_attitude(truth[:3, 3], att + [0.0, 0.0, math.radians(20)])
+    filt = PoseFilter(NOISE)
+    filt.reset_pose(wrong, 0.1, math.radians(0.1))
+    updates = [filt.update_attitude(att) for _ in range(NOISE.max_rejections + 1)]
+    assert not any(u.accepted for u in updates[:-1])
+    assert updates[-1].accepted and "rejections in a row" in updates[-1].reason
+    for _ in range(5):
+        filt.predict(DT)
+        filt.update_attitude(att)
+    assert pose_errors(filt.cam_from_world, invert(truth))[1] < 3.0
