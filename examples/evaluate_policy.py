@@ -1,8 +1,10 @@
 """Compare a trained viewpoint policy with random and scripted baselines over the same seeds.
 
-Policies: ``ppo`` (a model saved by ``train_viewpoint_ppo.py``, deterministic actions), ``random``
-(uniform actions), ``hold`` (hover at the starting viewpoint) and ``orbit`` (fly sideways around
-the building at 5 m/s, turning towards its centre from the estimated position). Every policy runs
+Policies: ``ppo`` (a model saved by ``train_viewpoint_ppo.py``, deterministic actions) and the
+scripted baselines of :mod:`uav_struct_env.baselines`: ``random`` (uniform actions), ``hold``
+(hover at the starting viewpoint), ``orbit`` (fly sideways around the building at 5 m/s, turning
+towards its centre from the estimated position) and ``greedy`` (each step the action whose
+predicted viewpoint has the lowest Cramér-Rao bound of the agent's own position). Every policy runs
 the same ``episodes`` episodes, seeds ``seed, seed + 1, ...`` (training starts at small seeds and
 continues each copy's stream, so the default 10_000 + i are unseen).
 
@@ -36,7 +38,6 @@ holds only SB3's ``vecnormalize.pkl``; it is read only with ``--trust-pickle``.
 
 from __future__ import annotations
 
-import math
 import pickle
 import sys
 import time
@@ -46,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from uav_struct_env.baselines import BASELINES, make_baseline
 from uav_struct_env.errors import UsageError
 from uav_struct_env.outputs import atomic_write_json, save_figure
 from uav_struct_env.validate import (
@@ -57,7 +59,7 @@ from uav_struct_env.validate import (
     refuse,
 )
 
-POLICIES = ("ppo", "random", "hold", "orbit")
+POLICIES = ("ppo", *BASELINES)
 DEFAULTS: dict[str, Any] = {
     "model": None,
     "config": "state",
@@ -108,31 +110,6 @@ class PpoPolicy:
             batch = self.norm(batch)
         actions, _ = self.model.predict(batch, deterministic=True)
         return {a: actions[i].astype(np.float32) for i, a in enumerate(agents)}
-
-
-class RandomPolicy:
-    def __init__(self, seed: int) -> None:
-        self.rng = np.random.default_rng(seed)
-
-    def __call__(self, obs, env):
-        return {a: self.rng.uniform(-1, 1, 5).astype(np.float32) for a in obs}
-
-
-def hold_policy(obs, env):
-    return {a: np.zeros(5, np.float32) for a in obs}
-
-
-def orbit_policy(obs, env, speed: float = 0.5, gain: float = 2.0):
-    """Sideways at ``speed`` x 10 m/s, yaw towards the site centre from the estimated pose."""
-    c = env.unwrapped.site.center
-    out = {}
-    for a, o in obs.items():
-        p = o["pose"][:3]
-        yaw = float(o["attitude"][2])
-        want = math.atan2(c[1] - p[1], c[0] - p[0])
-        err = (want - yaw + math.pi) % (2 * math.pi) - math.pi
-        out[a] = np.array([0.0, speed, 0.0, np.clip(gain * err, -1, 1), 0.0], np.float32)
-    return out
 
 
 def run_policy(policy, env, seeds) -> dict[str, Any]:
@@ -337,12 +314,7 @@ def main(**kwargs: Any) -> dict[str, Any]:
         env.close()
         raise
     for name in policies:
-        policy = {
-            "ppo": lambda: ppo,
-            "random": lambda: RandomPolicy(opt["seed"]),
-            "hold": lambda: hold_policy,
-            "orbit": lambda: orbit_policy,
-        }[name]()
+        policy = ppo if name == "ppo" else make_baseline(name, env, seed=opt["seed"])
         t0 = time.perf_counter()
         rec = run_policy(policy, env, seeds)
         results[name] = {

@@ -101,16 +101,16 @@ def test_evaluate_compares_all_policies_on_the_same_seeds(trained, tmp_path, mon
         plot=str(tmp_path / "eval.png"),
         json_out=str(tmp_path / "eval.json"),
     )
-    assert set(summary["results"]) == {"ppo", "random", "hold", "orbit"}
+    assert set(summary["results"]) == {"ppo", "random", "hold", "orbit", "greedy"}
     assert summary["seeds"] == [10_000, 10_001]
     for r in summary["results"].values():
         assert r["final_step"]["n"] == 8  # 2 episodes x 4 agents
     # Every policy started its episodes from the same seeds, in order, and so from the same
     # scenes (identical first observations); the two seeds give two different scenes.
-    assert [seed for seed, _ in resets] == [10_000, 10_001] * 4
+    assert [seed for seed, _ in resets] == [10_000, 10_001] * 5
     starts = [first for _, first in resets]
     assert starts[0] != starts[1]
-    assert starts == starts[:2] * 4
+    assert starts == starts[:2] * 5
     assert (tmp_path / "eval.png").stat().st_size > 1000
     assert json.loads((tmp_path / "eval.json").read_text())["seeds"] == [10_000, 10_001]
 
