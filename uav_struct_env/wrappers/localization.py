@@ -142,6 +142,7 @@ class LocalizationWrapper(ParallelWrapper):
         self.reward = reward_obj
         self.reward_name = reward if isinstance(reward, str) else type(reward).__name__
         self.privileged = bool(privileged)
+        self.temporal = bool(temporal)
         self.pixel_sigma = spec.detector_sigma(self.poses.image_size[0])
         self.miss_rate = spec.miss_rate
         self.false_positives = spec.false_positives
@@ -175,5 +176,5 @@ class LocalizationWrapper(ParallelWrapper):
         return (
             f"LocalizationWrapper({self.env!r}, landmarks={self.poses.landmarks!r}, "
             f"detector={self.detector_name!r}, mode={self.mode!r}, reward={self.reward_name!r}, "
-            f"drop_image={self.drop_image})"
+            f"drop_image={self.drop_image}, temporal={self.temporal})"
         )
