@@ -158,7 +158,7 @@ def fly(noise: str, seed: int, steps: int, *, near: float = 9.0, far: float = 30
     bar = tqdm(range(steps + 1), desc=f"{noise} seed {seed}", unit="step", disable=not progress, leave=False)
     for k in bar:
         for name in runs:
-            _record(rec, name, infos[name])
+            _record(rec, name, infos[name], runs[name].poses.tracks)
         agents = list(runs["single_frame"].agents)
         if not agents or k == steps:
             break
@@ -175,10 +175,11 @@ def fly(noise: str, seed: int, steps: int, *, near: float = 9.0, far: float = 30
     return rec
 
 
-_KEYS = (*(f"{x}_{m}" for m in METHODS for x in "tr"), "gnss_fix", "fix_accepted", "fix_gated")
+_KEYS = (*(f"{x}_{m}" for m in METHODS for x in "tr"), "gnss_fix", "fix_accepted", "fix_gated",
+         "gnss_gated", "attitude_gated")
 
 
-def _record(rec: dict, name: str, infos: dict) -> None:
+def _record(rec: dict, name: str, infos: dict, tracks) -> None:
     nan = float("nan")
     for agent, info in infos.items():
         r = rec.setdefault(agent, {key: [] for key in _KEYS})
@@ -198,6 +199,9 @@ def _record(rec: dict, name: str, infos: dict) -> None:
             r["gnss_fix"].append(bool(loc["gnss_fix"]))
             r["fix_accepted"].append(bool(loc["fix_accepted"]))
             r["fix_gated"].append(bool(loc["success"] and not loc["fix_accepted"]))
+            for kind in ("gnss", "attitude"):  # a reading fused ungated after a streak counts too
+                upd = tracks.last_updates[agent].get(kind)
+                r[f"{kind}_gated"].append(upd is not None and (not upd.accepted or upd.reason is not None))
 
 
 def recovery(t_filtered: Sequence[float], accepted: Sequence[bool], threshold: float = RECOVERED_M) -> list:
@@ -249,6 +253,8 @@ def summarize(records: Sequence[dict]) -> dict:
     steps = [g[2] for g in gaps if g[2] is not None]
     out["filtered"]["fixes_accepted"] = int(cat["fix_accepted"].sum())
     out["filtered"]["fixes_gated"] = int(cat["fix_gated"].sum())
+    out["filtered"]["gnss_readings_gated"] = int(cat["gnss_gated"].sum())
+    out["filtered"]["attitude_readings_gated"] = int(cat["attitude_gated"].sum())
     out["filtered"]["recovery"] = {
         "gaps": len(gaps),
         "gap_steps": median_p90([g[0] for g in gaps]),
@@ -330,7 +336,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"  {m:16s} pose {100 * x['pose_share']:5.1f} %  good {100 * good:5.1f} %"
                   f"  t {t['median']:.3f} / {t['p90']:.3f} m  r {d['median']:.2f} / {d['p90']:.2f} deg")
         rec = r["filtered"]["recovery"]
-        print(f"  filtered: {r['filtered']['fixes_gated']} fixes gated; {rec['gaps']} gaps without a fix, "
+        f = r["filtered"]
+        print(f"  filtered: gated {f['fixes_gated']} fixes, {f['gnss_readings_gated']} GNSS and "
+              f"{f['attitude_readings_gated']} attitude readings; "
+              f"{rec['gaps']} gaps without a fix, "
               f"max error in a gap median {rec['max_error_in_gap_m']['median']:.3f} m, steps to recover "
               f"below {RECOVERED_M} m median {rec['steps_to_recover']['median']} "
               f"max {rec['steps_to_recover']['max']}")
