@@ -135,7 +135,7 @@ def ambiguity(
     """
     best_score, best_a, best_T = scored[0]
     pairs = best_a >= 0
-    cov = pose_covariance(K, best_T, landmarks_xyz[best_a[pairs]], pixel_sigma)[:3, :3]
+    cov = None  # the winner's covariance, computed only when a rival is close enough to need it
     centre = camera_center(best_T)
     for score, a, T in scored[1:]:
         if score - best_score >= margin:
@@ -143,6 +143,8 @@ def ambiguity(
         conflict = (a >= 0) & pairs & (a != best_a)
         if not conflict.any():
             continue
+        if cov is None:
+            cov = pose_covariance(K, best_T, landmarks_xyz[best_a[pairs]], pixel_sigma)[:3, :3]
         d = camera_center(T) - centre
         if np.all(np.isfinite(cov)):
             distinct = float(d @ np.linalg.solve(cov, d)) > _DISTINCT_POSITION_SQ

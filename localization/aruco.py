@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from localization.checks import check_number
+from localization.distortion import check_distortion, is_pinhole, undistort_points
 from localization.failure import FailureCode
 from localization.geometry import (
     camera_center,
@@ -104,7 +105,10 @@ class ArucoLocalizer:
         dictionary: an OpenCV predefined dictionary id, default ``cv2.aruco.DICT_4X4_50``.
         detector_parameters: ``cv2.aruco.DetectorParameters`` (default: OpenCV's, with subpixel
             corner refinement).
-        dist_coeffs: distortion coefficients or None.
+        dist_coeffs: the camera's OpenCV distortion coefficients ``(k1, k2, p1, p2, k3)``, or
+            None for a pinhole. Detected corners are undistorted to pinhole pixels of ``K`` once
+            (:func:`localization.distortion.undistort_points`, exact) on entry to
+            :meth:`localize_corners`; everything after is the pinhole model.
         pixel_sigma: corner noise, px (candidate choice and covariance).
         prior_sigmas: prior uncertainty (default 3 m, 2/2/5 degrees).
 
@@ -139,7 +143,7 @@ class ArucoLocalizer:
         self.pixel_sigma = float(pixel_sigma)
         self.prior_sigmas = prior_sigmas or PriorSigmas()
         self.dist_coeffs = (
-            None if dist_coeffs is None else np.asarray(dist_coeffs, dtype=np.float64)
+            None if is_pinhole(dist_coeffs) else check_distortion("dist_coeffs", dist_coeffs)
         )
         params = detector_parameters
         if params is None:
@@ -199,7 +203,8 @@ class ArucoLocalizer:
 
         Args:
             ids: (K,) marker ids.
-            corners: (K, 4, 2) their corners in OpenCV's order.
+            corners: (K, 4, 2) their corners in OpenCV's order, as detected (distorted pixels
+                when the localizer has ``dist_coeffs``).
             prior_cam_from_world: (4, 4) rough pose choosing between IPPE solutions, or None
                 (then the lowest reprojection error wins; expect flips).
 
@@ -215,6 +220,8 @@ class ArucoLocalizer:
             c = c.reshape(0, 4, 2)
         if c.ndim != 3 or c.shape[1:] != (4, 2) or c.shape[0] != ids.shape[0]:
             raise ValueError(f"corners must have shape ({ids.shape[0]}, 4, 2), got {c.shape}")
+        if self.dist_coeffs is not None:  # pinhole pixels from here on
+            c = undistort_points(c.reshape(-1, 2), self.K, self.dist_coeffs).reshape(c.shape)
         prior = (
             None
             if prior_cam_from_world is None
@@ -246,9 +253,6 @@ class ArucoLocalizer:
         m = assignment >= 0
         X = self.corners_world[assignment[m]]
         uv = c.reshape(-1, 2)[m]
-        if self.dist_coeffs is not None:
-            uv = cv2.undistortPoints(uv.reshape(-1, 1, 2), self.K, self.dist_coeffs, P=self.K)
-            uv = uv.reshape(-1, 2)
         t1 = time.perf_counter()
         if self.mode == "joint":
             res = solve_pnp(
@@ -319,10 +323,6 @@ class ArucoLocalizer:
         centres, rotations = [], []
         for k, i in known:
             uv = corners[k]
-            if self.dist_coeffs is not None:
-                uv = cv2.undistortPoints(
-                    uv.reshape(-1, 1, 2), self.K, self.dist_coeffs, P=self.K
-                ).reshape(-1, 2)
             X = self.corners_world[4 * i : 4 * i + 4]
             best = None
             for T in self.marker_pose_candidates(i, uv):

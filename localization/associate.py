@@ -12,15 +12,27 @@ Two methods:
     Goes beyond it for a detector that misses landmarks and reports clutter and a prior that is off
     by metres and degrees:
 
-    1. *Hypotheses.* The prior's attitude error mostly shifts the projected layout in the image;
-       its position error also changes scale and perspective. The prior camera centre is moved
-       on the grid {-1, 0, +1 sigma}^3; for each, every (detection, projected
-       landmark) pair proposes a 2D shift, ranked by how many other pairs agree with it (a Hough
-       vote). The best distinct layouts each give a gated assignment. Small problems (a slab's
-       four corners) enumerate every one-to-one assignment instead.
-    2. *Re-association.* Each hypothesis is turned into a pose (PnP, candidates chosen with the
-       prior as tie-breaker), the landmarks are re-projected with that pose and re-assigned with
-       a gate that tightens to ``gate_px``, until the assignment is stable.
+    1. *Hypotheses.* An onboard attitude sensor knows the camera's tilt far better than its yaw
+       and position; with the prior's tilt, two correspondences fix the pose in closed form
+       (:mod:`localization.upright`). Four spread-out detections of the dense part of the image
+       give six anchor pairs; every ordered pair of candidate landmarks whose prior image is
+       within a factor 3 in length and 45 degrees in direction of an anchor pair's gives a pose;
+       poses beyond the prior's Mahalanobis gate are dropped, and the rest are ranked by the
+       detections they explain within the coarse gate (then by the capped squared distances).
+       The best distinct ones each give a gated assignment. When the best refined hypothesis
+       leaves a quarter of the landmarks it predicts in the image unmatched, or more than one
+       (and a tenth) of the detections and some such landmark (or is ambiguous), the layout
+       vote adds its
+       hypotheses: the prior camera centre moved on the grid {-1, 0, +1 sigma}^3, and for each,
+       every (detection, projected landmark) pair proposes a 2D shift ranked by how many other
+       pairs agree with it (a Hough vote). Small problems (a slab's four corners) enumerate
+       every one-to-one assignment instead.
+    2. *Re-association.* Each hypothesis is refined from its start pose (Levenberg-Marquardt
+       with Cauchy weights first, as coarse pairs may hold wrong ones), the landmarks are
+       re-projected with that pose and re-assigned with the inlier gate ``gate_px`` (enumerated
+       assignments, whose starts fit their pairs exactly, with a gate tightening from
+       ``coarse_gate_px / 4``), until the assignment is stable. All hypotheses go through these steps together
+       (:mod:`localization.batch`): one set of numpy calls per step, not one per hypothesis.
     3. *Scoring.* Each final hypothesis is scored by a negative log-likelihood: squared residuals
        of the inliers over ``pixel_sigma^2``, a fixed cost per unassigned detection (clutter) and
        per landmark predicted inside the image but not detected (miss), plus the squared
@@ -39,6 +51,7 @@ Two methods:
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from dataclasses import dataclass
@@ -49,8 +62,16 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
 from localization.ambiguity import AMBIGUITY_MARGIN, ambiguity, translation_hypotheses
+from localization.batch import (
+    assign_many,
+    pose_difference_many,
+    project_many,
+    refine_many,
+    rotation_between,
+    to_transforms,
+)
 from localization.failure import FailureCode
-from localization.geometry import invert, project
+from localization.geometry import camera_center, project
 from localization.pnp import (
     PriorSigmas,
     is_coplanar,
@@ -58,8 +79,8 @@ from localization.pnp import (
     prior_mahalanobis_sq,
     refine_pose,
     reprojection_residuals,
-    solve_pnp,
 )
+from localization.upright import upright_two_point
 
 __all__ = [
     "Association",
@@ -200,47 +221,66 @@ def associate_paper(
     return Association(out, prior_cam_from_world, cost, cost, 1, None)
 
 
-def _shift_votes(det: NDArray, proj: NDArray, vote_px: float, k: int) -> list[tuple[int, NDArray]]:
-    """The ``k`` best-voted image shifts mapping projections ``proj`` onto detections ``det``.
+def _shift_votes(
+    det: NDArray, proj: NDArray, vote_px: float, k: int
+) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """The ``k`` best-voted image shifts of each layout ``proj`` (L, M, 2) onto ``det`` (N, 2).
 
     Every (detection, projection) pair proposes a shift; shifts are binned in cells of
     ``vote_px`` and a cell's vote is the number of shifts in it and its eight neighbours (a Hough
-    vote, O(N M)). Each returned shift is the mean of the proposals within ``vote_px`` of its
-    cell's mean. Returns ``[(votes, shift (2,)), ...]``, best first.
+    vote, O(L N M), one set of numpy calls for all layouts). Each returned shift is the mean of
+    the layout's proposals within ``vote_px`` of its cell's mean. NaN projections propose
+    nothing. Returns ``(layout index (S,), shift (S, 2))``, each layout's best first.
     """
-    shifts = (det[:, None, :] - proj[None, :, :]).reshape(-1, 2)
-    if shifts.shape[0] == 0:
-        return []
-    cells = np.floor(shifts / vote_px).astype(np.int64)
+    L = proj.shape[0]
+    shifts = (det[None, :, None, :] - proj[:, None, :, :]).reshape(L, -1, 2)
+    valid = np.isfinite(shifts).all(axis=2)
+    lay, which = np.nonzero(valid)
+    if lay.size == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+    s = shifts[lay, which]
+    cells = np.floor(s / vote_px).astype(np.int64)
     cells -= cells.min(axis=0) - 1  # one empty cell of padding on each side
-    shape = cells.max(axis=0) + 2
-    flat = cells[:, 0] * shape[1] + cells[:, 1]
-    counts = np.bincount(flat, minlength=int(shape[0] * shape[1])).reshape(shape)
-    box = np.zeros_like(counts)
-    box[1:-1, 1:-1] = sum(
-        counts[1 + di : shape[0] - 1 + di, 1 + dj : shape[1] - 1 + dj]
-        for di in (-1, 0, 1)
-        for dj in (-1, 0, 1)
-    )
-    votes = box.reshape(-1)
-    k = min(k, int(np.count_nonzero(counts)))
-    top = np.argpartition(-votes, k - 1)[:k] if k < votes.size else np.arange(votes.size)
-    top = top[np.argsort(-votes[top], kind="stable")]
-    out = []
-    for c in top:
-        in_cell = flat == c
-        if not in_cell.any():  # a neighbour-only peak: take the shifts around it
-            in_cell = (
-                np.abs(flat // shape[1] - c // shape[1]) + np.abs(flat % shape[1] - c % shape[1])
-                <= 2
-            )
-        mean = shifts[in_cell].mean(axis=0)
-        near = np.sum((shifts - mean) ** 2, axis=1) <= vote_px**2
-        out.append((int(votes[c]), shifts[near].mean(axis=0) if near.any() else mean))
-    return out
+    s1 = int(cells[:, 1].max()) + 2
+    s0 = int(cells[:, 0].max()) + 2
+    keys = (lay * s0 + cells[:, 0]) * s1 + cells[:, 1]
+    uniq, inv, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    votes = np.zeros(uniq.size, dtype=np.int64)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            nk = uniq + di * s1 + dj
+            pos = np.minimum(np.searchsorted(uniq, nk), uniq.size - 1)
+            votes += np.where(uniq[pos] == nk, counts[pos], 0)
+    cell_lay = uniq // (s0 * s1)
+    order = np.lexsort((-votes, cell_lay))
+    first = np.searchsorted(cell_lay[order], cell_lay[order], side="left")
+    chosen = order[np.arange(order.size) - first < k]
+    # mean of each chosen cell's proposals, then of the layout's proposals near that mean
+    sums = np.stack([np.bincount(inv, weights=s[:, c], minlength=uniq.size) for c in (0, 1)], axis=1)
+    mean = sums[chosen] / counts[chosen, None]
+    cl = cell_lay[chosen]
+    d2 = np.sum((shifts[cl] - mean[:, None, :]) ** 2, axis=2)
+    near = (d2 <= vote_px**2) & valid[cl]
+    nn = near.sum(axis=1)
+    sel = np.where(near[..., None], shifts[cl], 0.0).sum(axis=1)
+    refined = np.where(nn[:, None] > 0, sel / np.maximum(nn, 1)[:, None], mean)
+    return cl, refined
 
 
-def _prior_hypotheses(
+def _candidate_projections(
+    K: NDArray, R: NDArray, t: NDArray, landmarks_xyz: NDArray, image_size: tuple[int, int], margin_px: float
+) -> NDArray[np.float64]:
+    """(H, M, 2) projections at H poses, NaN where :func:`candidate_landmarks` would drop one."""
+    uv, _ = project_many(K, R, t, landmarks_xyz)
+    w, h = image_size
+    with np.errstate(invalid="ignore"):
+        ok = (uv[..., 0] >= -0.5 - margin_px) & (uv[..., 0] <= w - 0.5 + margin_px)
+        ok &= (uv[..., 1] >= -0.5 - margin_px) & (uv[..., 1] <= h - 0.5 + margin_px)
+    uv[~ok] = np.nan
+    return uv
+
+
+def _layout_hypotheses(
     det: NDArray,
     landmarks_xyz: NDArray,
     K: NDArray,
@@ -248,11 +288,11 @@ def _prior_hypotheses(
     image_size: tuple[int, int],
     margin_px: float,
     sig: PriorSigmas,
-    offsets: tuple[float, ...],
+    offsets: tuple[tuple[float, float, float], ...],
     gate_px: float,
     k: int,
-    min_pairs: int = 1,
-) -> list[tuple[tuple, NDArray]]:
+    min_pairs: int,
+) -> list[tuple[tuple, NDArray, NDArray]]:
     """Coarse assignments from perturbed priors, each shifted by its best-voted image shifts.
 
     The prior camera centre is moved by each of ``offsets`` (in units of the prior's position
@@ -260,38 +300,50 @@ def _prior_hypotheses(
     re-projected, and the projection shifted by zero and by its ``k`` best-voted shifts (the
     attitude error, which mostly shifts the image). Each shifted layout gives a gated assignment
     (``gate_px``); its shift is re-centred on the matched pairs once and the layout re-assigned;
-    layouts with fewer than ``min_pairs`` pairs are dropped. Returns ``[(rank key, assignment
-    into det rows), ...]``, best first: more matches, then smaller mean squared distance, then
-    smaller perturbation.
+    layouts with fewer than ``min_pairs`` pairs are dropped. All layouts go through the same
+    numpy calls at once. Returns ``[(rank key, assignment of det rows (N,) into landmarks,
+    start cam_from_world (4, 4)), ...]``, best first: more matches, then smaller mean squared
+    distance, then smaller perturbation. The start pose is the moved prior turned so that the
+    layout's matched projections move by the shift.
     """
-    world_from_cam = invert(prior)
-    sp = np.asarray(sig.position_m, dtype=np.float64)
-    n = det.shape[0]
-    out = []
-    for o in offsets:
-        wfc = world_from_cam.copy()
-        wfc[:3, 3] += np.asarray(o) * sp
-        idx, proj = candidate_landmarks(landmarks_xyz, K, invert(wfc), image_size, margin_px)
-        if idx.size == 0:
-            continue
-        size = float(np.sum(np.square(o)))
-        shifts = [np.zeros(2)] + [sh for _, sh in _shift_votes(det, proj, gate_px, k)]
-        for shift in shifts:
-            for rnd in range(2):
-                local = assign(det, proj + shift, gate_px)
-                ok = local >= 0
-                if ok.sum() < min_pairs:
-                    break
-                resid = det[ok] - (proj[local[ok]] + shift)
-                if rnd == 0:
-                    shift = shift + resid.mean(axis=0)
-            if ok.sum() < min_pairs:
-                continue
-            a = np.full(n, -1, dtype=np.int64)
-            a[ok] = idx[local[ok]]
-            mse = float(np.mean(np.sum(resid**2, axis=1)))
-            out.append(((-int(ok.sum()), mse, size), a))
-    out.sort(key=lambda t: t[0])
+    o = np.asarray(offsets, dtype=np.float64).reshape(-1, 3)
+    centres = camera_center(prior) + o * np.asarray(sig.position_m, dtype=np.float64)
+    R = np.broadcast_to(prior[:3, :3], (o.shape[0], 3, 3))
+    t = -np.einsum("ij,hj->hi", prior[:3, :3], centres)
+    proj = _candidate_projections(K, R, t, landmarks_xyz, image_size, margin_px)
+    lay_v, shift_v = _shift_votes(det, proj, gate_px, k)
+    lay = np.concatenate([np.arange(o.shape[0]), lay_v])
+    shift = np.concatenate([np.zeros((o.shape[0], 2)), shift_v])
+    base = proj[lay]
+    for rnd in range(2):
+        local = assign_many(det, base + shift[:, None, :], gate_px)
+        ok = local >= 0
+        cnt = ok.sum(axis=1)
+        matched = base[np.arange(lay.size)[:, None], np.maximum(local, 0)]  # (Q, N, 2)
+        resid = np.where(ok[..., None], det[None] - (matched + shift[:, None, :]), 0.0)
+        mean_resid = resid.sum(axis=1) / np.maximum(cnt, 1)[:, None]
+        if rnd == 0:
+            keep = cnt >= min_pairs
+            lay, shift, base = lay[keep], shift[keep] + mean_resid[keep], base[keep]
+    keep = cnt >= min_pairs
+    if not keep.any():
+        return []
+    lay, shift, local, ok, cnt = lay[keep], shift[keep], local[keep], ok[keep], cnt[keep]
+    matched, resid = matched[keep], resid[keep]
+    mse = np.sum(resid**2, axis=(1, 2)) / cnt
+    # the start pose: turn the moved prior so the matched projections' centroid moves by the shift
+    c = np.sum(np.where(ok[..., None], matched, 0.0), axis=1) / cnt[:, None]
+    Kinv = np.linalg.inv(K)
+    b1 = np.column_stack([c, np.ones(c.shape[0])]) @ Kinv.T
+    b2 = np.column_stack([c + shift, np.ones(c.shape[0])]) @ Kinv.T
+    dR = rotation_between(b1, b2)
+    starts = to_transforms(dR @ R[lay], np.einsum("hij,hj->hi", dR, t[lay]))
+    size = np.sum(o[lay] ** 2, axis=1)
+    out = [
+        ((-int(cnt[q]), float(mse[q]), float(size[q])), np.where(ok[q], local[q], -1), starts[q])
+        for q in range(lay.size)
+    ]
+    out.sort(key=lambda h: h[0])
     return out
 
 
@@ -308,14 +360,14 @@ def _exhaustive_hypotheses(
     sig: PriorSigmas,
     limit: int,
     keep: int,
-) -> list[NDArray] | None:
+) -> list[tuple[NDArray, NDArray]] | None:
     """Every one-to-one assignment of the largest size, scored by PnP fit + prior; None if too many.
 
     For small sets (a slab's four corners) the layout vote is weak (the corners spread over the
     whole image, so distance and perspective errors of the prior exceed the coarse gate), and
     enumerating is cheap: each assignment gets its IPPE/SQPnP candidates, scored by
     ``sum r^2 / sigma^2 + prior Mahalanobis^2 + (unused detections) * gate^2 / sigma^2``; the best
-    ``keep`` go on to re-association.
+    ``keep`` go on to re-association, each with its best candidate pose as the start.
     """
     n_good, m = good.size, idx.size
     k = min(n_good, m)
@@ -326,51 +378,129 @@ def _exhaustive_hypotheses(
         return None
     coplanar = is_coplanar(landmarks_xyz[idx])
     unused_cost = (n_good - k) * (gate_px / pixel_sigma) ** 2
-    scored: list[tuple[float, NDArray]] = []
+    scored: list[tuple[float, NDArray, NDArray]] = []
     for dsub in itertools.combinations(range(n_good), k):
         u = det[good[list(dsub)]]
         for msub in itertools.permutations(range(m), k):
             X = landmarks_xyz[idx[list(msub)]]
-            best = np.inf
+            best, best_T = np.inf, None
             for T in pnp_candidates(X, u, K, coplanar=coplanar):
                 res, depth = reprojection_residuals(K, T, X, u)
                 if not np.all(depth > 0):
                     continue
                 score = float(np.sum(res**2)) / pixel_sigma**2 + prior_mahalanobis_sq(T, prior, sig)
-                best = min(best, score)
-            if np.isfinite(best):
+                if score < best:
+                    best, best_T = score, T
+            if best_T is not None:
                 a = np.full(det.shape[0], -1, dtype=np.int64)
                 a[good[list(dsub)]] = idx[list(msub)]
-                scored.append((best + unused_cost, a))
+                scored.append((best + unused_cost, a, best_T))
     scored.sort(key=lambda t: t[0])
-    return [a for _, a in scored[:keep]]
+    return [(a, T) for _, a, T in scored[:keep]]
 
 
-def _nll(
-    det: NDArray,
-    landmarks_xyz: NDArray,
-    K: NDArray,
-    T: NDArray,
-    assignment: NDArray,
-    prior: NDArray,
-    image_size: tuple[int, int],
-    pixel_sigma: float,
-    gate_px: float,
-    miss_cost: float,
-    prior_sigmas: PriorSigmas,
-) -> float:
-    a = assignment >= 0
-    res, _ = reprojection_residuals(K, T, landmarks_xyz[assignment[a]], det[a])
-    inlier = float(np.sum(res**2)) / pixel_sigma**2
-    n_unassigned = int(np.sum(~a))
-    idx, _ = candidate_landmarks(landmarks_xyz, K, T, image_size, 0.0)
-    n_missed = int(np.setdiff1d(idx, assignment[a]).size)
-    return (
-        inlier
-        + n_unassigned * (gate_px / pixel_sigma) ** 2
-        + n_missed * miss_cost
-        + prior_mahalanobis_sq(T, prior, prior_sigmas)
-    )
+@dataclass(frozen=True)
+class _Problem:
+    """The fixed inputs of one robust association, shared by its batched steps."""
+
+    det: NDArray
+    good: NDArray
+    landmarks_xyz: NDArray
+    K: NDArray
+    prior: NDArray
+    image_size: tuple[int, int]
+    margin_px: float
+    pixel_sigma: float
+    sig: PriorSigmas
+    gate_px: float
+    coarse_gate_px: float
+    max_iterations: int
+    need: int
+
+    def pairs(self, a: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        """Padded correspondences (H, N, 3), (H, N, 2) and mask (H, N) of assignments (H, N)."""
+        m = a >= 0
+        X = self.landmarks_xyz[np.maximum(a, 0)]
+        uv = np.where(m[..., None], np.nan_to_num(self.det)[None], 0.0)
+        return X, uv, m
+
+    def reassign(self, R: NDArray, t: NDArray, gate: float) -> NDArray:
+        """(H, N) gated assignments of the finite detections at poses (H, ...)."""
+        proj = _candidate_projections(self.K, R, t, self.landmarks_xyz, self.image_size, self.margin_px)
+        local = assign_many(self.det[self.good], proj, gate)
+        a = np.full((R.shape[0], self.det.shape[0]), -1, dtype=np.int64)
+        a[:, self.good] = local
+        return a
+
+    def refine(self, a: NDArray, starts: NDArray, first_robust: bool) -> tuple[NDArray, NDArray, NDArray]:
+        """Coarse assignments (H, N) and start poses (H, 4, 4) -> (assignments, poses, alive (H,)).
+
+        Each round refines every pose on its pairs (LM; with ``first_robust``, the first round
+        with Cauchy weights at ``coarse_gate_px / 4``, as coarse pairs may hold wrong ones, and
+        every re-assignment at ``gate_px``; else with a gate that tightens from
+        ``coarse_gate_px / 4`` to ``gate_px``), re-projects the landmarks and re-assigns, until
+        the assignments are stable. A hypothesis
+        with fewer than ``need`` pairs, or with a point behind its camera, dies.
+        """
+        a = a.copy()
+        R, t = starts[:, :3, :3].copy(), starts[:, :3, 3].copy()
+        alive = np.ones(a.shape[0], dtype=bool)
+        moving = alive.copy()
+        for it in range(self.max_iterations):
+            alive &= (a >= 0).sum(axis=1) >= self.need
+            moving &= alive
+            if not moving.any():
+                break
+            mv = np.flatnonzero(moving)
+            step_gate = max(self.gate_px, self.coarse_gate_px / 4 ** (it + 1))
+            if first_robust:
+                step_gate = self.gate_px
+            X, uv, m = self.pairs(a[mv])
+            robust = max(self.gate_px, self.coarse_gate_px / 4) if (it == 0 and first_robust) else None
+            Rm, tm, cost = refine_many(
+                self.K, R[mv], t[mv], X, uv, m, iterations=3 if it == 0 else 2, robust_px=robust
+            )
+            R[mv], t[mv] = Rm, tm
+            alive[mv[~np.isfinite(cost)]] = False
+            new = self.reassign(Rm, tm, step_gate)
+            stable = np.all(new == a[mv], axis=1) & (step_gate == self.gate_px)
+            a[mv] = new
+            moving[mv[stable]] = False
+        alive &= (a >= 0).sum(axis=1) >= self.need
+        idx = np.flatnonzero(alive & moving)  # the others were refined on their final pairs
+        if idx.size:
+            X, uv, m = self.pairs(a[idx])
+            Rf, tf, cost = refine_many(self.K, R[idx], t[idx], X, uv, m, iterations=3)
+            R[idx], t[idx] = Rf, tf
+            alive[idx[~np.isfinite(cost)]] = False
+        return a, to_transforms(R, t), alive
+
+    def prior_sq(self, T: NDArray) -> NDArray:
+        """(H,) squared Mahalanobis distances of poses (H, 4, 4) from the prior."""
+        d = pose_difference_many(T[:, :3, :3], T[:, :3, 3], self.prior)
+        return np.sum((d / self.sig.as_array()) ** 2, axis=1)
+
+    def chi_sq(self, a: NDArray, T: NDArray) -> NDArray:
+        """(H,) sum of squared residuals over ``pixel_sigma^2`` of each hypothesis' pairs."""
+        X, uv, m = self.pairs(a)
+        uvp, _ = project_many(self.K, T[:, :3, :3], T[:, :3, 3], X)
+        r2 = np.where(m, np.sum((np.nan_to_num(uvp, nan=1e6) - uv) ** 2, axis=2), 0.0)
+        return np.sum(r2, axis=1) / self.pixel_sigma**2
+
+    def nll(
+        self, a: NDArray, T: NDArray, chi: NDArray, prior_sq: NDArray, miss_cost: float
+    ) -> tuple[NDArray, NDArray]:
+        """(H,) negative log-likelihoods (inliers, clutter, misses, prior) and (H,) miss counts."""
+        R, t = T[:, :3, :3], T[:, :3, 3]
+        uv = _candidate_projections(self.K, R, t, self.landmarks_xyz, self.image_size, 0.0)
+        expected = np.isfinite(uv).all(axis=2)  # (H, M) predicted inside the image
+        hit = np.zeros_like(expected)
+        hi, ii = np.nonzero(a >= 0)
+        hit[hi, a[hi, ii]] = True
+        n_missed = np.sum(expected & ~hit, axis=1)
+        n_unassigned = np.sum(a < 0, axis=1)
+        nll = chi + n_unassigned * (self.gate_px / self.pixel_sigma) ** 2 + n_missed * miss_cost + prior_sq
+        return nll, n_missed
 
 
 def associate_robust(
@@ -398,7 +528,7 @@ def associate_robust(
     ambiguity_margin: float = AMBIGUITY_MARGIN,
     fit_quantile: float = 1.0 - 1e-6,
 ) -> Association:
-    """Robust association: shift hypotheses, re-association after each PnP, likelihood scoring.
+    """Robust association: upright two-point hypotheses, batched re-association, likelihood scoring.
 
     Args:
         detections_uv: (N, 2) detections (validated; NaN rows stay unassigned).
@@ -412,8 +542,9 @@ def associate_robust(
         coarse_gate_px: gate of the first assignment of each shift hypothesis, px; never below
             the prior's smallest rotation sigma seen through the lens (``f * min(sigma_rot)``,
             38.7 px for the paper's camera and default sigmas, 310 px at f = 8900 px).
-        max_hypotheses: number of distinct coarse assignments refined by PnP and re-association
-            (those agreeing with an already refined result are skipped and not counted).
+        max_hypotheses: twice this many distinct coarse assignments of each source (upright
+            poses, then the layout vote if needed) are refined and re-associated in one batch
+            (those agreeing with an already refined result are skipped).
         max_iterations: PnP / re-association rounds per hypothesis.
         min_correspondences: a hypothesis needs this many pairs to be turned into a pose.
         miss_cost: cost of a landmark predicted inside the image but not detected (about
@@ -423,8 +554,9 @@ def associate_robust(
             (squared Mahalanobis distance, 6 dof; default the chi-square 99.9 % quantile 22.46)
             are rejected; None keeps all.
         position_offsets: offsets of the prior camera centre (in units of the prior's position
-            sigmas, project axes) that generate layout hypotheses; default the 27-point grid
-            ``{-1, 0, 1}^3``.
+            sigmas, project axes) that generate the layout vote's hypotheses (used when the
+            upright hypotheses leave the detections poorly explained); default the 27-point
+            grid ``{-1, 0, 1}^3``.
         shifts_per_layout: best-voted image shifts tried per layout (besides no shift).
         exhaustive_limit: when the number of largest one-to-one assignments between the finite
             detections and the candidate landmarks is at most this, all of them are tried
@@ -466,228 +598,288 @@ def associate_robust(
         )
     det = detections_uv
     need = max(min_correspondences, 3)
-
-    # 1. coarse hypotheses from image shifts
-    coarse: list[NDArray] = []
-    seen: set[bytes] = set()
-    exhaustive = _exhaustive_hypotheses(
-        det,
-        good,
-        idx,
-        landmarks_xyz,
-        K,
-        prior,
-        need,
-        pixel_sigma,
-        gate,
-        sig,
-        exhaustive_limit,
-        min(max(max_hypotheses, 1), 3),
+    P = _Problem(
+        det, good, landmarks_xyz, K, prior, image_size, margin_px, pixel_sigma, sig, gate,
+        coarse_gate_px, max_iterations, need,
     )
-    if exhaustive is not None:
-        coarse.extend(exhaustive)
-    else:
-        layouts = _prior_hypotheses(
-            det[good],
-            landmarks_xyz,
-            K,
-            prior,
-            image_size,
-            margin_px,
-            sig,
-            position_offsets,
-            coarse_gate_px,
-            shifts_per_layout,
-            need,
-        )
-        for _, local_a in layouts:
-            a = np.full(n, -1, dtype=np.int64)
-            a[good] = local_a
-            ok = local_a >= 0
-            key = a.tobytes()
-            if ok.sum() >= need and key not in seen:
-                seen.add(key)
-                coarse.append(a)
-                if len(coarse) >= 5 * max_hypotheses:
-                    break
 
-    # 2. re-association after each pose refinement
-    def refine(a: NDArray, start: NDArray | None = None) -> tuple[NDArray, NDArray] | None:
-        return _refine_hypothesis(
-            a, det, good, landmarks_xyz, K, prior, image_size, margin_px,
-            pixel_sigma=pixel_sigma, prior_sigmas=sig, gate_px=gate,
-            coarse_gate_px=coarse_gate_px, max_iterations=max_iterations, need=need, start=start,
-        )
+    def covered(a: NDArray) -> bool:
+        # a hypothesis whose pairs all agree with an explored result would converge to it again
+        return any(np.all((a < 0) | (a == e)) for e in explored)
 
-    def consistent(T: NDArray) -> bool:
-        return (
-            max_prior_mahalanobis_sq is None
-            or prior_mahalanobis_sq(T, prior, sig) <= max_prior_mahalanobis_sq
+    def check(a: NDArray, T: NDArray, alive: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        """(prior Mahalanobis^2, chi-square, consistent, consistent & fits) of refined hypotheses."""
+        prior_sq = P.prior_sq(T)
+        chi = P.chi_sq(a, T)
+        dof = 2 * (a >= 0).sum(axis=1) - 6
+        consistent = alive & (
+            prior_sq <= max_prior_mahalanobis_sq if max_prior_mahalanobis_sq is not None else True
         )
-
-    def fits(a: NDArray, T: NDArray) -> bool:
         # The residuals' chi-square against the noise model (2n - 6 dof): every pair within
         # the gate is not enough -- four wrong pairs at 3 px RMS each pass a 5 px gate.
-        m = a >= 0
-        dof = 2 * int(m.sum()) - 6
-        if dof <= 0:
-            return True
-        res, _ = reprojection_residuals(K, T, landmarks_xyz[a[m]], det[m])
-        return float(np.sum(res**2)) / pixel_sigma**2 <= chi2.ppf(fit_quantile, dof)
+        limit = np.where(dof > 0, _chi2_quantiles(fit_quantile, int(dof.max()))[np.maximum(dof, 0)], np.inf)
+        return prior_sq, chi, consistent, consistent & (chi <= limit)
 
-    finals: dict[bytes, tuple[NDArray, NDArray]] = {}
-    rejected_by_prior = rejected_by_fit = 0
+    finals: dict[bytes, tuple[NDArray, NDArray, float, float]] = {}
+    rejected = {"prior": 0, "fit": 0}
     explored: list[NDArray] = []
-    budget = max(max_hypotheses, 1)
-    for a in coarse:
-        # a hypothesis whose pairs all agree with an explored result would converge to it again
-        if any(np.all((a < 0) | (a == e)) for e in explored):
-            continue
-        if budget == 0:
-            break
-        budget -= 1
-        hyp = refine(a)
-        if hyp is None:
-            continue
-        explored.append(hyp[0])
-        if not consistent(hyp[1]):
-            rejected_by_prior += 1
-            continue
-        if not fits(*hyp):
-            rejected_by_fit += 1
-            continue
-        finals.setdefault(hyp[0].tobytes(), hyp)
+    tried = [0]
+
+    def explore(coarse: list[tuple[NDArray, NDArray]], first_robust: bool) -> list[tuple]:
+        """Refine the not yet covered coarse hypotheses at once; keep those that pass the tests."""
+        chunk = [c for c in coarse if not covered(c[0])][: 2 * max(max_hypotheses, 1)]
+        tried[0] += len(chunk)
+        if not chunk:
+            return []
+        a, T, alive = P.refine(np.stack([c[0] for c in chunk]), np.stack([c[1] for c in chunk]), first_robust)
+        prior_sq, chi, consistent, ok = check(a, T, alive)
+        new = []
+        for h in np.flatnonzero(alive):
+            explored.append(a[h])
+            key = a[h].tobytes()
+            if not consistent[h]:
+                rejected["prior"] += 1
+            elif not ok[h]:
+                rejected["fit"] += 1
+            elif key not in finals:
+                finals[key] = (a[h], T[h], chi[h], prior_sq[h])
+                new.append(finals[key])
+        return new
+
+    def full(hyps: list[tuple[NDArray, NDArray]]) -> list[tuple[NDArray, NDArray]]:
+        """Hypotheses on the finite detections as assignments of all rows, distinct, >= need pairs."""
+        out, seen = [], set()
+        for local_a, start in hyps:
+            a = np.full(n, -1, dtype=np.int64)
+            a[good] = local_a
+            key = a.tobytes()
+            if key not in seen and (a >= 0).sum() >= need:
+                seen.add(key)
+                out.append((a, start))
+        return out
+
+    def score(hyps: list[tuple]) -> list[tuple[float, NDArray, NDArray, int]]:
+        a = np.stack([h[0] for h in hyps])
+        T = np.stack([h[1] for h in hyps])
+        s, missed = P.nll(a, T, np.array([h[2] for h in hyps]), np.array([h[3] for h in hyps]), miss_cost)
+        return [(float(s[i]), a[i], T[i], int(missed[i])) for i in range(len(hyps))]
+
+    def decide() -> tuple[list[tuple], str | None]:
+        """Score the finals, search the winner's rivals, apply the ambiguity rule."""
+        scored = ranked()
+        for _ in range(max_rival_rounds):
+            best_a, best_T = scored[0][1], scored[0][2]
+            rivals = translation_hypotheses(
+                det, landmarks_xyz, K, best_T, best_a, prior, sig.as_array()[:3],
+                max_prior_mahalanobis_sq, coarse_gate_px, need, max_rivals,
+            )
+            chunk = []
+            for idx_r, proj_r, start in rivals:
+                local = assign(det[good], proj_r, coarse_gate_px)
+                a = np.full(n, -1, dtype=np.int64)
+                a[good[local >= 0]] = idx_r[local[local >= 0]]
+                chunk.append((a, start))
+            new = explore([c for c in chunk if (c[0] >= 0).sum() >= need], True)
+            if not new:
+                break
+            scored = sorted(scored + score(new), key=lambda h: h[0])
+            if scored[0][1] is best_a:
+                break
+        return scored, ambiguity([h[:3] for h in scored], landmarks_xyz, K, pixel_sigma, ambiguity_margin)
+
+    cache: dict[int, list[tuple]] = {}
+
+    def ranked() -> list[tuple]:
+        """The finals scored, best first (scored again only when finals changed)."""
+        if len(finals) not in cache:
+            cache.clear()
+            cache[len(finals)] = sorted(score(list(finals.values())), key=lambda h: h[0])
+        return cache[len(finals)]
+
+    def weak() -> bool:
+        """Whether the upright hypotheses need the layout vote's help.
+
+        True when there is no final, or the best leaves a quarter of the landmarks it predicts
+        in the image unmatched, or more than one (and a tenth) of the detections and at least
+        one such landmark (clutter alone leaves detections, not landmarks, unmatched).
+        """
+        if not finals:
+            return True
+        _, a, _, missed = ranked()[0]
+        pairs = int((a >= 0).sum())
+        unexplained = good.size - pairs > max(1.0, 0.1 * good.size)
+        return (unexplained and missed > 0) or missed > 0.25 * (pairs + missed)
+
+    def layouts() -> list[tuple[NDArray, NDArray]]:
+        return full(
+            [(a, T) for _, a, T in _layout_hypotheses(
+                det[good], landmarks_xyz, K, prior, image_size, margin_px, sig, position_offsets,
+                coarse_gate_px, shifts_per_layout, need,
+            )][: 5 * max_hypotheses]
+        )
+
+    # 1-2. coarse hypotheses, refined with re-association: every assignment of a small set;
+    # else upright two-point poses, and the prior's layout vote when those leave the detections
+    # poorly explained (or, below, ambiguous)
+    exhaustive = _exhaustive_hypotheses(
+        det, good, idx, landmarks_xyz, K, prior, need, pixel_sigma, gate, sig, exhaustive_limit,
+        min(max(max_hypotheses, 1), 3),
+    )
+    voted = exhaustive is not None
+    if exhaustive is not None:
+        explore(exhaustive, False)
+    else:
+        explore(full(_upright_hypotheses(
+            det[good], landmarks_xyz, idx, proj, K, prior, sig, max_prior_mahalanobis_sq, coarse_gate_px,
+            need, 5 * max_hypotheses,
+        )), True)
+        if weak():
+            explore(layouts(), True)
+            voted = True
 
     if not finals:
-        if rejected_by_fit and not rejected_by_prior:
+        if rejected["fit"] and not rejected["prior"]:
             code = FailureCode.NO_CONSISTENT_ASSOCIATION
             reason = (
-                f"all {rejected_by_fit} association hypotheses fit worse than pixel_sigma="
+                f"all {rejected['fit']} association hypotheses fit worse than pixel_sigma="
                 f"{pixel_sigma:g} px allows (chi-square quantile {fit_quantile})"
             )
-        elif rejected_by_prior:
+        elif rejected["prior"]:
             code = FailureCode.INCONSISTENT_WITH_PRIOR
             reason = (
-                f"all {rejected_by_prior} association hypotheses give poses inconsistent with "
+                f"all {rejected['prior']} association hypotheses give poses inconsistent with "
                 f"the prior (Mahalanobis^2 > {max_prior_mahalanobis_sq})"
             )
         else:
             code = FailureCode.NO_CONSISTENT_ASSOCIATION
             reason = f"no association hypothesis with {need} or more consistent correspondences"
-        return Association(empty, prior, 0.0, np.inf, len(coarse), reason, code)
+        return Association(empty, prior, 0.0, np.inf, tried[0], reason, code)
 
-    # 3. scoring
-    def nll(a: NDArray, T: NDArray) -> float:
-        return _nll(det, landmarks_xyz, K, T, a, prior, image_size, pixel_sigma, gate, miss_cost, sig)
-
-    scored = sorted(((nll(a, T), a, T) for a, T in finals.values()), key=lambda h: h[0])
-
-    # 4. rivals of the winner under the layout's self-translations, then the ambiguity rule
-    for _ in range(max_rival_rounds):
-        best_a, best_T = scored[0][1], scored[0][2]
-        rivals = translation_hypotheses(
-            det, landmarks_xyz, K, best_T, best_a, prior, sig.as_array()[:3],
-            max_prior_mahalanobis_sq, coarse_gate_px, need, max_rivals,
-        )
-        added = False
-        for idx_r, proj_r, start in rivals:
-            local = assign(det[good], proj_r, coarse_gate_px)
-            a = np.full(n, -1, dtype=np.int64)
-            a[good[local >= 0]] = idx_r[local[local >= 0]]
-            if (a >= 0).sum() < need or any(np.all((a < 0) | (a == e)) for e in explored):
-                continue
-            hyp = refine(a, start)
-            if hyp is None:
-                continue
-            explored.append(hyp[0])
-            if hyp[0].tobytes() in finals or not consistent(hyp[1]) or not fits(*hyp):
-                continue
-            finals[hyp[0].tobytes()] = hyp
-            scored.append((nll(*hyp), *hyp))
-            added = True
-        scored.sort(key=lambda h: h[0])
-        if not added or scored[0][1] is best_a:
-            break
-    reason = ambiguity(scored, landmarks_xyz, K, pixel_sigma, ambiguity_margin)
+    # 3-4. scoring, rivals of the winner under the layout's self-translations, ambiguity
+    scored, reason = decide()
+    if reason is not None and not voted and explore(layouts(), True):
+        scored, reason = decide()
     if reason is not None:
         return Association(empty, prior, 0.0, np.inf, len(finals), reason, FailureCode.AMBIGUOUS)
-    score, a, T = scored[0]
+    score_best, a, T, _ = scored[0]
+    # The batched assignment pairs mutual nearest neighbours; two landmarks projecting within a
+    # gate of each other can be swapped there, so the winner gets the minimum-cost assignment.
+    cidx, cproj = candidate_landmarks(landmarks_xyz, K, T, image_size, margin_px)
+    local = assign(det[good], cproj, gate)
+    exact = np.full(n, -1, dtype=np.int64)
+    exact[good[local >= 0]] = cidx[local[local >= 0]]
+    if not np.array_equal(exact, a) and (exact >= 0).sum() >= need:
+        a = exact
+        T, _ = refine_pose(landmarks_xyz[a[a >= 0]], det[a >= 0], K, T, max_iterations=10)
     m = a >= 0
     res, _ = reprojection_residuals(K, T, landmarks_xyz[a[m]], det[m])
-    return Association(a, T, float(np.sum(res**2)), float(score), len(finals), None)
+    return Association(a, T, float(np.sum(res**2)), float(score_best), len(finals), None)
 
 
-def _refine_hypothesis(
-    a: NDArray,
-    det: NDArray,
-    good: NDArray,
-    landmarks_xyz: NDArray,
-    K: NDArray,
-    prior: NDArray,
-    image_size: tuple[int, int],
-    margin_px: float,
-    *,
-    pixel_sigma: float,
-    prior_sigmas: PriorSigmas,
-    gate_px: float,
-    coarse_gate_px: float,
-    max_iterations: int,
-    need: int,
-    start: NDArray | None = None,
-) -> tuple[NDArray, NDArray] | None:
-    """A coarse assignment turned into ``(assignment, pose)`` by PnP and re-association.
+@functools.lru_cache(maxsize=64)
+def _chi2_quantiles(quantile: float, max_dof: int) -> NDArray[np.float64]:
+    """Chi-square ``quantile`` for 0 .. ``max_dof`` degrees of freedom (inf at 0), cached."""
+    return np.concatenate([[np.inf], chi2.ppf(quantile, np.arange(1, max(max_dof, 1) + 1))])
 
-    The first pose is ``start`` refined on the coarse pairs when given, else PnP on them (RANSAC
-    with 6 or more, candidates chosen with the prior); then the landmarks are re-projected and
-    re-assigned with a gate that tightens from ``coarse_gate_px / 4`` to ``gate_px``, the pose
-    refined on the new pairs, until the assignment is stable. None when fewer than ``need``
-    pairs remain or PnP fails.
+
+def _anchor_pairs(det: NDArray, k: int = 4) -> list[tuple[int, int]]:
+    """Every pair among ``k`` spread-out detections of the dense part of the image.
+
+    Far-apart anchors condition the two-point pose best, but the extremes of a detection set are
+    often clutter (uniform over the image, while landmarks gather on the building): the anchors
+    are taken, farthest-point first, among the detections whose median distance to the others
+    is at most the median of that (and any detection when there are at most ``k``). Every pair
+    of ``k`` anchors leaves a pair of true detections unless ``k - 1`` of them are clutter.
     """
     n = det.shape[0]
-    T = None
-    current = a
-    for it in range(max_iterations):
-        m = current >= 0
-        if m.sum() < need:
-            return None
-        if T is None and start is not None:
-            T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, start, max_iterations=5)
-        elif T is None:
-            res = solve_pnp(
-                landmarks_xyz[current[m]],
-                det[m],
-                K,
-                prior,
-                rule="prior",
-                min_points=need,
-                pixel_sigma=pixel_sigma,
-                prior_sigmas=prior_sigmas,
-                ransac=m.sum() >= 6,
-                ransac_threshold_px=max(gate_px, coarse_gate_px / 4),
-            )
-            if not res.success:
-                return None
-            T = res.cam_from_world
-            if not res.inliers.all():
-                # drop RANSAC outliers before re-assigning
-                keep = np.flatnonzero(m)[res.inliers]
-                current = np.full(n, -1, dtype=np.int64)
-                current[keep] = a[keep]
-        else:
-            T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, T, max_iterations=5)
-        step_gate = max(gate_px, coarse_gate_px / 4 ** (it + 1))
-        cidx, cproj = candidate_landmarks(landmarks_xyz, K, T, image_size, margin_px)
-        local = assign(det[good], cproj, step_gate)
-        new = np.full(n, -1, dtype=np.int64)
-        ok = local >= 0
-        new[good[ok]] = cidx[local[ok]]
-        if np.array_equal(new, current) and step_gate == gate_px:
-            break
-        current = new
-    if T is None:
-        return None
-    m = current >= 0
-    if m.sum() < need:
-        return None
-    T, _ = refine_pose(landmarks_xyz[current[m]], det[m], K, T, max_iterations=10)
-    return current, T
+    if n < 2:
+        return []
+    d2 = np.sum((det[:, None, :] - det[None, :, :]) ** 2, axis=2)
+    pool = np.arange(n)
+    if n > k:
+        spread = np.median(d2, axis=1)
+        pool = np.flatnonzero(spread <= np.median(spread))
+        if pool.size < k:
+            pool = np.argsort(spread, kind="stable")[:k]
+    sub = d2[np.ix_(pool, pool)]
+    first = int(np.argmax(sub.sum(axis=1)))
+    chosen = [first]
+    dmin = sub[first].copy()
+    for _ in range(min(k, pool.size) - 1):
+        nxt = int(np.argmax(dmin))
+        chosen.append(nxt)
+        dmin = np.minimum(dmin, sub[nxt])
+    return list(itertools.combinations(pool[chosen].tolist(), 2))
+
+
+def _upright_hypotheses(
+    det: NDArray,
+    landmarks_xyz: NDArray,
+    idx: NDArray,
+    proj: NDArray,
+    K: NDArray,
+    prior: NDArray,
+    sig: PriorSigmas,
+    max_prior_sq: float | None,
+    gate_px: float,
+    min_pairs: int,
+    keep: int,
+) -> list[tuple[NDArray, NDArray]]:
+    """Coarse assignments from upright two-point poses (:mod:`localization.upright`).
+
+    For each pair of spread-out detections (:func:`_anchor_pairs`) and each ordered pair of
+    candidate landmarks ``idx``, the pose with the prior's tilt that puts the two landmarks on
+    the two detections; poses farther from the prior than ``max_prior_sq`` (yaw and position
+    terms) are dropped. Each pose is scored like a rival (:func:`localization.ambiguity.
+    translation_hypotheses`): detections explained within ``gate_px``, then the sum of squared
+    distances to the nearest projection capped at ``gate_px^2``, then the prior distance. The
+    best ``keep`` give gated assignments. Returns ``[(assignment of det rows into landmarks,
+    start cam_from_world), ...]``, best first.
+    """
+    pairs = _anchor_pairs(det)
+    m = idx.size
+    if not pairs or m < 2:
+        return []
+    i1, i2 = (np.array(v) for v in zip(*pairs, strict=True))
+    j1, j2 = (v.reshape(-1) for v in np.meshgrid(np.arange(m), np.arange(m), indexing="ij"))
+    distinct = j1 != j2
+    j1, j2 = j1[distinct], j2[distinct]
+    s_i1, s_i2 = np.repeat(i1, j1.size), np.repeat(i2, j1.size)
+    s_j1, s_j2 = np.tile(j1, i1.size), np.tile(j2, i1.size)
+    # The prior's errors scale and turn the image of a landmark pair only so much: its prior
+    # projection must be within a factor 3 in length and 45 degrees in direction of the
+    # detection pair's (a 9 m / 15 degree error at the nearest views stays well inside).
+    vd = det[s_i2] - det[s_i1]
+    vp = proj[s_j2] - proj[s_j1]
+    dot = np.sum(vd * vp, axis=1)
+    nd, np_ = np.sum(vd * vd, axis=1), np.sum(vp * vp, axis=1)
+    near = (nd <= 9.0 * np_) & (np_ <= 9.0 * nd) & (dot > 0.0) & (2.0 * dot * dot >= nd * np_)
+    s_i1, s_i2, s_j1, s_j2 = s_i1[near], s_i2[near], idx[s_j1[near]], idx[s_j2[near]]
+    rays = np.column_stack([det, np.ones(det.shape[0])]) @ np.linalg.inv(K).T @ prior[:3, :3]
+    psi, C, ok = upright_two_point(rays[s_i1], rays[s_i2], landmarks_xyz[s_j1], landmarks_xyz[s_j2])
+    sp = np.asarray(sig.position_m, dtype=np.float64)
+    prior_sq = (psi / sig.rotation_rad[2]) ** 2 + np.sum(((C - camera_center(prior)) / sp) ** 2, axis=1)
+    if max_prior_sq is not None:
+        ok &= prior_sq <= max_prior_sq
+    psi, C, prior_sq = psi[ok], C[ok], prior_sq[ok]
+    if psi.size == 0:
+        return []
+    c, s = np.cos(psi), np.sin(psi)
+    Rz_t = np.zeros((psi.size, 3, 3))  # Rz(psi)^T
+    Rz_t[:, 0, 0], Rz_t[:, 0, 1], Rz_t[:, 1, 0], Rz_t[:, 1, 1], Rz_t[:, 2, 2] = c, s, -s, c, 1.0
+    R = prior[:3, :3] @ Rz_t
+    t = -(R @ C[..., None])[..., 0]
+    uv, _ = project_many(K, R, t, landmarks_xyz[idx])
+    du = det[None, :, 0, None] - uv[:, None, :, 0]
+    dv = det[None, :, 1, None] - uv[:, None, :, 1]
+    nearest = np.minimum(np.min(np.fmin(du * du + dv * dv, np.inf), axis=2), gate_px**2)
+    explained = np.sum(nearest < gate_px**2, axis=1)
+    misfit = np.sum(nearest, axis=1)
+    order = np.lexsort((prior_sq, misfit, -explained))
+    order = order[explained[order] >= min_pairs][:keep]
+    if order.size == 0:
+        return []
+    local = assign_many(det, uv[order], gate_px)
+    a = np.where(local >= 0, idx[np.maximum(local, 0)], -1)
+    T = to_transforms(R[order], t[order])
+    return [(a[q], T[q]) for q in range(order.size)]

@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from localization.associate import Association, associate_paper, associate_robust
 from localization.checks import check_choice, check_number
 from localization.detect import Detections, check_image_size
+from localization.distortion import check_distortion, is_pinhole, undistort_points
 from localization.failure import FailureCode
 from localization.geometry import (
     as_points,
@@ -125,6 +126,10 @@ class Localizer:
         max_prior_mahalanobis_sq: robust mode rejects association hypotheses whose pose is
             farther from the prior than this squared Mahalanobis distance (6 dof; default the
             chi-square 99.9 % quantile); None disables the check.
+        distortion: the camera's OpenCV coefficients ``(k1, k2, p1, p2, k3)``
+            (:mod:`localization.distortion`), or None for a pinhole. Detections are undistorted
+            to pinhole pixels of ``K`` once, on entry; everything after (association, PnP,
+            residuals, covariance) is the pinhole model.
 
     Raises:
         TypeError, ValueError: on bad arguments, naming the value and what was expected.
@@ -148,6 +153,7 @@ class Localizer:
         ransac_threshold_px: float = 8.0,
         max_position_std_m: float | None = None,
         max_prior_mahalanobis_sq: float | None = 22.46,
+        distortion: ArrayLike | None = None,
     ) -> None:
         X = as_points("landmarks_xyz", landmarks_xyz, 3)
         if X.shape[0] == 0:
@@ -190,6 +196,7 @@ class Localizer:
             else check_number("max_prior_mahalanobis_sq", max_prior_mahalanobis_sq, 0, lo_open=True)
         )
         self.coplanar = is_coplanar(X)
+        self.distortion = check_distortion("distortion", distortion)
 
     @staticmethod
     def _prior_sigmas(value: PriorSigmas | tuple | None) -> PriorSigmas:
@@ -289,6 +296,8 @@ class Localizer:
         if isinstance(detections_uv, Detections):
             detections_uv = detections_uv.uv
         det = as_points("detections_uv", detections_uv, 2)
+        if not is_pinhole(self.distortion):  # pinhole pixels from here on
+            det = undistort_points(det, self.K, self.distortion)
         prior = check_transform("prior_cam_from_world", prior_cam_from_world)
         sigmas = self.prior_sigmas if prior_sigmas is None else self._prior_sigmas(prior_sigmas)
         n = det.shape[0]

@@ -70,5 +70,6 @@ def test_every_baseline_acts_and_bad_names_are_refused(env):
         assert set(actions) == set(obs) and all(a.shape == (5,) for a in actions.values())
     with pytest.raises(ValueError, match=r"baseline must be one of .*got 'greedi'"):
         make_baseline("greedi", env)
-    with pytest.raises(TypeError, match="needs an env wrapped by LocalizationWrapper, got UavStructParallelEnv"):
+    wrapped_only = "needs an env wrapped by LocalizationWrapper, got UavStructParallelEnv"
+    with pytest.raises(TypeError, match=wrapped_only):
         GreedyCrbPolicy(env.unwrapped)

@@ -1,4 +1,4 @@
-"""The ``uav-struct`` command: ``uav-struct study …`` and ``uav-struct render …``."""
+"""The ``uav-struct`` command: ``uav-struct study …``, ``uav-struct sweep …`` and ``uav-struct render …``."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ USAGE = """usage: uav-struct <command> [options]
 
 commands:
   study    reproduce the paper's four-UAV study (Tables I and II, Fig. 2)
+  sweep    the study over many sites and seeds (a process pool, or Ray), merged into one table
   render   render the four UAV views of a site to PNG files
 
 `uav-struct <command> --help` describes each command's options and their defaults;
@@ -39,6 +40,10 @@ def _dispatch(argv: Sequence[str] | None) -> int:
         from uav_struct_env.study import main as study_main
 
         return study_main(rest)
+    if command == "sweep":
+        from uav_struct_env.study.sweep import main as sweep_main
+
+        return sweep_main(rest)
     if command == "render":
         from uav_struct_env.demo import main as render_main
 

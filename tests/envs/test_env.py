@@ -235,9 +235,13 @@ def test_on_crash_all_ends_the_episode_for_everyone():
     env.reset(seed=0)
     env._states["uav_1"] = UavState.make([0.0, -30.0, 1.0], 0.0, 0.3)
     _, _, term, trunc, infos = env.step({})
-    assert term == {"uav_0": False, "uav_1": True, "uav_2": False, "uav_3": False}
-    assert trunc == {"uav_0": True, "uav_1": False, "uav_2": True, "uav_3": True}
-    assert infos["uav_0"]["truncation_reason"] == "teammate_crash"
+    # Everyone is terminated (a terminal state for the team, not a time limit), so that a
+    # wrapper that ends the episode when all agents are terminated sees it end.
+    assert term == dict.fromkeys(env.possible_agents, True)
+    assert trunc == dict.fromkeys(env.possible_agents, False)
+    assert infos["uav_1"]["termination_reason"] == "below_min_altitude"
+    assert infos["uav_0"]["termination_reason"] == "teammate_crash"
+    assert infos["uav_0"]["truncation_reason"] is None
     assert env.agents == []
     env.close()
 

@@ -99,6 +99,11 @@ def test_settings_line_names_every_setting_and_the_version():
     assert "site paper, as built aci117 x 4" in settings_line(_results(as_built="aci117", as_built_scale=4))
     assert "camera imaging, fixed lighting" in line
     assert "random lighting" in settings_line(_results(lighting="random"))
+    assert "paper camera, camera imaging" in line
+    assert "mavic2pro camera, ideal imaging" in settings_line(_results(camera="mavic2pro"))
+    assert _results(camera="mavic2pro")["config"]["camera"] == "mavic2pro"
+    with pytest.raises(ConfigError, match=r"camera must be one of \('paper', 'mavic2pro'\), got 'gopro'"):
+        StudyConfig(camera="gopro")
     with pytest.raises(ConfigError, match=r"lighting must be one of \('fixed', 'random'\), got 'dusk'"):
         StudyConfig(lighting="dusk")
     results = _results()

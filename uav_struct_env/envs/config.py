@@ -28,6 +28,7 @@ from localization.checks import check_choice, check_number
 from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError, SiteGeometryError
 from uav_struct_env.sim.imaging import ImagingModel, make_imaging
+from uav_struct_env.sim.lens import CameraModel, make_camera_model
 from uav_struct_env.sim.schedule import ScheduleSpec
 from uav_struct_env.sim.sensors import SensorModel, make_noise
 from uav_struct_env.sim.uav import FlightLimits, Geofence
@@ -73,7 +74,7 @@ class EnvConfig:
             :class:`~uav_struct_env.site.Site`, or the path of a site file (``*.json``) or an
             IFC file (``*.ifc``, needs the ``ifc`` extra).
         marker_size: ArUco marker side (m), or None for no markers.
-        image_size: ``(W, H)`` of the observed images. The intrinsics are the paper's camera
+        image_size: ``(W, H)`` of the observed images. The intrinsics are the ``camera``'s
             scaled to this size (same field of view).
         imaging: camera effects on the observed image (:mod:`uav_struct_env.sim.imaging`):
             ``"ideal"`` (none, the default), ``"camera"`` (blur, noise, JPEG) or an
@@ -100,8 +101,9 @@ class EnvConfig:
         observe_depth: add ``obs["depth"]`` (float32 (H, W), metres along the optical axis).
         texture_seed: seed of the per-env concrete textures (and of ``site="random"``).
         on_crash: ``"agent"`` (a crash terminates only that agent, PettingZoo's usual
-            semantics) or ``"all"`` (it also truncates every other agent: the episode ends, as
-            SuperSuit's vector-env conversion needs).
+            semantics) or ``"all"`` (it also terminates every other agent, reason
+            ``"teammate_crash"``: the episode ends for everyone, as SuperSuit's vector-env
+            conversion and RLlib's PettingZoo wrappers need).
         show_uavs: draw every flying UAV's airframe (a 32 x 24 x 8 cm box) in the other
             UAVs' images.
         render_view_height: height in pixels of each agent's tile in ``render()``.
@@ -119,6 +121,12 @@ class EnvConfig:
             ``"aci117"``): the rendered building, the collision obstacles and the landmark truth
             in ``info`` are the as-built building; ``env.site`` (what a localizer uses) stays
             the design.
+        camera: the camera (:mod:`uav_struct_env.sim.lens`): ``"paper"`` (the paper's ideal
+            pinhole, the default), ``"mavic2pro"`` (the Mavic 2 Pro's Hasselblad L1D-20c: its
+            intrinsics, lens distortion, 47 ms rolling-shutter readout and 1/500 s exposure with
+            the UAV's motion) or a ``CameraModel``. ``info["intrinsics"]`` and
+            ``info["distortion"]`` are its K and ``(k1, k2, p1, p2, k3)``; landmark ``uv`` is where
+            each landmark appears in the delivered image.
     """
 
     stage: str | None = None
@@ -147,6 +155,7 @@ class EnvConfig:
     start_yaw_jitter: float = 0.0
     lighting: str = "fixed"
     as_built: AsBuilt | str | None = None
+    camera: str | CameraModel = "paper"
 
     def __post_init__(self) -> None:
         if not (isinstance(self.site, Site) or self.site in ("paper", "random") or _is_site_file(self.site)):
@@ -175,6 +184,7 @@ class EnvConfig:
         object.__setattr__(self, "image_size", (w, h))
         object.__setattr__(self, "noise", make_noise(self.noise))
         object.__setattr__(self, "imaging", make_imaging(self.imaging))
+        object.__setattr__(self, "camera", make_camera_model(self.camera))
         check_choice("renderer", self.renderer, RENDERERS, error=ConfigError)
         for name, lo, hi in (("max_cycles", 1, None), ("n_agents", 1, MAX_AGENTS),
                              ("render_view_height", 16, MAX_IMAGE_SIDE), ("render_fps", 1, 1000),

@@ -23,6 +23,7 @@ import numpy as np
 from uav_struct_env.envs.config import PRESETS, EnvConfig
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.imaging import IMAGING_PRESETS
+from uav_struct_env.sim.lens import CAMERA_MODELS
 from uav_struct_env.sim.schedule import ScheduleSpec
 from uav_struct_env.sim.sensors import NOISE_MODELS
 from uav_struct_env.sim.uav import FlightLimits, Geofence
@@ -33,7 +34,7 @@ __all__ = ["NESTED", "Setting", "UndocumentedSettingError", "settings", "setting
 NESTED: dict[str, type] = {"limits": FlightLimits, "geofence": Geofence, "schedule": ScheduleSpec}
 
 #: Registries whose resolved objects are shown by name (``noise="gnss_ins"`` is stored resolved).
-_NAMED = (NOISE_MODELS, IMAGING_PRESETS)
+_NAMED = (NOISE_MODELS, IMAGING_PRESETS, CAMERA_MODELS)
 
 
 class UndocumentedSettingError(ConfigError):

@@ -15,13 +15,16 @@ Per agent and step:
   FLU, positive pitch looks down), each wrapped to [-pi, pi);
 * info ``world_from_cam`` (ground truth), ``prior_world_from_cam`` (exactly
   ``world_from_cam_from_attitude(obs["gnss"], obs["attitude"])`` in float64), ``intrinsics``
-  (3x3 K of the observed image), ``landmarks`` (per configured set: ids, xyz, uv, in_frame,
-  visible), ``viewpoint`` (k right after ``reset(options={"viewpoint": k})``, else -1),
+  (3x3 K of the observed image), ``distortion`` ((5,) its OpenCV ``k1, k2, p1, p2, k3``; zeros
+  for the paper's pinhole), ``landmarks`` (per configured set: ids, xyz, uv, in_frame,
+  visible; ``uv`` is where the landmark appears in the delivered image, distortion and rolling
+  shutter included, see :mod:`uav_struct_env.sim.lens`), ``viewpoint`` (k right after
+  ``reset(options={"viewpoint": k})``, else -1),
   ``noise_index`` (the viewpoint counter the paper noise's sign uses), ``gnss_fix`` (False in a
   GNSS outage of the sensor model, when ``gnss`` repeats the last fix) and
   ``termination_reason`` (None, ``"collision_structure"``, ``"collision_uav"``,
-  ``"below_min_altitude"``, ``"above_max_altitude"``, ``"beyond_max_distance"``) and
-  ``truncation_reason`` (None, ``"max_cycles"``, ``"teammate_crash"``);
+  ``"below_min_altitude"``, ``"above_max_altitude"``, ``"beyond_max_distance"``,
+  ``"teammate_crash"``) and ``truncation_reason`` (None, ``"max_cycles"``);
 * reward ``0.0``: the base env has no localization and no task; the LocalizationWrapper adds
   the reward. ``info["reward_terms"]`` is an empty dict that sums to it.
 
@@ -32,9 +35,11 @@ the landmark truth in ``info`` are ``env.built_site``, the design moved within t
 Episode: a crash (structure within ``uav_radius``, another UAV within ``2 * uav_radius``) or
 leaving the geofence terminates that agent (it leaves ``env.agents``); after ``max_cycles``
 steps every remaining agent is truncated. With ``on_crash="all"`` (the ``train`` preset) a crash
-also truncates every other agent, ending the episode: SuperSuit's
+also terminates every other agent (``"teammate_crash"``), ending the episode: SuperSuit's
 ``pettingzoo_env_to_vec_env_v1`` cannot handle agents leaving mid-episode and its
-``black_death_v3`` wrapper does not support Dict observations.
+``black_death_v3`` wrapper does not support Dict observations; RLlib's PettingZoo wrappers end
+an episode only when all agents are terminated or all are truncated (one terminated and three
+truncated kept the finished env stepping), and the end is terminal for the team, not a time limit.
 """
 
 from __future__ import annotations
@@ -56,7 +61,7 @@ from uav_struct_env.envs.render import MapView, UavMarker, compose_frame, draw_s
 from uav_struct_env.errors import ClosedError, ConfigError, ResetNeededError
 from uav_struct_env.sim.airframes import Airframes
 from uav_struct_env.sim.attitude import world_from_cam_from_attitude
-from uav_struct_env.sim.camera import Camera
+from uav_struct_env.sim.lens import LensView, Motion
 from uav_struct_env.sim.schedule import (
     ViewpointSchedule,
     _ViewTargets,
@@ -67,10 +72,14 @@ from uav_struct_env.sim.sensors import Reading
 from uav_struct_env.sim.uav import ACTION_COMPONENTS, Obstacles, UavState, step_uav
 from uav_struct_env.site import Site, make_site
 
-__all__ = ["ACTION_COMPONENTS", "RESET_OPTIONS", "UavStructParallelEnv"]
+__all__ = ["ACTION_COMPONENTS", "RESET_OPTIONS", "TEAMMATE_CRASH", "UavStructParallelEnv"]
 
 #: The keys ``reset(options=...)`` accepts.
 RESET_OPTIONS = ("viewpoint",)
+
+#: ``termination_reason`` of the agents that did not crash when, with ``on_crash="all"``, a
+#: teammate's crash ended the episode (they are terminated, not truncated).
+TEAMMATE_CRASH = "teammate_crash"
 
 #: Bound on the gnss observation box (m); far outside any reachable geofence.
 GNSS_BOUND = 1.0e4
@@ -115,7 +124,11 @@ class UavStructParallelEnv(ParallelEnv):
         # and the landmark truth); the localizer's BIM is ``self.site``.
         self.built_site: Site = self.site if cfg.as_built is None else cfg.as_built.apply(self.site)
         w, h = cfg.image_size
-        self.camera = Camera().scaled(w, h)
+        self.camera = cfg.camera.camera(w, h)
+        # A real camera renders wide and remaps (sim.lens); the paper's pinhole renders directly.
+        self._lens: LensView | None = None if cfg.camera.is_ideal else LensView(cfg.camera, w, h)
+        self._distortion = np.array(cfg.camera.distortion)
+        self._motions: dict[str, Motion] = {}
         self.obstacles = Obstacles.from_site(self.built_site)
         # The schedule's ranges and the geofence fitted to the building (sim.schedule.fit_schedule).
         self.viewpoint_schedule: ViewpointSchedule
@@ -282,6 +295,7 @@ class UavStructParallelEnv(ParallelEnv):
             self._viewpoint_base = 0
             self._scripted_viewpoint = -1
         self._sensor_state = self.config.noise.start(self._rng, n)
+        self._motions = {a: Motion() for a in self.possible_agents}  # hovering at the start
         if self.config.lighting == "random":  # a new sun for the episode
             from uav_struct_env.sim.world import random_light
 
@@ -345,23 +359,26 @@ class UavStructParallelEnv(ParallelEnv):
         cfg = self.config
         hover = np.zeros(len(ACTION_COMPONENTS))
         for agent in live:
+            before = self._states[agent]
             self._states[agent] = step_uav(
-                self._states[agent], cleaned.get(agent, hover), cfg.limits, cfg.control_period
+                before, cleaned.get(agent, hover), cfg.limits, cfg.control_period
             )
+            self._motions[agent] = Motion.between(before, self._states[agent], cfg.control_period)
         reasons = self._crashes(live)
+        if cfg.on_crash == "all" and any(r is not None for r in reasons.values()):
+            # The team's episode ends here, by the dynamics and not by a time limit: everyone is
+            # terminated, so that no learner bootstraps past it and RLlib's PettingZoo wrappers
+            # (whose episode end needs all agents terminated or all truncated) see the end.
+            reasons = {a: TEAMMATE_CRASH if r is None else r for a, r in reasons.items()}
         self.num_cycles += 1
         self._scripted_viewpoint = -1
         observations, infos = self._observe(live, dt=cfg.control_period, reasons=reasons)
         terminations = {a: reasons[a] is not None for a in live}
-        crashed = [a for a in live if terminations[a]]
         truncations = {}
         for a in live:
             why = None
-            if not terminations[a]:
-                if cfg.on_crash == "all" and crashed:
-                    why = "teammate_crash"
-                elif self.num_cycles >= self.max_cycles:
-                    why = "max_cycles"
+            if not terminations[a] and self.num_cycles >= self.max_cycles:
+                why = "max_cycles"
             truncations[a] = why is not None
             infos[a]["truncation_reason"] = why
         rewards = dict.fromkeys(live, 0.0)
@@ -429,7 +446,9 @@ class UavStructParallelEnv(ParallelEnv):
             cam_from_world = invert(world_from_cam)
             obs = {"gnss": gnss32, "attitude": att32}
             with self._own_airframe_hidden(agent):
-                if render:
+                if self._lens is not None:
+                    obs, landmarks = self._observe_lens(agent, cam_from_world, obs, render, need_depth)
+                elif render:
                     result = world.render(cam_from_world, self.camera, depth=need_depth)
                     image = cfg.imaging.apply(result.rgb, self._rng)
                     if cfg.observe_image:
@@ -454,6 +473,7 @@ class UavStructParallelEnv(ParallelEnv):
                 "world_from_cam": world_from_cam,
                 "prior_world_from_cam": prior,
                 "intrinsics": K.copy(),
+                "distortion": self._distortion.copy(),
                 "landmarks": landmarks,
                 "viewpoint": self._scripted_viewpoint,
                 "noise_index": noise_index,
@@ -464,6 +484,36 @@ class UavStructParallelEnv(ParallelEnv):
             }
             self._priors[agent] = prior
         return observations, infos
+
+    def _observe_lens(
+        self, agent: str, cam_from_world: NDArray[np.float64], obs: dict, render: bool, need_depth: bool
+    ) -> tuple[dict, dict]:
+        """:meth:`_observe`'s render and landmark truth through a real camera (``self._lens``)."""
+        cfg, world, lens = self.config, self.world, self._lens
+        motion = self._motions.get(agent)
+        if not render:
+            wide = {
+                name: world.landmark_truth_raycast(name, cam_from_world, lens.render_camera)
+                for name in cfg.landmark_sets
+            }
+        else:
+            moving = motion is not None and not motion.is_static
+            result = world.render(cam_from_world, lens.render_camera, depth=need_depth or moving)
+            rgb, depth = lens.warp(
+                result.rgb, result.depth, cam_from_world, motion, warp_depth=cfg.observe_depth
+            )
+            image = cfg.imaging.apply(rgb, self._rng)
+            if cfg.observe_image:
+                obs = {"image": image, **obs}
+                self._last_images[agent] = image
+            if cfg.observe_depth:
+                obs["depth"] = np.asarray(depth, dtype=np.float32)
+            wide = {
+                name: world.landmark_truth(name, cam_from_world, lens.render_camera, result)
+                for name in cfg.landmark_sets
+            }
+        landmarks = {name: lens.landmark_truth(w, cam_from_world, motion) for name, w in wide.items()}
+        return obs, landmarks
 
     # ------------------------------------------------------------------ render / close
     def render(self) -> NDArray[np.uint8] | None:
@@ -503,8 +553,12 @@ class UavStructParallelEnv(ParallelEnv):
 
     def _view(self, agent: str) -> NDArray[np.uint8]:
         """``agent``'s camera image now (its own airframe hidden), for :meth:`render`."""
+        cam_from_world = invert(self._states[agent].world_from_cam)
         with self._own_airframe_hidden(agent):
-            return self.world.render(invert(self._states[agent].world_from_cam), self.camera).rgb
+            if self._lens is None:
+                return self.world.render(cam_from_world, self.camera).rgb
+            wide = self.world.render(cam_from_world, self._lens.render_camera)
+            return self._lens.warp(wide.rgb, None, cam_from_world)[0]
 
     @contextmanager
     def _own_airframe_hidden(self, agent: str) -> Iterator[None]:

@@ -275,6 +275,7 @@ def build_stack(
     model_ids: ArrayLike | None = None,
     markers: Sequence[Any] = (),
     rng: np.random.Generator | None = None,
+    distortion: ArrayLike | None = None,
 ) -> LocalizationStack:
     """Build the stack of ``spec`` for a camera ``K`` with images of ``image_size`` (W, H).
 
@@ -286,6 +287,9 @@ def build_stack(
         model_ids: (M,) their ids (default ``0 .. M-1``).
         markers: the site's ArUco markers (``landmarks="aruco"``).
         rng: the projection detector's generator (see :meth:`LocalizationStack.seed`).
+        distortion: the frames' OpenCV distortion coefficients (``info["distortion"]``), or
+            None for a pinhole; the localizer (or the ArUco localizer) undistorts detections
+            with them at its entry.
 
     Raises:
         ConfigError: with fewer than 4 landmarks, or no markers for ArUco.
@@ -300,7 +304,9 @@ def build_stack(
         if not markers:
             raise ConfigError("detector='aruco' needs markers: build the env with marker_size set")
         sigma = max(spec.aruco_pixel_sigma, spec.min_localizer_sigma_px)
-        aruco = ArucoLocalizer(markers, K, mode=spec.aruco_mode, pixel_sigma=sigma)
+        aruco = ArucoLocalizer(
+            markers, K, mode=spec.aruco_mode, pixel_sigma=sigma, dist_coeffs=distortion
+        )
         ids = np.repeat(np.array([m.id for m in aruco.markers], dtype=np.int64), 4)
         return LocalizationStack(spec, (w, h), ids, aruco=aruco)
     xyz = np.asarray(model_xyz, dtype=np.float64).reshape(-1, 3)
@@ -310,7 +316,10 @@ def build_stack(
             "localize"
         )
     ids = np.arange(len(xyz)) if model_ids is None else np.asarray(model_ids)
-    localizer = Localizer(xyz, K, association=spec.association, **spec.localizer_arguments((w, h)))
+    localizer = Localizer(
+        xyz, K, association=spec.association, distortion=distortion,
+        **spec.localizer_arguments((w, h)),
+    )
     if not isinstance(spec.detector, str):
         detector = spec.detector
     elif spec.detector == "learned":

@@ -17,6 +17,7 @@ from localization.checks import check_choice, check_number
 from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.sim.lens import CAMERA_MODELS
 from uav_struct_env.site import make_site
 from uav_struct_env.site.as_built import MAX_SCALE, TOLERANCE_MODELS, AsBuilt
 from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS, check_weights
@@ -187,6 +188,11 @@ class StudyConfig:
         as_built_scale: factor on every tolerance of ``as_built`` (0: the design).
         lighting: ``"fixed"`` (the default sun) or ``"random"`` (a sun drawn per scene and
             viewpoint from the seed, :func:`uav_struct_env.sim.world.random_light`).
+        camera: the camera (:data:`uav_struct_env.sim.lens.CAMERA_MODELS`): ``"paper"`` (the
+            paper's ideal pinhole) or ``"mavic2pro"`` (the Mavic 2 Pro's intrinsics, lens
+            distortion, rolling shutter and exposure; the localizers get its distortion
+            coefficients). At the scripted viewpoints the UAVs hover, so the rolling shutter and
+            blur have no motion to show; the distortion always applies.
     """
 
     seed: int = 0
@@ -210,6 +216,7 @@ class StudyConfig:
     as_built: str | None = None
     as_built_scale: float = 1.0
     lighting: str = "fixed"
+    camera: str = "paper"
 
     def __post_init__(self) -> None:
         for name, options in (
@@ -240,6 +247,7 @@ class StudyConfig:
         ):
             check_number(name, getattr(self, name), lo, hi, error=ConfigError, type_error=ConfigError)
         check_choice("lighting", self.lighting, LIGHTINGS, error=ConfigError)
+        check_choice("camera", self.camera, tuple(CAMERA_MODELS), error=ConfigError)
         if self.as_built is not None:
             check_choice("as_built", self.as_built, tuple(TOLERANCE_MODELS), error=ConfigError)
         check_number("as_built_scale", self.as_built_scale, 0.0, MAX_SCALE, error=ConfigError,

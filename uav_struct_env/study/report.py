@@ -223,6 +223,7 @@ def settings_line(results: dict) -> str:
         detector,
         f"{c.pop('association')} association",
         f"{c.pop('noise')} prior",
+        f"{c.pop('camera', 'paper')} camera, "
         f"{c.pop('imaging')} imaging, {c.pop('lighting', 'fixed')} lighting, {w}x{h} px, "
         f"{c.pop('renderer')} renderer",
         f"seed {c.pop('seed')}",

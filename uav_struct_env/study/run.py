@@ -118,6 +118,7 @@ def _env_for(config: StudyConfig, scene: Scene):
             texture_seed=config.seed,
             as_built=config.as_built_model,
             lighting=config.lighting,
+            camera=config.camera,
         )
         _ENVS[scene] = env
     return env
@@ -186,6 +187,7 @@ def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoin
                 model_ids=model_ids,
                 markers=site.markers,
                 rng=_rng(config, method, uav, viewpoint),
+                distortion=info["distortion"],
             )
             frame = stack.localize(image, {method.landmarks: truth}, prior)
             est = frame.estimate

@@ -13,6 +13,7 @@ from tqdm import tqdm
 from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.outputs import OutputExistsError, StagedOutput
 from uav_struct_env.processes import WorkerDied
+from uav_struct_env.sim.lens import CAMERA_MODELS
 from uav_struct_env.site import make_site
 from uav_struct_env.site.as_built import TOLERANCE_MODELS
 from uav_struct_env.study.figures import plot_error_cdfs, plot_fig2, plot_viewpoint_map
@@ -159,6 +160,13 @@ def _parser() -> CommandParser:
         help="camera effects on the rendered images: ideal (none) or camera (blur, noise, JPEG)",
     )
     p.add_argument(
+        "--camera",
+        default="paper",
+        choices=tuple(CAMERA_MODELS),
+        help="the camera: paper (ideal pinhole) or mavic2pro (lens distortion, rolling shutter, "
+        "motion blur; the localizers undistort with its coefficients)",
+    )
+    p.add_argument(
         "--lighting",
         default="fixed",
         choices=LIGHTINGS,
@@ -181,31 +189,42 @@ def _parser() -> CommandParser:
     return p
 
 
+def study_config(args, **overrides) -> StudyConfig:
+    """The :class:`StudyConfig` of parsed ``uav-struct study`` options; ``overrides`` replace fields.
+
+    ``uav-struct sweep`` takes the same options and builds its runs' settings here too.
+    """
+    # The command's default is the full method from pixels (StudyConfig keeps "projection").
+    fields = dict(
+        seed=args.seed,
+        detector=args.detector,
+        association=args.association,
+        noise=args.noise,
+        site=args.site,
+        n_viewpoints=QUICK_VIEWPOINTS if args.quick else 10,
+        pixel_sigma=args.pixel_sigma,
+        miss_rate=args.miss_rate,
+        false_positives=args.false_positives,
+        renderer=args.renderer,
+        imaging=args.imaging,
+        detector_model=args.detector_model,
+        refiner_model=args.refiner_model,
+        workers=args.workers,
+        stage=args.stage,
+        as_built=args.as_built,
+        as_built_scale=args.as_built_scale,
+        lighting=args.lighting,
+        camera=args.camera,
+    )
+    fields.update(overrides)
+    return StudyConfig(**fields)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     args = _parser().parse_args(argv)
     try:
-        # The command's default is the full method from pixels (StudyConfig keeps "projection").
-        config = StudyConfig(
-            seed=args.seed,
-            detector=args.detector,
-            association=args.association,
-            noise=args.noise,
-            site=args.site,
-            n_viewpoints=QUICK_VIEWPOINTS if args.quick else 10,
-            pixel_sigma=args.pixel_sigma,
-            miss_rate=args.miss_rate,
-            false_positives=args.false_positives,
-            renderer=args.renderer,
-            imaging=args.imaging,
-            detector_model=args.detector_model,
-            refiner_model=args.refiner_model,
-            workers=args.workers,
-            stage=args.stage,
-            as_built=args.as_built,
-            as_built_scale=args.as_built_scale,
-            lighting=args.lighting,
-        )
+        config = study_config(args)
         check_site(args.site, args.stage, seed=args.seed)
         check_output_dir(args.out, overwrite=args.overwrite)
     except INPUT_ERRORS as err:

@@ -7,6 +7,7 @@ wenv = make_train_env("state")                             # a documented traini
 ``LocalizationWrapper`` composes :class:`LocalizePoses` (pose, pose_std, localized, info),
 :class:`LayoutObservation` (layout), :class:`RewardWrapper` (a reward object's terms) and
 :class:`DropKeys` (drop the image); :class:`FlattenObservation` turns the Dict into one vector;
+:class:`TensorInfo` keeps only numeric, fixed-shape info entries (TorchRL);
 the stack itself is :mod:`uav_struct_env.stack`.
 """
 
@@ -35,6 +36,7 @@ from uav_struct_env.wrappers.rewards import (
     UncertaintyReward,
     make_reward,
 )
+from uav_struct_env.wrappers.tensor_info import TensorInfo
 
 __all__ = [
     "DETECTORS",
@@ -52,6 +54,7 @@ __all__ = [
     "LocalizePoses",
     "Reward",
     "RewardWrapper",
+    "TensorInfo",
     "TrainConfig",
     "UncertaintyReward",
     "localize_frame",

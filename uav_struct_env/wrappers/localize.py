@@ -141,6 +141,7 @@ class LocalizePoses(ParallelWrapper):
                 model_ids=model.ids,
                 markers=base.site.markers,
                 rng=self._rng,
+                distortion=np.asarray(config.camera.distortion, dtype=np.float64),
             )
         except ConfigError as e:
             if spec.structural and len(model.xyz) < 4:

@@ -4,7 +4,8 @@ A reward is any object with ``terms(frame, crashed) -> dict[str, float]`` (:clas
 the reward is the sum of its terms, and ``info["reward_terms"]`` holds them (merged with the
 terms of rewards below). ``frame`` is the agent's :class:`~uav_struct_env.stack.FrameLocalization`
 of this step (from a :class:`~uav_struct_env.wrappers.localize.LocalizePoses` below), ``crashed``
-whether the agent was terminated (geofence or collision). Built in:
+whether the agent was terminated by its own geofence exit or collision (not an agent that
+``on_crash="all"`` terminates for a teammate's crash, ``"teammate_crash"``). Built in:
 
 * :class:`ErrorReward` (``"error"``, needs ground truth, simulation only): ``alive``
   (+``alive_bonus``), ``translation`` (-min(translation error, ``error_cap``)), ``rotation``
@@ -13,7 +14,7 @@ whether the agent was terminated (geofence or collision). Built in:
 * :class:`UncertaintyReward` (``"uncertainty"``, deployable, no ground truth): ``alive``,
   ``uncertainty`` (-min(predicted position RMS std = sqrt(trace of the covariance's position
   block), cap)) when localized, else ``failure``;
-* both: ``crash`` (-``crash_penalty``) when the agent is terminated.
+* both: ``crash`` (-``crash_penalty``) when the agent itself crashed.
 
 ``alive_bonus`` defaults to ``failure_penalty`` so a failed step scores 0 and a good fix scores
 close to ``alive_bonus``: every step is worth at least as much as ending the episode, so a
@@ -28,6 +29,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from localization.checks import check_choice, check_number
+from uav_struct_env.envs.uav_struct import TEAMMATE_CRASH
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.stack import FrameLocalization
 from uav_struct_env.wrappers.base import ParallelWrapper
@@ -177,7 +179,9 @@ class RewardWrapper(ParallelWrapper):
         obs, rewards, terminations, truncations, infos = self.env.step(actions)
         for agent in obs:
             terms = dict(infos[agent].get("reward_terms", {}))
-            crashed = bool(terminations.get(agent, False))
+            crashed = bool(terminations.get(agent, False)) and (
+                infos[agent].get("termination_reason") != TEAMMATE_CRASH
+            )
             terms.update(self.reward.terms(self._loc.last_frames[agent], crashed))
             infos[agent]["reward_terms"] = terms
             rewards[agent] = float(sum(terms.values()))

@@ -1,0 +1,263 @@
+"""Many poses at once: projection, gated assignment, Levenberg-Marquardt and prior distance.
+
+Robust association (:mod:`localization.associate`) weighs tens of identity hypotheses per image;
+refined one after another, each PnP, re-projection and assignment round costs the Python
+overhead of a few dozen small numpy calls, and that overhead, not arithmetic, was the whole
+latency (12-30 ms per image). Here every step takes a stack of ``H`` hypotheses and runs the
+same numpy calls once for all of them.
+
+Poses are held as ``R`` (H, 3, 3) and ``t`` (H, 3) of ``cam_from_world`` (``p_cam = R X + t``).
+Correspondences of different hypotheses are padded to one length ``P`` and carry a (H, P) bool
+mask. The LM update perturbs the camera frame, ``R' = exp([w]x) R``, ``t' = exp([w]x) t + d``;
+the resulting poses are the same as :func:`localization.pnp.refine_pose`'s (a different
+parameterization of the same least-squares problem).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from localization.geometry import so3_log
+
+__all__ = [
+    "assign_many",
+    "pose_difference_many",
+    "project_many",
+    "refine_many",
+    "rotation_between",
+    "so3_exp_many",
+    "to_transforms",
+]
+
+
+def so3_exp_many(w: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(H, 3, 3) rotation matrices of (H, 3) rotation vectors (Rodrigues, series near zero)."""
+    theta2 = np.sum(w * w, axis=1)
+    theta = np.sqrt(theta2)
+    small = theta < 1e-4
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - theta2 / 6.0, np.sin(safe) / safe)
+    b = np.where(small, 0.5 - theta2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
+    W = (w[:, _SKEW_FROM] * _SKEW_SIGN).reshape(-1, 3, 3)
+    return np.eye(3) + a[:, None, None] * W + b[:, None, None] * (W @ W)
+
+
+#: The skew matrix [w]x as a gather of w's components (row-major) times signs (0 where zero).
+_SKEW_FROM = np.array([0, 2, 1, 2, 0, 0, 1, 0, 0])
+_SKEW_SIGN = np.array([0.0, -1.0, 1.0, 1.0, 0.0, -1.0, -1.0, 1.0, 0.0])
+
+
+def rotation_between(b1: NDArray[np.float64], b2: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(H, 3, 3) the smallest rotations taking directions ``b1`` (H, 3) to ``b2`` (H, 3)."""
+    b1 = b1 / np.linalg.norm(b1, axis=1, keepdims=True)
+    b2 = b2 / np.linalg.norm(b2, axis=1, keepdims=True)
+    axis = np.cross(b1, b2)
+    s = np.linalg.norm(axis, axis=1)
+    angle = np.arctan2(s, np.sum(b1 * b2, axis=1))
+    return so3_exp_many(axis * np.where(s > 1e-15, angle / np.maximum(s, 1e-300), 0.0)[:, None])
+
+
+def project_many(
+    K: NDArray[np.float64], R: NDArray[np.float64], t: NDArray[np.float64], X: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Pixels (H, M, 2) and depths (H, M) of points ``X`` ((M, 3) shared or (H, M, 3)).
+
+    A point at or behind the camera gets NaN pixels (its depth tells which).
+    """
+    p = X @ R.transpose(0, 2, 1) + t[:, None, :]
+    z = p[..., 2]
+    front = z > 1e-6
+    zs = np.where(front, z, 1.0)
+    u = (K[0, 0] * p[..., 0] + K[0, 1] * p[..., 1]) / zs + K[0, 2]
+    v = K[1, 1] * p[..., 1] / zs + K[1, 2]
+    uv = np.stack([u, v], axis=-1)
+    uv[~front] = np.nan
+    return uv, z
+
+
+def assign_many(
+    det: NDArray[np.float64], proj: NDArray[np.float64], gate_px: float, rounds: int = 3
+) -> NDArray[np.int64]:
+    """(H, N) gated one-to-one assignments of detections (N, 2) to each layout ``proj`` (H, M, 2).
+
+    Greedy by mutual nearest neighbours: a detection and a projection are paired when each is
+    the other's nearest and they are within ``gate_px``; paired rows and columns leave, and
+    ``rounds`` such passes run. Each pass pairs the globally closest remaining pair, so with
+    separated points the result is the minimum-cost assignment (:func:`localization.associate.
+    assign`); NaN detections or projections never pair. -1 marks an unassigned detection.
+    """
+    h, n, m = proj.shape[0], det.shape[0], proj.shape[1]
+    out = np.full((h, n), -1, dtype=np.int64)
+    if n == 0 or m == 0 or h == 0:
+        return out
+    du = det[None, :, 0, None] - proj[:, None, :, 0]
+    dv = det[None, :, 1, None] - proj[:, None, :, 1]
+    d2 = du * du + dv * dv  # NaN for NaN points, and NaN > gate is False: see below
+    d2[~(d2 <= gate_px**2)] = np.inf
+    rows = np.arange(n)
+    for _ in range(rounds):
+        jn = np.argmin(d2, axis=2)  # (H, N) nearest projection of each detection
+        inn = np.argmin(d2, axis=1)  # (H, M) nearest detection of each projection
+        mutual = np.take_along_axis(inn, jn, axis=1) == rows
+        ok = mutual & (np.take_along_axis(d2, jn[..., None], axis=2)[..., 0] < np.inf)
+        if not ok.any():
+            break
+        out[ok] = jn[ok]
+        d2[ok] = np.inf  # paired detections leave
+        cols = np.zeros((h, m), dtype=bool)
+        hi = np.nonzero(ok)[0]
+        cols[hi, jn[ok]] = True
+        d2[np.broadcast_to(cols[:, None, :], d2.shape)] = np.inf  # and so do their projections
+    return out
+
+
+def _residuals_and_jacobian(
+    K: NDArray, R: NDArray, t: NDArray, X: NDArray, uv: NDArray
+) -> tuple[NDArray, NDArray, NDArray]:
+    """Residuals (H, P, 2), Jacobians (H, P, 2, 6) w.r.t. the update ``(w, d)`` and depth (H, P).
+
+    For ``p' = p + w x p + d``: ``du/dw = p x du/dp`` and ``du/dd = du/dp``.
+    """
+    p = X @ R.transpose(0, 2, 1) + t[:, None, :]
+    x, y, z = p[..., 0], p[..., 1], p[..., 2]
+    iz = 1.0 / np.where(z > 1e-6, z, 1.0)
+    fx, fy, s = K[0, 0], K[1, 1], K[0, 1]
+    xs, ys = x * iz, y * iz
+    ur = fx * xs + K[0, 2] if s == 0.0 else fx * xs + s * ys + K[0, 2]
+    r = np.stack([ur - uv[..., 0], fy * ys + K[1, 2] - uv[..., 1]], axis=-1)
+    a, b, c = fx * iz, s * iz, (K[0, 2] - ur) * iz  # du/dp
+    e = fy * iz
+    f = -e * ys  # dv/dp = (0, e, f)
+    zero = np.zeros_like(z)
+    J = np.stack(
+        [y * c - z * b, z * a - x * c, x * b - y * a, a, b, c,
+         y * f - z * e, -x * f, x * e, zero, e, f],
+        axis=-1,
+    ).reshape(p.shape[:2] + (2, 6))
+    return r, J, z
+
+
+def _normal_equations(
+    K: NDArray, R: NDArray, t: NDArray, X: NDArray, uv: NDArray, w: NDArray
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """(A (H,6,6), g (H,6), weighted cost (H,), residuals (H,P,2), Jacobians) at the poses."""
+    r, J, z = _residuals_and_jacobian(K, R, t, X, uv)
+    w = np.where(z > 1e-6, w, 0.0)
+    r = r * (w > 0)[..., None]
+    A, g = _weighted_system(J, r, w)
+    cost = np.sum(w * (r[..., 0] ** 2 + r[..., 1] ** 2), axis=1)
+    return A, g, cost, r, J
+
+
+def _weighted_system(J: NDArray, r: NDArray, w: NDArray) -> tuple[NDArray, NDArray]:
+    h = J.shape[0]
+    Jf = J.reshape(h, -1, 6)
+    JwT = (Jf * np.repeat(w, 2, axis=1)[..., None]).transpose(0, 2, 1)
+    return JwT @ Jf, (JwT @ r.reshape(h, -1, 1))[..., 0]
+
+
+def refine_many(
+    K: NDArray[np.float64],
+    R: NDArray[np.float64],
+    t: NDArray[np.float64],
+    X: NDArray[np.float64],
+    uv: NDArray[np.float64],
+    mask: NDArray[np.bool_],
+    iterations: int = 10,
+    robust_px: float | None = None,
+    tol: float = 1e-6,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Levenberg-Marquardt on the reprojection error of H poses at once.
+
+    Args:
+        K: (3, 3) intrinsics.
+        R: (H, 3, 3) start rotations of ``cam_from_world``.
+        t: (H, 3) start translations.
+        X: (H, P, 3) model points, padded.
+        uv: (H, P, 2) their pixels, padded.
+        mask: (H, P) the real correspondences.
+        iterations: LM steps (each tries one damped update per pose and keeps it if it lowers
+            that pose's cost, else raises its damping).
+        robust_px: if given, Cauchy weights ``1 / (1 + (|r| / robust_px)^2)`` recomputed each
+            step (iteratively reweighted least squares), so a wrong pair pulls less.
+        tol: a pose whose relative cost decrease falls below this stops moving.
+
+    Returns:
+        ``(R, t, cost)``: refined poses and their unweighted sum of squared residuals over the
+        mask, px^2 (inf for a pose with a masked point at or behind the camera).
+    """
+    h = R.shape[0]
+    w0 = mask.astype(np.float64)
+    lam = np.full(h, 1e-3)
+    active = np.ones(h, dtype=bool)
+    eye = np.eye(6)
+    w = w0
+    A, g, cost, r, J = _normal_equations(K, R, t, X, uv, w)
+    for _ in range(iterations):
+        if robust_px is not None:
+            w = w0 / (1.0 + np.sum(r**2, axis=-1) / robust_px**2)
+            A, g = _weighted_system(J, r, w)
+            cost = np.sum(w * np.sum(r**2, axis=-1), axis=1)
+        M = A + (lam[:, None] * np.maximum(np.diagonal(A, axis1=1, axis2=2), 1e-12))[:, :, None] * eye
+        try:
+            delta = -np.linalg.solve(M, g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            delta = -np.stack([np.linalg.lstsq(Mi, gi, rcond=None)[0] for Mi, gi in zip(M, g, strict=True)])
+        delta = np.where(active[:, None] & np.isfinite(delta), delta, 0.0)
+        dR = so3_exp_many(delta[:, :3])
+        Rn = dR @ R
+        tn = (dR @ t[..., None])[..., 0] + delta[:, 3:]
+        An, gn, costn, rn, Jn = _normal_equations(K, Rn, tn, X, uv, w)
+        better = active & (costn <= cost)  # False for NaN
+        rel = (cost - costn) / np.maximum(cost, 1e-300)
+        if better.all():
+            R, t, A, g, r, J, cost = Rn, tn, An, gn, rn, Jn, costn
+        else:
+            b3 = better[:, None, None]
+            R, t = np.where(b3, Rn, R), np.where(better[:, None], tn, t)
+            A, g = np.where(b3, An, A), np.where(better[:, None], gn, g)
+            r, J = np.where(b3, rn, r), np.where(better[:, None, None, None], Jn, J)
+            cost = np.where(better, costn, cost)
+        lam = np.where(better, np.maximum(lam * 0.1, 1e-12), lam * 10.0)
+        active &= ~(better & (rel < tol)) & (lam < 1e8)
+        if not active.any():
+            break
+    # re-orthonormalize, then the unweighted cost (and inf when a point is behind the camera)
+    U, _, Vt = np.linalg.svd(R)
+    R = U @ Vt
+    r, _, z = _residuals_and_jacobian(K, R, t, X, uv)
+    final = np.sum(w0 * np.sum(r * r, axis=-1), axis=1)
+    behind = np.any(mask & (z <= 1e-6), axis=1)
+    return R, t, np.where(behind, np.inf, final)
+
+
+def pose_difference_many(
+    R: NDArray[np.float64], t: NDArray[np.float64], prior: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(H, 6) poses minus ``prior`` (4, 4) as :func:`localization.pnp.pose_difference` gives them.
+
+    Camera centre difference [m], then the world-frame rotation vector ``log(R_wc R_wc_prior^T)``.
+    """
+    C = -(R.transpose(0, 2, 1) @ t[..., None])[..., 0]
+    Rp = prior[:3, :3]
+    Cp = -Rp.T @ prior[:3, 3]
+    Q = R.transpose(0, 2, 1) @ Rp  # R_wc @ R_wc_prior.T
+    w = np.stack([Q[:, 2, 1] - Q[:, 1, 2], Q[:, 0, 2] - Q[:, 2, 0], Q[:, 1, 0] - Q[:, 0, 1]], axis=1)
+    cos = np.clip((Q[:, 0, 0] + Q[:, 1, 1] + Q[:, 2, 2] - 1.0) / 2.0, -1.0, 1.0)
+    s = 0.5 * np.linalg.norm(w, axis=1)
+    theta = np.arctan2(s, cos)
+    rot = w * np.where(s < 1e-12, 0.5, theta / (2.0 * np.maximum(s, 1e-300)))[:, None]
+    far = cos <= -0.99  # near pi the skew part loses the axis: the exact scalar logarithm
+    for i in np.flatnonzero(far):
+        rot[i] = so3_log(Q[i])
+    return np.concatenate([C - Cp, rot], axis=1)
+
+
+def to_transforms(R: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(H, 4, 4) rigid transforms of rotations (H, 3, 3) and translations (H, 3)."""
+    T = np.zeros((R.shape[0], 4, 4))
+    T[:, :3, :3] = R
+    T[:, :3, 3] = t
+    T[:, 3, 3] = 1.0
+    return T
