@@ -36,10 +36,10 @@ docs-serve: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs serve
 
 lint: $(STAMP)
-	$(BIN)/ruff check uav_struct_env localization tests benchmarks examples
+	$(BIN)/ruff check uav_struct_env localization tracking tests benchmarks examples
 
 bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in docs/benchmarks.md
-	for b in render env_step raycast localizer wrapper_throughput detector ifc_import; do \
+	for b in render env_step raycast localizer wrapper_throughput detector ifc_import worker_tracking; do \
 		[ -f benchmarks/$$b.py ] && $(BIN)/python benchmarks/$$b.py || exit 1; done
 
 # The learned detector from scratch, as localization/models/MODEL_CARD.md trained it: four

@@ -4,6 +4,7 @@ Usage::
 
     .venv/bin/python benchmarks/env_step.py                  # paper 1280x720 and train 128x72
     .venv/bin/python benchmarks/env_step.py --steps 50 --renderer tiny
+    .venv/bin/python benchmarks/env_step.py --config "paper 1280x720" --config "paper 1280x720, busy activity"
     .venv/bin/python benchmarks/env_step.py --compare-camera mavic2pro --steps 40
 
 For each configuration: the time of one ``reset`` (the first one also builds the world), then
@@ -31,11 +32,17 @@ import uav_struct_env
 CONFIGS = {
     "paper 1280x720": ("paper", {}),
     "paper 1280x720, no landmark info": ("paper", {"landmark_sets": ()}),
+    "paper 1280x720, light activity": ("paper", {"activity": "light"}),
+    "paper 1280x720, busy activity": ("paper", {"activity": "busy"}),
     "paper 1280x720, mavic2pro camera": ("paper", {"camera": "mavic2pro"}),
+    "paper 1280x720, mavic2pro camera, busy activity": ("paper", {"camera": "mavic2pro", "activity": "busy"}),
     "train 128x72": ("train", {}),
     "train 128x72 + landmark info": ("train", {"landmark_sets": ("column_tops", "slab_corners")}),
     "train, no image + landmark info (ray-cast)": (
         "train", {"landmark_sets": ("column_tops", "slab_corners"), "observe_image": False}),
+    "train, no image + ray-cast, busy activity": (
+        "train", {"landmark_sets": ("column_tops", "slab_corners"), "observe_image": False,
+                  "activity": "busy"}),
 }
 
 

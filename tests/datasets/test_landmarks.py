@@ -104,3 +104,20 @@ def test_a_missing_site_file_is_refused_before_anything_is_written(tmp_path, cap
     assert cli_main([str(out), "--site", str(tmp_path / "missing.ifc")]) == 2
     assert "DatasetConfig.site must be 'random' or an existing site file" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_site_activity_hides_labels_and_changes_nothing_else(tmp_path, tiny_dataset):
+    """--activity busy: the same views (its own seed), pixels differ, labels only lose landmarks."""
+    out = tmp_path / "busy"
+    assert cli_main([str(out), "--layouts", "1", "--views", "2", "--seed", "7", "--scale", "0.25",
+                     "--activity", "busy"]) == 0
+    busy, plain = load_labels(out), load_labels(tiny_dataset)
+    assert busy["config"]["activity"] == "busy"
+    for b, p in zip(busy["images"], plain["images"], strict=True):
+        assert b["cam_from_world"] == p["cam_from_world"]
+        kb = {tuple(k) for k in b["keypoints"]}
+        kp = {tuple(k) for k in p["keypoints"]}
+        assert kb <= kp
+        assert not np.array_equal(cv2.imread(str(out / b["file"])), cv2.imread(str(tiny_dataset / p["file"])))
+    with pytest.raises(ConfigError, match=r"activity must be one of \('none', 'light', 'busy'\)"):
+        DatasetConfig(activity="crowded")

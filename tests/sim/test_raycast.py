@@ -117,3 +117,40 @@ def test_an_env_without_images_renders_nothing_and_gives_the_same_truth():
     finally:
         with_images.close()
         without.close()
+
+
+def test_many_oriented_boxes_hit_as_one_by_one_and_a_skipped_box_is_passed_through():
+    """The culled, vectorized box test equals a plain per-box slab test on random boxes and rays."""
+    rng = np.random.default_rng(4)
+    scene = RayScene([])
+    boxes = []
+    for _ in range(40):
+        a, b = rng.uniform(-np.pi, np.pi, 2)
+        Rz = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+        Ry = np.array([[np.cos(b), 0, -np.sin(b)], [0, 1, 0], [np.sin(b), 0, np.cos(b)]])
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = Rz @ Ry, rng.uniform(-15, 15, 3)
+        boxes.append((T, rng.uniform(0.05, 3.0, 3)))
+    scene.boxes = boxes
+    o = np.array([0.5, -0.3, 0.2])
+    d = rng.normal(size=(500, 3)) * rng.uniform(0.2, 3.0, (500, 1))
+
+    def reference(skip=None):
+        best = np.full(len(d), np.inf)
+        for i, ray in enumerate(d):
+            for k, (T, half) in enumerate(boxes):
+                if skip is not None and skip[i] == k:
+                    continue
+                ob, db = T[:3, :3].T @ (o - T[:3, 3]), T[:3, :3].T @ ray
+                with np.errstate(divide="ignore"):
+                    t1, t2 = (-half - ob) / db, (half - ob) / db
+                lo, hi = np.minimum(t1, t2).max(), np.maximum(t1, t2).min()
+                if hi >= lo and lo >= 0:
+                    best[i] = min(best[i], lo)
+        return best
+
+    expected = reference()
+    assert np.isfinite(expected).sum() > 50  # many rays hit something
+    np.testing.assert_allclose(scene.first_hit(o, d), expected, rtol=1e-12)
+    skip = rng.integers(-1, len(boxes), len(d))
+    np.testing.assert_allclose(scene.first_hit(o, d, skip_box=skip), reference(skip), rtol=1e-12)

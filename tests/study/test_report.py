@@ -99,6 +99,10 @@ def test_settings_line_names_every_setting_and_the_version():
     assert "site paper, as built aci117 x 4" in settings_line(_results(as_built="aci117", as_built_scale=4))
     assert "camera imaging, fixed lighting" in line
     assert "random lighting" in settings_line(_results(lighting="random"))
+    assert "as designed, site activity none" in line
+    assert "as designed, site activity busy" in settings_line(_results(activity="busy"))
+    with pytest.raises(ConfigError, match=r"activity must be one of \('none', 'light', 'busy'\), got 'rush'"):
+        StudyConfig(activity="rush")
     assert "paper camera, camera imaging" in line
     assert "mavic2pro camera, ideal imaging" in settings_line(_results(camera="mavic2pro"))
     assert _results(camera="mavic2pro")["config"]["camera"] == "mavic2pro"

@@ -7,6 +7,7 @@ import sys
 from uav_struct_env.datasets.landmarks import DatasetConfig, generate
 from uav_struct_env.outputs import OutputExistsError
 from uav_struct_env.processes import WorkerDied
+from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_option, check_output_dir, refuse
 
 
@@ -22,6 +23,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--site", default="random",
                     help="random (a new random site per layout) or a site file (*.json) / IFC file "
                          "(*.ifc): that building at a stage drawn per layout")
+    ap.add_argument("--activity", default="none", choices=tuple(ACTIVITY_PRESETS),
+                    help="site activity per layout: none, light or busy (workers, equipment, "
+                         "materials, scaffolding; they hide landmarks)")
     ap.add_argument("--workers", type=int, default=1, help="rendering processes")
     ap.add_argument("--overwrite", action="store_true",
                     help="replace a dataset already in out_dir (otherwise such a folder is refused)")
@@ -29,7 +33,8 @@ def main(argv: list[str] | None = None) -> int:
     prog = ap.prog
     try:
         config = DatasetConfig(n_layouts=args.layouts, views_per_layout=args.views, seed=args.seed,
-                               scale=args.scale, renderer=args.renderer, site=args.site)
+                               scale=args.scale, renderer=args.renderer, site=args.site,
+                               activity=args.activity)
         check_option("--workers", args.workers, 1, integer=True)
         check_output_dir(args.out_dir, overwrite=args.overwrite, option="out_dir")
     except INPUT_ERRORS as err:

@@ -9,7 +9,10 @@ resolution and 3-14 clutter boxes (stacks of building material and equipment-siz
 ground, a few small stacks on the slab away from its edges). Each layout is seen from
 ``views_per_layout`` random viewpoints: any azimuth, 10-40 m out from the slab edge, 8-30 m up,
 aimed at the building centre with up to +-4 m (horizontal) / +-2 m (vertical) of jitter, so the
-building is sometimes cut by the image border. Every view draws a new sun direction
+building is sometimes cut by the image border. With ``activity`` (``"light"``, ``"busy"``) each
+layout also gets the site activity of :mod:`uav_struct_env.site.activity` (workers, equipment,
+materials, scaffolding; seeded by ``[seed, layout, 1]``, the workers 3 s further on at each
+view), which hides landmarks like everything else. Every view draws a new sun direction
 (elevation 25-85 deg, any azimuth) and TinyRenderer ambient/diffuse coefficients (the EGL
 backend only uses the direction: that limitation is pybullet's).
 
@@ -46,11 +49,12 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from localization.checks import check_number
+from localization.checks import check_choice, check_number
 from localization.geometry import look_at
 from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.site import Site, make_site, random_site
+from uav_struct_env.site.activity import ACTIVITY_PRESETS, SiteActivity
 
 __all__ = ["LANDMARK_TYPES", "DatasetConfig", "generate", "load_labels", "render_layout"]
 
@@ -62,6 +66,8 @@ _MATERIAL_RGB = (
     (0.55, 0.42, 0.28), (0.62, 0.60, 0.57), (0.35, 0.36, 0.38), (0.70, 0.68, 0.62),
     (0.20, 0.35, 0.55), (0.45, 0.20, 0.15), (0.80, 0.78, 0.74),
 )
+#: Seconds of site activity between two views of a layout (the workers move on).
+_ACTIVITY_SECONDS_PER_VIEW = 3.0
 _EQUIPMENT_RGB = ((0.90, 0.70, 0.10), (0.85, 0.45, 0.10), (0.25, 0.25, 0.27), (0.90, 0.90, 0.88))
 
 
@@ -78,6 +84,7 @@ class DatasetConfig:
     renderer: str = "auto"
     source_size: tuple[int, int] = PAPER_IMAGE_SIZE
     site: str = "random"
+    activity: str = "none"
 
     def __post_init__(self) -> None:
         if not isinstance(self.site, str) or not (
@@ -90,6 +97,7 @@ class DatasetConfig:
             )
         if self.site != "random":
             object.__setattr__(self, "site", str(Path(self.site).resolve()))
+        check_choice("DatasetConfig.activity", self.activity, tuple(ACTIVITY_PRESETS), error=ConfigError)
         for name in ("n_layouts", "views_per_layout", "seed"):
             v = getattr(self, name)
             check_number(f"DatasetConfig.{name}", v, 0 if name == "seed" else 1, integer=True,
@@ -171,6 +179,7 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
     ``record`` is the layout's entry for ``labels.json`` without ``file``. If ``out_dir`` is
     given nothing is returned in memory (images are written as ``layout_view.png`` there).
     """
+    from uav_struct_env.sim.activity import ActivityBodies
     from uav_struct_env.sim.camera import Camera
     from uav_struct_env.sim.world import SiteWorld, random_light
 
@@ -193,7 +202,12 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
     with SiteWorld(site, renderer=config.renderer, image_size=config.source_size,
                    rng=rng.spawn(1)[0], texture_size=texture_size) as world:
         _add_clutter(world, site, rng)
+        activity = None
+        if config.activity != "none":  # its own seed: the layout's other draws are unchanged
+            activity = ActivityBodies(world, SiteActivity(site, config.activity, [config.seed, layout, 1]))
         for view in range(config.views_per_layout):
+            if activity is not None:
+                activity.update(_ACTIVITY_SECONDS_PER_VIEW * view)
             cam_from_world = _random_view(site, rng, config)
             world.light = random_light(rng)
             result = world.render(cam_from_world, camera, depth=True)

@@ -33,6 +33,7 @@ from uav_struct_env.sim.schedule import ScheduleSpec
 from uav_struct_env.sim.sensors import SensorModel, make_noise
 from uav_struct_env.sim.uav import FlightLimits, Geofence
 from uav_struct_env.site import LANDMARK_SETS, Site, paper_site
+from uav_struct_env.site.activity import Activity, make_activity
 from uav_struct_env.site.as_built import AsBuilt, make_as_built
 
 __all__ = ["PRESETS", "RENDER_MODES", "RENDERERS", "EnvConfig", "make_config"]
@@ -121,6 +122,13 @@ class EnvConfig:
             ``"aci117"``): the rendered building, the collision obstacles and the landmark truth
             in ``info`` are the as-built building; ``env.site`` (what a localizer uses) stays
             the design.
+        activity: site activity (:mod:`uav_struct_env.site.activity`): ``"none"`` (a bare site,
+            the default), ``"light"``, ``"busy"`` or an ``Activity``. Workers walking on the slab
+            and the ground, equipment, stored materials, scaffolding and column formwork, laid
+            out from the site's elements at each ``reset`` from their own seeded generator (the
+            episode's other draws are unchanged): they are rendered, hide landmarks in the
+            landmark truth (rendered and ray-cast), and the static ones are collision obstacles.
+            ``env.worker_points()`` and ``env.worker_visibility(agent)`` report the workers.
         camera: the camera (:mod:`uav_struct_env.sim.lens`): ``"paper"`` (the paper's ideal
             pinhole, the default), ``"mavic2pro"`` (the Mavic 2 Pro's Hasselblad L1D-20c: its
             intrinsics, lens distortion, 47 ms rolling-shutter readout and 1/500 s exposure with
@@ -155,6 +163,7 @@ class EnvConfig:
     start_yaw_jitter: float = 0.0
     lighting: str = "fixed"
     as_built: AsBuilt | str | None = None
+    activity: str | Activity = "none"
     camera: str | CameraModel = "paper"
 
     def __post_init__(self) -> None:
@@ -184,6 +193,7 @@ class EnvConfig:
         object.__setattr__(self, "image_size", (w, h))
         object.__setattr__(self, "noise", make_noise(self.noise))
         object.__setattr__(self, "imaging", make_imaging(self.imaging))
+        object.__setattr__(self, "activity", make_activity(self.activity))
         object.__setattr__(self, "camera", make_camera_model(self.camera))
         check_choice("renderer", self.renderer, RENDERERS, error=ConfigError)
         for name, lo, hi in (("max_cycles", 1, None), ("n_agents", 1, MAX_AGENTS),

@@ -27,6 +27,7 @@ from uav_struct_env.sim.lens import CAMERA_MODELS
 from uav_struct_env.sim.schedule import ScheduleSpec
 from uav_struct_env.sim.sensors import NOISE_MODELS
 from uav_struct_env.sim.uav import FlightLimits, Geofence
+from uav_struct_env.site.activity import ACTIVITY_PRESETS
 
 __all__ = ["NESTED", "Setting", "UndocumentedSettingError", "settings", "settings_markdown"]
 
@@ -34,7 +35,7 @@ __all__ = ["NESTED", "Setting", "UndocumentedSettingError", "settings", "setting
 NESTED: dict[str, type] = {"limits": FlightLimits, "geofence": Geofence, "schedule": ScheduleSpec}
 
 #: Registries whose resolved objects are shown by name (``noise="gnss_ins"`` is stored resolved).
-_NAMED = (NOISE_MODELS, IMAGING_PRESETS, CAMERA_MODELS)
+_NAMED = (NOISE_MODELS, IMAGING_PRESETS, CAMERA_MODELS, ACTIVITY_PRESETS)
 
 
 class UndocumentedSettingError(ConfigError):

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from typing import Any
 
 import numpy as np
@@ -59,6 +59,7 @@ from localization.geometry import invert, quat_wxyz_from_matrix
 from uav_struct_env.envs.config import EnvConfig, make_config
 from uav_struct_env.envs.render import MapView, UavMarker, compose_frame, draw_site_map
 from uav_struct_env.errors import ClosedError, ConfigError, ResetNeededError
+from uav_struct_env.sim.activity import ActivityBodies
 from uav_struct_env.sim.airframes import Airframes
 from uav_struct_env.sim.attitude import world_from_cam_from_attitude
 from uav_struct_env.sim.lens import LensView, Motion
@@ -71,6 +72,7 @@ from uav_struct_env.sim.schedule import (
 from uav_struct_env.sim.sensors import Reading
 from uav_struct_env.sim.uav import ACTION_COMPONENTS, Obstacles, UavState, step_uav
 from uav_struct_env.site import Site, make_site
+from uav_struct_env.site.activity import SiteActivity
 
 __all__ = ["ACTION_COMPONENTS", "RESET_OPTIONS", "TEAMMATE_CRASH", "UavStructParallelEnv"]
 
@@ -130,6 +132,7 @@ class UavStructParallelEnv(ParallelEnv):
         self._distortion = np.array(cfg.camera.distortion)
         self._motions: dict[str, Motion] = {}
         self.obstacles = Obstacles.from_site(self.built_site)
+        self._site_obstacles = self.obstacles  # the building; reset adds the activity's boxes
         # The schedule's ranges and the geofence fitted to the building (sim.schedule.fit_schedule).
         self.viewpoint_schedule: ViewpointSchedule
         self.viewpoint_schedule, scale = fit_schedule(self.site, cfg.n_agents, cfg.schedule)
@@ -163,6 +166,11 @@ class UavStructParallelEnv(ParallelEnv):
         self._alive: dict[str, bool] = {}
         self._map_view: MapView | None = None
         self._airframes: Airframes | None = None
+        #: Site activity: this episode's layout and its bodies (None with activity "none").
+        self.activity_layout: SiteActivity | None = None
+        self._activity_bodies: ActivityBodies | None = None
+        self._activity_seed: list[int] = []
+        self._activity_episode = 0
 
     # ------------------------------------------------------------------ spaces
     def _check_agent(self, agent: str) -> None:
@@ -258,6 +266,7 @@ class UavStructParallelEnv(ParallelEnv):
         if seed is not None:
             check_number("seed", seed, 0, integer=True, type_error=ValueError)
             self._rng = np.random.default_rng(seed)
+            self._activity_seed, self._activity_episode = [int(seed)], 0
         if options is not None and not isinstance(options, dict):
             raise ValueError(f"options must be a dict (keys {RESET_OPTIONS}) or None, got {options!r}")
         unknown = sorted(set(options or ()) - set(RESET_OPTIONS) - {"options"}, key=str)
@@ -296,6 +305,7 @@ class UavStructParallelEnv(ParallelEnv):
             self._scripted_viewpoint = -1
         self._sensor_state = self.config.noise.start(self._rng, n)
         self._motions = {a: Motion() for a in self.possible_agents}  # hovering at the start
+        self._lay_out_activity()
         if self.config.lighting == "random":  # a new sun for the episode
             from uav_struct_env.sim.world import random_light
 
@@ -306,6 +316,79 @@ class UavStructParallelEnv(ParallelEnv):
         self.num_cycles = 0
         observations, infos = self._observe(self.agents, dt=0.0, reasons=dict.fromkeys(self.agents))
         return observations, infos
+
+    def _lay_out_activity(self) -> None:
+        """Lay out this episode's site activity (none: remove the last one's bodies).
+
+        Its seed is (reset seed, episodes since that seed), or fresh entropy before any seed;
+        the env's generator is not drawn from, so every other draw of the episode is unchanged.
+        """
+        if self._activity_bodies is not None:
+            self._activity_bodies.remove()
+            self._activity_bodies = None
+        if self.config.activity.is_none:
+            return
+        if not self._activity_seed:
+            self._activity_seed = [int(np.random.SeedSequence().entropy)]
+        self.activity_layout = SiteActivity(
+            self.built_site, self.config.activity, [*self._activity_seed, self._activity_episode]
+        )
+        self._activity_episode += 1
+        self._activity_bodies = ActivityBodies(self.world, self.activity_layout)
+        self.obstacles = self._site_obstacles.with_boxes(*self.activity_layout.static_aabbs())
+
+    def _activity_time(self) -> float:
+        """Seconds since the episode's reset (the workers' clock)."""
+        return self.num_cycles * self.config.control_period
+
+    def worker_points(self) -> dict[str, NDArray[np.float64]]:
+        """Every worker's ``(2, 3)`` float64 points now, by name (empty without site activity).
+
+        Row 0 is the feet (ground contact, centre), row 1 the head top; project frame.
+
+        Raises:
+            ResetNeededError: before the first :meth:`reset`.
+        """
+        self._check_open()
+        if not self._was_reset:
+            raise ResetNeededError("worker_points() before reset(): call env.reset(seed=...) first")
+        if self.activity_layout is None or self.config.activity.is_none:
+            return {}
+        return self.activity_layout.worker_points(self._activity_time())
+
+    def worker_visibility(self, agent: str) -> dict[str, float]:
+        """Per worker, the fraction (0..1) of its sample points ``agent``'s camera sees now.
+
+        The points are five along the worker's vertical axis (10 %, 30 %, ..., 90 % of its
+        height, :data:`~uav_struct_env.site.activity.WORKER_SAMPLE_HEIGHTS`). A point counts
+        when it appears inside the delivered image (through the ``camera``'s distortion and
+        rolling shutter) in front of the camera and the ray from the camera
+        centre to it hits nothing else first (building, other activity bodies, other UAVs'
+        airframes; the worker's own body is passed through, the camera's own airframe is
+        hidden): ray casting, so it works with ``observe_image=False``.
+
+        Raises:
+            ValueError: for an unknown agent.
+            ResetNeededError: before the first :meth:`reset`.
+        """
+        self._check_agent(agent)
+        if not self.worker_points():
+            return {}
+        cam_from_world = invert(self._states[agent].world_from_cam)
+        project = None
+        if self._lens is not None:  # where the delivered image shows them (distortion, shutter)
+            lens, motion = self._lens, self._motions.get(agent)
+
+            def project(xyz):
+                uv, _, in_field = lens.project(cam_from_world, xyz, motion)
+                return uv, in_field
+
+        # a finished agent's airframe is hidden already
+        hidden = self._own_airframe_hidden(agent) if agent in self.agents else nullcontext()
+        with hidden:
+            return self._activity_bodies.worker_visibility(
+                self._activity_time(), cam_from_world, self.camera, project
+            )
 
     def _validate_action(self, agent: Any, action: Any) -> NDArray[np.float64]:
         if agent not in self._index:
@@ -420,9 +503,12 @@ class UavStructParallelEnv(ParallelEnv):
         K = self.camera.K
         observations: dict[str, dict[str, NDArray]] = {}
         infos: dict[str, dict[str, Any]] = {}
-        clearance = self.obstacles.distances(np.array([self._states[a].xyz for a in agents]))
+        # The sensors' multipath / sky-blockage model sees the building, not the site activity.
+        clearance = self._site_obstacles.distances(np.array([self._states[a].xyz for a in agents]))
         if self._airframes is not None:  # draw the flying UAVs, hide the finished ones
             self._airframes.place({a: self._states[a] for a in agents})
+        if self._activity_bodies is not None:
+            self._activity_bodies.update(self._activity_time())
         for k, agent in enumerate(agents):
             i = self._index[agent]
             state = self._states[agent]
@@ -586,6 +672,7 @@ class UavStructParallelEnv(ParallelEnv):
         """
         self._closed = True
         self._airframes = None
+        self._activity_bodies = None
         if self._world is not None:
             self._world.close()
             self._world = None

@@ -2,18 +2,15 @@
 
 Each airframe is a visual-only box made with ``SiteWorld.add_body`` (DJI Mavic 2 Pro unfolded,
 322 x 242 x 84 mm), level, turned to the heading, its centre 0.1 m above the camera (the gimbal
-hangs under the body). Poses are set with pybullet directly on the world's client
-(``SiteWorld.client_id`` is public for this): ``SiteWorld.move_body`` validates a general 4x4
-pose, ~0.5 ms per call, and a step moves the airframes 12 times; a yaw-only pose needs no
-validation.
+hangs under the body). Poses are set with ``SiteWorld.place_body``, the unvalidated yaw-only path:
+``SiteWorld.move_body`` validates a general 4x4 pose, ~0.5 ms per call, and a step moves the
+airframes 12 times.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
-from uav_struct_env.sim.client import p  # imported quietly there
 from uav_struct_env.sim.uav import UavState
 
 __all__ = ["UAV_HALF_EXTENTS", "UAV_RGBA", "Airframes"]
@@ -35,25 +32,17 @@ class Airframes:
 
     def __init__(self, world, names: Sequence[str]) -> None:
         hidden = [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, _HIDDEN_POSITION[2]], [0, 0, 0, 1.0]]
-        self._client_id = world.client_id
+        self._world = world
         self.bodies = {n: world.add_body(UAV_HALF_EXTENTS, UAV_RGBA, hidden) for n in names}
 
     def set(self, name: str, state: UavState | None) -> None:
         """Place airframe ``name`` at ``state`` (None: hide it)."""
         body = self.bodies[name]
         if state is None:
-            p.resetBasePositionAndOrientation(
-                body, _HIDDEN_POSITION, (0.0, 0.0, 0.0, 1.0), physicsClientId=self._client_id
-            )
+            self._world.place_body(body, _HIDDEN_POSITION, 0.0)
             return
         x, y, z = state.position
-        h = 0.5 * state.yaw
-        p.resetBasePositionAndOrientation(
-            body,
-            (x, y, z + _BODY_ABOVE_CAMERA),
-            (0.0, 0.0, math.sin(h), math.cos(h)),
-            physicsClientId=self._client_id,
-        )
+        self._world.place_body(body, (x, y, z + _BODY_ABOVE_CAMERA), state.yaw)
 
     def place(self, states: dict[str, UavState | None]) -> None:
         """Place every airframe: at its state, or hidden where the state is None or missing."""

@@ -61,18 +61,39 @@ class RayScene:
         self._lo = np.array(lo).reshape(-1, 3) - pad
         self._hi = np.array(hi).reshape(-1, 3) + pad
         self._rects = np.array(rects, dtype=np.float64).reshape(-1, 5)
-        #: Oriented boxes: ``(world_from_box (4, 4), half_extents (3,))``; set before each query.
-        self.boxes: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+        self._box_poses, self._box_halves = np.zeros((0, 4, 4)), np.zeros((0, 3))
+
+    @property
+    def boxes(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """Oriented boxes ``(world_from_box (4, 4), half_extents (3,))``; set before each query."""
+        return list(zip(self._box_poses, self._box_halves, strict=True))
+
+    @boxes.setter
+    def boxes(self, boxes: Sequence[tuple[ArrayLike, ArrayLike]]) -> None:
+        self.set_boxes([T for T, _ in boxes], [h for _, h in boxes])
+
+    def set_boxes(self, poses: ArrayLike, half_extents: ArrayLike) -> None:
+        """Set the oriented boxes at once: ``poses`` (B, 4, 4), ``half_extents`` (B, 3)."""
+        self._box_poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        self._box_halves = np.asarray(half_extents, dtype=np.float64).reshape(-1, 3)
 
     @property
     def n_triangles(self) -> int:
         """Triangles tested one by one (flat rectangles excluded)."""
         return len(self._v0)
 
-    def first_hit(self, origin: ArrayLike, directions: ArrayLike, t_min: float = 0.0) -> NDArray[np.float64]:
+    def first_hit(
+        self,
+        origin: ArrayLike,
+        directions: ArrayLike,
+        t_min: float = 0.0,
+        skip_box: ArrayLike | None = None,
+    ) -> NDArray[np.float64]:
         """Ray parameter ``t`` of the first surface hit at ``t >= t_min`` (``inf`` for none).
 
         The rays are ``origin + t * directions[i]``; ``t`` is in units of each direction's length.
+        ``skip_box`` (R,) ints: for each ray, the index in :attr:`boxes` of a box that ray passes
+        through unseen (-1: none), e.g. the body whose own visibility is asked.
         """
         o = np.asarray(origin, dtype=np.float64).reshape(3)
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
@@ -94,13 +115,35 @@ class RayScene:
             tri = first + np.arange(len(ray))
             t = _moller_trumbore(o, d[ray], self._v0[tri], self._e1[tri], self._e2[tri], t_min)
             np.minimum.at(best, ray, t)
-        for world_from_box, half in self.boxes:
-            R, c = world_from_box[:3, :3], world_from_box[:3, 3]
-            ob, db = R.T @ (o - c), d @ R  # origin and directions in the box frame
-            lo, hi = _slab(ob, db, -half[None], half[None])
-            entry = np.where(lo[:, 0] >= t_min, lo[:, 0], np.inf)
-            hit = (hi[:, 0] >= lo[:, 0]) & (entry < best)
-            best[hit] = entry[hit]
+        if len(self._box_poses):
+            R, c, half = self._box_poses[:, :3, :3], self._box_poses[:, :3, 3], self._box_halves
+            # Cull ray-box pairs by the box's bounding sphere seen from the origin (one matrix
+            # product), then slab-test the pairs left.
+            oc = c - o
+            dist = np.linalg.norm(oc, axis=1)
+            radius = np.linalg.norm(half, axis=1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cone = np.sqrt(np.maximum(1.0 - (radius / dist) ** 2, 0.0))  # cos of the half angle
+                cos_limit = np.where(dist > radius, cone, -2.0)
+                unit = d / np.linalg.norm(d, axis=1, keepdims=True)
+                toward = oc / np.maximum(dist, 1e-12)[:, None]
+            ray, box = np.nonzero(unit @ toward.T >= cos_limit[None] - 1e-9)
+            if skip_box is not None and len(ray):
+                keep = np.asarray(skip_box, dtype=np.int64).reshape(-1)[ray] != box
+                ray, box = ray[keep], box[keep]
+            if len(ray):
+                ob = np.einsum("pij,pi->pj", R[box], o - c[box])  # origin in the box frame
+                db = np.einsum("pi,pij->pj", d[ray], R[box])  # direction in the box frame
+                hb = half[box]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    inv = 1.0 / db
+                    t1, t2 = (-hb - ob) * inv, (hb - ob) * inv
+                inside = np.abs(ob) <= hb  # a ray parallel to a slab is limited only outside it
+                parallel = db == 0
+                t_lo = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2)).max(axis=1)
+                t_hi = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2)).min(axis=1)
+                entry = np.where((t_hi >= t_lo) & (t_lo >= t_min), t_lo, np.inf)
+                np.minimum.at(best, ray, entry)
         return best
 
 

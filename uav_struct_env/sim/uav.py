@@ -241,6 +241,16 @@ class Obstacles:
             tuple(names),
         )
 
+    def with_boxes(self, lo: ArrayLike, hi: ArrayLike, names: tuple[str, ...]) -> Obstacles:
+        """These obstacles plus boxes ``lo`` (B, 3), ``hi`` (B, 3) named ``names`` (site activity)."""
+        lo = np.asarray(lo, dtype=np.float64).reshape(-1, 3)
+        hi = np.asarray(hi, dtype=np.float64).reshape(-1, 3)
+        if len(lo) == 0:
+            return self
+        return Obstacles(
+            np.concatenate([self.lo, lo]), np.concatenate([self.hi, hi]), self.names + tuple(names)
+        )
+
     @cached_property
     def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Overall bounding box ``(lo (3,), hi (3,))`` of the structure."""

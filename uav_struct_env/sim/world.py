@@ -156,8 +156,11 @@ class SiteWorld:
         except BaseException:
             self.close()
             raise
-        #: Bodies added with add_body: body id -> the box's half extents (m).
+        #: Bodies added with add_body: body id -> the box's half extents (m), and -> its pose.
         self._extra_bodies: dict[int, NDArray[np.float64]] = {}
+        #: Their poses as rows of one array (ray casting and the near plane read them all at once).
+        self._body_row: dict[int, int] = {}
+        self._body_poses = np.zeros((0, 4, 4))
         #: The rendered triangles, for landmark visibility without rendering (:mod:`.raycast`).
         self._rays = RayScene([(e.mesh.vertices, e.mesh.faces) for e in elements])
         self._depth_meta: dict[int, tuple[weakref.ref, float, float, int]] = {}
@@ -263,12 +266,22 @@ class SiteWorld:
         R, t = cam_from_world[:3, :3], cam_from_world[:3, 3]
         corners = self._box_corners
         if self._extra_bodies:
-            extra = []
-            for body in self._extra_bodies:
-                lo, hi = p.getAABB(body, physicsClientId=self.client_id)
-                grid = np.meshgrid(*np.array([lo, hi]).T, indexing="ij")
-                extra.append(np.array(grid).reshape(3, -1).T)
-            corners = np.concatenate([corners, np.stack(extra)])
+            _, poses, halves = self._added_boxes()
+            signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T
+            local = signs[None] * halves[:, None, :]  # (B, 8, 3)
+            extra = np.einsum("bij,bkj->bki", poses[:, :3, :3], local) + poses[:, None, :3, 3]
+            # Added bodies wholly outside the view (site activity beside or under the camera)
+            # must not pull the near plane in: cull them against the image's side planes.
+            cam = extra @ R.T + t  # (B, 8, 3) camera frame
+            K = camera.K
+            lo_x, hi_x = (-0.5 - K[0, 2]) / K[0, 0], (camera.width - 0.5 - K[0, 2]) / K[0, 0]
+            lo_y, hi_y = (-0.5 - K[1, 2]) / K[1, 1], (camera.height - 0.5 - K[1, 2]) / K[1, 1]
+            x, y, zc = cam[..., 0], cam[..., 1], cam[..., 2]
+            outside = (
+                np.all(x < lo_x * zc, axis=1) | np.all(x > hi_x * zc, axis=1)
+                | np.all(y < lo_y * zc, axis=1) | np.all(y > hi_y * zc, axis=1)
+            )
+            corners = np.concatenate([corners, extra[~outside]])
         z = corners @ R[2] + t[2]  # (boxes, 8) depth of every box corner
         in_front = z.max(axis=1) > 0
         if np.any(z[in_front].min(axis=1) <= camera.near):
@@ -340,16 +353,43 @@ class SiteWorld:
         """
         self._check_open()
         camera = self.camera if camera is None else camera
-        boxes = []
-        for body, half_extents in self._extra_bodies.items():
-            position, quat = p.getBasePositionAndOrientation(body, physicsClientId=self.client_id)
-            T = np.eye(4)
-            T[:3, :3] = np.reshape(p.getMatrixFromQuaternion(quat), (3, 3))
-            T[:3, 3] = position
-            boxes.append((T, half_extents))
-        self._rays.boxes = boxes
+        self._sync_ray_boxes()
         points = self.site.landmarks(name)
         return raycast_visibility(self._rays, points.xyz, points.ids, cam_from_world, camera)
+
+    def first_hits(
+        self,
+        origin: ArrayLike,
+        directions: ArrayLike,
+        t_min: float = 0.0,
+        skip_bodies: ArrayLike | None = None,
+    ) -> NDArray[np.float64]:
+        """First surface hit ``t`` of rays ``origin + t * directions[i]`` (inf: none), no render.
+
+        Against the triangles this world renders and the bodies added with :meth:`add_body` at
+        their current poses (:class:`~uav_struct_env.sim.raycast.RayScene`). ``skip_bodies``
+        (R,): per ray, the id of an added body that ray passes through unseen (-1: none).
+        """
+        self._check_open()
+        ids = self._sync_ray_boxes()
+        skip = None
+        if skip_bodies is not None:
+            index = {body: k for k, body in enumerate(ids)}
+            skip = np.array([index.get(int(b), -1) for b in np.asarray(skip_bodies).reshape(-1)])
+        return self._rays.first_hit(origin, directions, t_min, skip)
+
+    def _added_boxes(self) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64]]:
+        """``(body ids, world_from_body (B, 4, 4), half extents (B, 3))`` of the added bodies."""
+        ids = list(self._extra_bodies)  # insertion order = row order
+        poses = self._body_poses
+        halves = np.array(list(self._extra_bodies.values())).reshape(-1, 3)
+        return ids, poses, halves
+
+    def _sync_ray_boxes(self) -> list[int]:
+        """Give the ray scene the added bodies at their current poses; their ids in box order."""
+        ids, poses, halves = self._added_boxes()
+        self._rays.set_boxes(poses, halves)
+        return ids
 
     # ------------------------------------------------------------------------------ extra bodies
     def add_body(
@@ -372,6 +412,8 @@ class SiteWorld:
             physicsClientId=self.client_id,
         )
         self._extra_bodies[body] = np.asarray(half_extents, dtype=np.float64)
+        self._body_row[body] = len(self._body_poses)
+        self._body_poses = np.concatenate([self._body_poses, np.eye(4)[None]])
         if world_from_body is not None:
             self.move_body(body, world_from_body)
         return body
@@ -389,6 +431,22 @@ class SiteWorld:
         p.resetBasePositionAndOrientation(
             body_id, T[:3, 3].tolist(), [x, y, z, w], physicsClientId=self.client_id
         )
+        self._body_poses[self._body_row[body_id]] = T
+
+    def place_body(self, body_id: int, position: tuple[float, float, float], yaw: float) -> None:
+        """:meth:`move_body` for an upright pose turned ``yaw`` (rad) about z, without validation.
+
+        The fast path for bodies moved every step (airframes, workers): ~10 us instead of ~0.5 ms.
+        ``body_id`` must come from :meth:`add_body` (unchecked).
+        """
+        c, s = math.cos(yaw), math.sin(yaw)
+        h = 0.5 * yaw
+        p.resetBasePositionAndOrientation(
+            body_id, position, (0.0, 0.0, math.sin(h), math.cos(h)), physicsClientId=self.client_id
+        )
+        pose = self._body_poses[self._body_row[body_id]]
+        pose[:3, :3] = ((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0))
+        pose[:3, 3] = position
 
     def remove_body(self, body_id: int) -> None:
         """Remove a body added with :meth:`add_body`."""
@@ -398,6 +456,8 @@ class SiteWorld:
         self._client.activate()
         p.removeBody(body_id, physicsClientId=self.client_id)
         del self._extra_bodies[body_id]
+        self._body_poses = np.delete(self._body_poses, self._body_row.pop(body_id), axis=0)
+        self._body_row = {b: k for k, b in enumerate(self._extra_bodies)}
 
     # ------------------------------------------------------------------------------ lifetime
     def close(self) -> None:

@@ -19,8 +19,11 @@ from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.lens import CAMERA_MODELS
 from uav_struct_env.site import make_site
+from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.site.as_built import MAX_SCALE, TOLERANCE_MODELS, AsBuilt
 from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS, check_weights
+from uav_struct_env.study.tracking import TRACKING_ACTIVITY
+from uav_struct_env.tracking_sim import DEFAULT_WORKER_SIGMA_PX
 
 __all__ = [
     "ASSOCIATIONS",
@@ -188,6 +191,16 @@ class StudyConfig:
         as_built_scale: factor on every tolerance of ``as_built`` (0: the design).
         lighting: ``"fixed"`` (the default sun) or ``"random"`` (a sun drawn per scene and
             viewpoint from the seed, :func:`uav_struct_env.sim.world.random_light`).
+        activity: site activity (:mod:`uav_struct_env.site.activity`): ``"none"``, ``"light"``
+            or ``"busy"``: workers, equipment, materials and scaffolding laid out per viewpoint
+            from the env's reset seed; they hide landmarks in the images and in the truth.
+        track_workers: also track the site's workers from the four cameras at true, estimated
+            and prior poses (:mod:`uav_struct_env.study.tracking`). Workers need site activity:
+            with ``activity="none"`` it is set to ``"light"`` (whose bodies also hide landmarks).
+        worker_pixel_sigma: with ``track_workers``, the simulated worker detector's feet /
+            head-top noise, px of the images.
+        upright_workers: with ``track_workers``, triangulate workers standing (the head top
+            above the feet, :func:`tracking.triangulate.triangulate_upright`).
         camera: the camera (:data:`uav_struct_env.sim.lens.CAMERA_MODELS`): ``"paper"`` (the
             paper's ideal pinhole) or ``"mavic2pro"`` (the Mavic 2 Pro's intrinsics, lens
             distortion, rolling shutter and exposure; the localizers get its distortion
@@ -216,6 +229,10 @@ class StudyConfig:
     as_built: str | None = None
     as_built_scale: float = 1.0
     lighting: str = "fixed"
+    activity: str = "none"
+    track_workers: bool = False
+    worker_pixel_sigma: float = DEFAULT_WORKER_SIGMA_PX
+    upright_workers: bool = False
     camera: str = "paper"
 
     def __post_init__(self) -> None:
@@ -247,6 +264,14 @@ class StudyConfig:
         ):
             check_number(name, getattr(self, name), lo, hi, error=ConfigError, type_error=ConfigError)
         check_choice("lighting", self.lighting, LIGHTINGS, error=ConfigError)
+        check_choice("activity", self.activity, tuple(ACTIVITY_PRESETS), error=ConfigError)
+        for name in ("track_workers", "upright_workers"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        check_number("worker_pixel_sigma", self.worker_pixel_sigma, 0.0, lo_open=True, error=ConfigError,
+                     type_error=ConfigError)
+        if self.track_workers and self.activity == "none":
+            object.__setattr__(self, "activity", TRACKING_ACTIVITY)
         check_choice("camera", self.camera, tuple(CAMERA_MODELS), error=ConfigError)
         if self.as_built is not None:
             check_choice("as_built", self.as_built, tuple(TOLERANCE_MODELS), error=ConfigError)

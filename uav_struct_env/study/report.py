@@ -212,6 +212,7 @@ def settings_line(results: dict) -> str:
     site, stage = c.pop("site"), c.pop("stage", None)
     as_built, scale = c.pop("as_built", None), c.pop("as_built_scale", None)
     building = "as designed" if as_built is None else f"as built {as_built} x {scale:g}"
+    building += f", site activity {c.pop('activity', 'none')}"
     w, h = c.pop("image_size")
     version = f"{sw.get('package', 'uav-struct-env')} {sw.get('version', '?')}"
     if sw.get("git_commit"):
@@ -229,6 +230,10 @@ def settings_line(results: dict) -> str:
         f"seed {c.pop('seed')}",
         protocol,
     ]
+    worker_sigma = c.pop("worker_pixel_sigma", None)
+    upright = c.pop("upright_workers", False)
+    if c.pop("track_workers", False):
+        parts.append(f"worker tracking ({worker_sigma} px keypoint noise{', upright' if upright else ''})")
     parts += [f"{k} {v}" for k, v in sorted(c.items()) if k not in _UNSTATED]
     return " · ".join(parts)
 

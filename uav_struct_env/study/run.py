@@ -22,6 +22,7 @@ from localization.metrics import pose_errors
 from uav_struct_env.processes import run_chunks
 from uav_struct_env.stack import FrameLocalization, StackSpec, build_stack
 from uav_struct_env.study.protocol import METHODS, Method, Scene, StudyConfig
+from uav_struct_env.study.tracking import ViewpointTracking, track_viewpoint
 
 __all__ = [
     "ImageResult",
@@ -30,7 +31,10 @@ __all__ = [
     "bound_pixel_sigma",
     "bound_source",
     "iter_study",
+    "run_unit",
+    "run_unit_tracked",
     "run_units",
+    "run_units_tracked",
     "stack_spec",
 ]
 
@@ -118,6 +122,7 @@ def _env_for(config: StudyConfig, scene: Scene):
             texture_seed=config.seed,
             as_built=config.as_built_model,
             lighting=config.lighting,
+            activity=config.activity,
             camera=config.camera,
         )
         _ENVS[scene] = env
@@ -160,12 +165,25 @@ def stack_spec(config: StudyConfig, method: Method) -> StackSpec:
 
 def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoint: int = 0):
     """Render ``scene`` at ``viewpoint`` and evaluate its methods: ``(results, overlays)``."""
+    results, overlays, _ = run_unit_tracked(config, scene, viewpoint, overlay_viewpoint)
+    return results, overlays
+
+
+def run_unit_tracked(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoint: int = 0):
+    """:func:`run_unit` and, with ``config.track_workers``, the viewpoint's worker tracking.
+
+    Returns ``(results, overlays, tracking)``; ``tracking`` is a list with one
+    :class:`~uav_struct_env.study.tracking.ViewpointTracking` for a scene with structural
+    methods when workers are tracked, else empty.
+    """
     env = _env_for(config, scene)
     obs, infos = env.reset(seed=config.seed * 1000 + viewpoint, options={"viewpoint": viewpoint})
     site = env.site
     methods = [m for m in config.selected_methods if m.scene == scene]
     results: list[ImageResult] = []
     overlays: list[Overlay] = []
+    estimates: dict[str, dict] = {}
+    prior_sigmas = None
     for uav, agent in enumerate(env.possible_agents):
         info = infos[agent]
         image = obs[agent]["image"]
@@ -192,6 +210,8 @@ def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoin
             frame = stack.localize(image, {method.landmarks: truth}, prior)
             est = frame.estimate
             if method.structural:
+                estimates.setdefault(method.key, {})[agent] = est
+                prior_sigmas = stack.localizer.prior_sigmas
                 counts = _structural_counts(frame)
                 if viewpoint == overlay_viewpoint and uav == 0:
                     overlays.append(
@@ -203,7 +223,15 @@ def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoin
             if method.structural:
                 counts["pixel_error_rms_px"] = _pixel_error_rms(frame.detections, truth)
             results.append(_row(method, uav, viewpoint, est, gt, prior, truth, K, **counts))
-    return results, overlays
+    tracking: list[ViewpointTracking] = []
+    if config.track_workers and estimates:
+        index = config.scenes.index(scene)
+        tracking.append(track_viewpoint(
+            env, infos, estimates, stage=scene.stage, viewpoint=viewpoint,
+            rng=np.random.default_rng([config.seed, 0x7A4C, index, viewpoint]), prior_sigmas=prior_sigmas,
+            pixel_sigma=config.worker_pixel_sigma, upright=config.upright_workers,
+        ))
+    return results, overlays, tracking
 
 
 def _row(method, uav, viewpoint, est, gt, prior, truth, K, **counts) -> ImageResult:
@@ -356,7 +384,7 @@ def _units(config: StudyConfig) -> list[tuple[Scene, int]]:
 
 def _worker(args):
     config, scene, k = args
-    return run_unit(config, scene, k)
+    return run_unit_tracked(config, scene, k)
 
 
 class StudyInterrupted(KeyboardInterrupt):
@@ -367,8 +395,10 @@ class StudyInterrupted(KeyboardInterrupt):
         self.done, self.total = done, total
 
 
-def iter_study(config: StudyConfig) -> Iterator[tuple[list[ImageResult], list[Overlay]]]:
-    """Yield the results of every (scene, viewpoint) unit as it completes.
+def iter_study(
+    config: StudyConfig,
+) -> Iterator[tuple[list[ImageResult], list[Overlay], list[ViewpointTracking]]]:
+    """Yield the results of every (scene, viewpoint) unit as it completes (:func:`run_unit_tracked`).
 
     With ``workers > 1`` the units run in spawned processes (:func:`uav_struct_env.processes.
     run_chunks`): Ctrl-C stops and reaps them all, and a worker that dies raises
@@ -378,7 +408,7 @@ def iter_study(config: StudyConfig) -> Iterator[tuple[list[ImageResult], list[Ov
     if config.workers == 1:
         try:
             for scene, k in units:
-                yield run_unit(config, scene, k)
+                yield run_unit_tracked(config, scene, k)
         finally:
             _close_envs()
         return
@@ -394,14 +424,24 @@ def run_units(
     config: StudyConfig, progress: Callable[[int, int], None] | None = None
 ) -> tuple[list[ImageResult], list[Overlay]]:
     """Run the whole study; ``progress(done, total)`` is called after each unit."""
+    results, overlays, _ = run_units_tracked(config, progress)
+    return results, overlays
+
+
+def run_units_tracked(
+    config: StudyConfig, progress: Callable[[int, int], None] | None = None
+) -> tuple[list[ImageResult], list[Overlay], list[ViewpointTracking]]:
+    """:func:`run_units` and the worker tracking of every viewpoint (empty unless tracked)."""
     total = len(_units(config))
     results: list[ImageResult] = []
     overlays: list[Overlay] = []
+    tracking: list[ViewpointTracking] = []
     done = 0
     try:
-        for res, ovs in iter_study(config):
+        for res, ovs, trk in iter_study(config):
             results += res
             overlays += ovs
+            tracking += trk
             done += 1
             if progress is not None:
                 progress(done, total)
@@ -410,4 +450,5 @@ def run_units(
     order = {m.key: i for i, m in enumerate(METHODS)}
     results = _with_bounds(config, results)
     results.sort(key=lambda r: (order[r.method], r.uav, r.viewpoint))
-    return results, overlays
+    tracking.sort(key=lambda t: (t.stage, t.viewpoint))
+    return results, overlays, tracking

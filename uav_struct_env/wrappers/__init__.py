@@ -7,6 +7,7 @@ wenv = make_train_env("state")                             # a documented traini
 ``LocalizationWrapper`` composes :class:`LocalizePoses` (pose, pose_std, localized, info),
 :class:`LayoutObservation` (layout), :class:`RewardWrapper` (a reward object's terms) and
 :class:`DropKeys` (drop the image); :class:`FlattenObservation` turns the Dict into one vector;
+:class:`WorkerTracking` tracks the site's workers from all cameras (info and a reward option);
 :class:`TensorInfo` keeps only numeric, fixed-shape info entries (TorchRL);
 the stack itself is :mod:`uav_struct_env.stack`.
 """
@@ -37,12 +38,14 @@ from uav_struct_env.wrappers.rewards import (
     make_reward,
 )
 from uav_struct_env.wrappers.tensor_info import TensorInfo
+from uav_struct_env.wrappers.tracking import TRACKING_INFO_KEYS, TrackingReward, WorkerTracking
 
 __all__ = [
     "DETECTORS",
     "LAYOUT_COMPONENTS",
     "PRIVILEGED_LAYOUT_COMPONENTS",
     "REWARDS",
+    "TRACKING_INFO_KEYS",
     "TRAIN_CONFIGS",
     "AnchorReward",
     "DropKeys",
@@ -55,8 +58,10 @@ __all__ = [
     "Reward",
     "RewardWrapper",
     "TensorInfo",
+    "TrackingReward",
     "TrainConfig",
     "UncertaintyReward",
+    "WorkerTracking",
     "localize_frame",
     "make_localization_env",
     "make_reward",

@@ -20,6 +20,10 @@ whether the agent was terminated by its own geofence exit or collision (not an a
 close to ``alive_bonus``: every step is worth at least as much as ending the episode, so a
 policy never learns to crash to stop a negative reward stream (with ``on_crash="all"`` a crash
 ends everyone's episode). Set ``alive_bonus=0`` for the bare "minus error" reward.
+
+Downstream worker tracking adds its own terms: ``WorkerTracking(env, reward="tracking")``
+(:mod:`~uav_struct_env.wrappers.tracking`) adds ``tracking_coverage`` and ``tracking_error``
+(workers seen by at least two cameras, their triangulation error) to every agent's reward.
 """
 
 from __future__ import annotations
