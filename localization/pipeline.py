@@ -239,9 +239,12 @@ class Localizer:
     # ----------------------------------------------------------------------------------------
 
     def associate(
-        self, detections_uv: NDArray[np.float64], prior: NDArray[np.float64]
+        self,
+        detections_uv: NDArray[np.float64],
+        prior: NDArray[np.float64],
+        prior_sigmas: PriorSigmas | None = None,
     ) -> Association:
-        """Run the configured association only (validated inputs)."""
+        """Run the configured association only (validated inputs; ``prior_sigmas`` as in localize)."""
         if self.association == "paper":
             return associate_paper(
                 detections_uv, self.landmarks_xyz, self.K, prior, self.image_size, self.margin_px
@@ -258,12 +261,16 @@ class Localizer:
             coarse_gate_px=self.coarse_gate_px,
             max_hypotheses=self.max_hypotheses,
             min_correspondences=self.min_correspondences,
-            prior_sigmas=self.prior_sigmas,
+            prior_sigmas=self.prior_sigmas if prior_sigmas is None else prior_sigmas,
             max_prior_mahalanobis_sq=self.max_prior_mahalanobis_sq,
         )
 
     def localize(
-        self, detections_uv: ArrayLike | Detections, prior_cam_from_world: ArrayLike
+        self,
+        detections_uv: ArrayLike | Detections,
+        prior_cam_from_world: ArrayLike,
+        *,
+        prior_sigmas: PriorSigmas | tuple | None = None,
     ) -> PoseEstimate:
         """Estimate ``cam_from_world`` from anonymous detections and a rough prior pose.
 
@@ -271,6 +278,9 @@ class Localizer:
             detections_uv: (N, 2) pixel detections (or a :class:`Detections`); rows with NaN are
                 ignored (assignment -1).
             prior_cam_from_world: (4, 4) rough pose from GNSS + attitude.
+            prior_sigmas: this frame's prior sigmas (as the constructor's), e.g. a filter's
+                prediction (:meth:`localization.temporal.PoseFilter.prior_sigmas`); None: the
+                localizer's own.
 
         Returns:
             A :class:`PoseEstimate`. Degenerate input (too few usable detections or
@@ -289,6 +299,7 @@ class Localizer:
         if not is_pinhole(self.distortion):  # pinhole pixels from here on
             det = undistort_points(det, self.K, self.distortion)
         prior = check_transform("prior_cam_from_world", prior_cam_from_world)
+        sigmas = self.prior_sigmas if prior_sigmas is None else self._prior_sigmas(prior_sigmas)
         n = det.shape[0]
         unassigned = np.full(n, -1, dtype=np.int64)
         t1 = time.perf_counter()
@@ -324,7 +335,7 @@ class Localizer:
             timings.update(associate=0.0, pnp=0.0, covariance=0.0)
             return fail(FailureCode.DEGENERATE_GEOMETRY, edge_on)
 
-        assoc = self.associate(det, prior)
+        assoc = self.associate(det, prior, sigmas)
         t2 = time.perf_counter()
         timings["associate"] = t2 - t1
         if assoc.failure_reason is not None:
@@ -411,7 +422,7 @@ class Localizer:
             covariance=cov,
             failure_reason=None,
             timings=timings,
-            prior_mahalanobis_sq=prior_mahalanobis_sq(T, prior, self.prior_sigmas),
+            prior_mahalanobis_sq=prior_mahalanobis_sq(T, prior, sigmas),
             n_hypotheses=assoc.n_hypotheses,
         )
 

@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 
 from uav_struct_env.errors import ConfigError
-from uav_struct_env.sim.sensors import GnssInsNoise, NoNoise, PaperNoise, Reading, make_noise
+from uav_struct_env.sim.sensors import (
+    DegradedGnssNoise,
+    GnssInsNoise,
+    NoNoise,
+    PaperNoise,
+    Reading,
+    make_noise,
+)
 
 POS = np.array([10.0, -20.0, 15.0])
 ATT = np.array([0.0, 0.4, 1.0])
@@ -106,3 +113,56 @@ def test_make_noise():
         GnssInsNoise(gnss_bias_sigma=(1.0, -1.0, 1.0))
     with pytest.raises(ConfigError, match="position_pattern"):
         PaperNoise(position_pattern=(1, 2, 1))
+
+
+def _series(model, clearance, n=2000, dt=0.5, seed=3):
+    rng = np.random.default_rng(seed)
+    st = model.start(rng, 1)
+    first = model.measure(st, rng, reading(clearance=clearance, dt=0.0))[0]
+    return first, np.array([model.measure(st, rng, reading(clearance=clearance, dt=dt))[0] for _ in range(n)])
+
+
+def test_degraded_gnss_has_no_fix_close_to_the_structure_but_one_at_reset():
+    m = DegradedGnssNoise()
+    first, g = _series(m, clearance=m.outage_clearance - 0.5, n=20)
+    assert np.all(np.isfinite(first))
+    assert np.all(np.isnan(g))
+
+
+def test_degraded_gnss_outage_schedule_matches_its_rates():
+    """Far from the structure: outages only, a share of rate * duration / (1 + rate * duration)."""
+    m = DegradedGnssNoise(outage_rate=1 / 30, outage_duration=6.0)
+    _, g = _series(m, clearance=100.0, n=8000)
+    out = np.isnan(g[:, 0])
+    expected = (6.0 / 30) / (1 + 6.0 / 30)
+    assert abs(out.mean() - expected) < 0.05, out.mean()
+    starts = np.sum(out[1:] & ~out[:-1])
+    assert 0.5 * 8000 * 0.5 / 30 < starts < 8000 * 0.5 / 30
+    base = GnssInsNoise()
+    # no jumps out there: the fixes are the base model's (multipath factor 1 at 100 m)
+    err = g[~out] - POS
+    assert np.all(np.abs(err) < 6 * np.hypot(base.gnss_bias_sigma, base.gnss_white_sigma) * 1.01)
+
+
+def test_degraded_gnss_jumps_near_the_structure():
+    m = DegradedGnssNoise(outage_rate=0.0, jump_rate=1 / 10, jump_duration=5.0, jump_sigma=(20.0, 20.0, 0.0))
+    _, g = _series(m, clearance=m.jump_clearance - 1.0, n=4000)
+    assert np.all(np.isfinite(g))
+    horizontal = np.linalg.norm(g[:, :2] - POS[:2], axis=1)
+    share = np.mean(horizontal > 15.0)  # the base model's horizontal error stays far below 15 m
+    in_jump = 0.5 / (1 + 0.5)
+    assert 0.5 * in_jump < share < in_jump
+    _, far = _series(m, clearance=m.jump_clearance + 1.0, n=4000)
+    assert np.mean(np.linalg.norm(far[:, :2] - POS[:2], axis=1) > 15.0) < 0.01
+
+
+def test_degraded_gnss_reproduces_and_validates():
+    m = DegradedGnssNoise()
+    a = _series(m, clearance=8.0, n=200, seed=5)[1]
+    b = _series(m, clearance=8.0, n=200, seed=5)[1]
+    np.testing.assert_array_equal(a, b)
+    assert isinstance(make_noise("gnss_degraded"), DegradedGnssNoise)
+    with pytest.raises(ConfigError, match="jump_sigma"):
+        DegradedGnssNoise(jump_sigma=(1.0, 2.0))
+    with pytest.raises(ConfigError, match="outage_duration"):
+        DegradedGnssNoise(outage_duration=0.0)

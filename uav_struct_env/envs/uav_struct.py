@@ -20,7 +20,8 @@ Per agent and step:
   visible; ``uv`` is where the landmark appears in the delivered image, distortion and rolling
   shutter included, see :mod:`uav_struct_env.sim.lens`), ``viewpoint`` (k right after
   ``reset(options={"viewpoint": k})``, else -1),
-  ``noise_index`` (the viewpoint counter the paper noise's sign uses) and
+  ``noise_index`` (the viewpoint counter the paper noise's sign uses), ``gnss_fix`` (False in a
+  GNSS outage of the sensor model, when ``gnss`` repeats the last fix) and
   ``termination_reason`` (None, ``"collision_structure"``, ``"collision_uav"``,
   ``"below_min_altitude"``, ``"above_max_altitude"``, ``"beyond_max_distance"``,
   ``"teammate_crash"``) and ``truncation_reason`` (None, ``"max_cycles"``);
@@ -57,7 +58,7 @@ from localization.checks import check_number
 from localization.geometry import invert, quat_wxyz_from_matrix
 from uav_struct_env.envs.config import EnvConfig, make_config
 from uav_struct_env.envs.render import MapView, UavMarker, compose_frame, draw_site_map
-from uav_struct_env.errors import ClosedError, ResetNeededError
+from uav_struct_env.errors import ClosedError, ConfigError, ResetNeededError
 from uav_struct_env.sim.activity import ActivityBodies
 from uav_struct_env.sim.airframes import Airframes
 from uav_struct_env.sim.attitude import world_from_cam_from_attitude
@@ -518,6 +519,14 @@ class UavStructParallelEnv(ParallelEnv):
                 self._rng,
                 Reading(i, noise_index, state.xyz, state.attitude, float(clearance[k]), dt),
             )
+            gnss_fix = bool(np.all(np.isfinite(gnss)))
+            if not gnss_fix:  # an outage: the onboard position is the last fix, held
+                if dt == 0.0 or agent not in self._priors:
+                    raise ConfigError(
+                        f"sensor model {cfg.noise.name!r} gave no GNSS fix for {agent!r} at reset; "
+                        "a model must give a fix when dt == 0 (uav_struct_env.sim.sensors)"
+                    )
+                gnss = self._priors[agent][:3, 3]
             gnss32 = np.clip(gnss, -GNSS_BOUND, GNSS_BOUND).astype(np.float32)
             att32 = np.clip(attitude, -np.pi, np.pi).astype(np.float32)
             world_from_cam = state.world_from_cam
@@ -555,6 +564,7 @@ class UavStructParallelEnv(ParallelEnv):
                 "landmarks": landmarks,
                 "viewpoint": self._scripted_viewpoint,
                 "noise_index": noise_index,
+                "gnss_fix": gnss_fix,
                 "termination_reason": reasons.get(agent),
                 "truncation_reason": None,
                 "reward_terms": {},

@@ -64,6 +64,8 @@ def localize_frame(
     prior_cam_from_world: NDArray[np.float64],
     gt_cam_from_world: NDArray[np.float64] | None = None,
     model_ids: NDArray[np.int64] | None = None,
+    *,
+    prior_sigmas: Any = None,
 ) -> FrameLocalization:
     """Detect, localize and score one frame.
 
@@ -76,11 +78,12 @@ def localize_frame(
         gt_cam_from_world: (4, 4) ground truth, or None (errors are then NaN).
         model_ids: (M,) landmark id of each model index (for association scores); default the
             index itself.
+        prior_sigmas: this frame's :class:`~localization.PriorSigmas` (None: the localizer's).
     """
     t0 = time.perf_counter()
     det = detector.detect(image, context)
     t_detect = time.perf_counter() - t0
-    est = localizer.localize(det.uv, prior_cam_from_world)
+    est = localizer.localize(det.uv, prior_cam_from_world, prior_sigmas=prior_sigmas)
     latency = t_detect + float(est.timings.get("total", 0.0))
     scores = (
         association_scores(est.assignment, det.true_ids, model_ids)

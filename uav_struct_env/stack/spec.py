@@ -212,6 +212,7 @@ class LocalizationStack:
         landmark_truth: Mapping[str, Any] | None,
         prior_cam_from_world: NDArray[np.float64],
         gt_cam_from_world: NDArray[np.float64] | None = None,
+        prior_sigmas: PriorSigmas | None = None,
     ) -> FrameLocalization:
         """Detect, localize and score one frame.
 
@@ -222,6 +223,8 @@ class LocalizationStack:
                 needs it, the others use it for scoring only. None or {} without truth.
             prior_cam_from_world: (4, 4) onboard prior.
             gt_cam_from_world: (4, 4) ground truth, or None (errors are then NaN).
+            prior_sigmas: this frame's prior sigmas for structural association (a filter's
+                prediction); None: the localizer's. ArUco poses take the prior as a tie-break only.
         """
         if self.aruco is not None:
             return localize_aruco_frame(
@@ -240,6 +243,7 @@ class LocalizationStack:
             prior_cam_from_world,
             gt_cam_from_world,
             self.model_ids,
+            prior_sigmas=prior_sigmas,
         )
 
 

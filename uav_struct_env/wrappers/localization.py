@@ -74,6 +74,11 @@ class LocalizationWrapper(ParallelWrapper):
             committed one).
         privileged: put the simulator's true visible fraction in ``layout[0]`` (privileged
             information a real UAV does not have; default: the deployable inlier fraction).
+        temporal: filter each agent's pose over time (GNSS, attitude, commanded motion and the
+            visual fixes; :mod:`~uav_struct_env.wrappers.temporal`): ``pose`` is the filtered
+            pose at every step and its prediction is the next frame's association prior.
+        filter_noise: with ``temporal``, the filters' :class:`~localization.temporal.FilterNoise`
+            (default: matched to the env's sensor model).
 
     Raises:
         ConfigError: for an unknown option or when the env does not provide the landmark truth.
@@ -100,6 +105,8 @@ class LocalizationWrapper(ParallelWrapper):
         detector_model: str | Path | None = None,
         refiner_model: str | Path | None = None,
         privileged: bool = False,
+        temporal: bool = False,
+        filter_noise: Any = None,
     ) -> None:
         check_choice("mode", mode, MODES, error=ConfigError)
         reward_obj = make_reward(
@@ -121,7 +128,7 @@ class LocalizationWrapper(ParallelWrapper):
             refiner_model=refiner_model,
             localizer_kwargs=localizer_kwargs or {},
         )
-        chain: Any = LocalizePoses(env, spec)
+        chain: Any = LocalizePoses(env, spec, temporal=temporal, filter_noise=filter_noise)
         self.poses = chain
         chain = LayoutObservation(chain, privileged=privileged)
         chain = RewardWrapper(chain, reward_obj)
@@ -135,6 +142,7 @@ class LocalizationWrapper(ParallelWrapper):
         self.reward = reward_obj
         self.reward_name = reward if isinstance(reward, str) else type(reward).__name__
         self.privileged = bool(privileged)
+        self.temporal = bool(temporal)
         self.pixel_sigma = spec.detector_sigma(self.poses.image_size[0])
         self.miss_rate = spec.miss_rate
         self.false_positives = spec.false_positives
@@ -168,5 +176,5 @@ class LocalizationWrapper(ParallelWrapper):
         return (
             f"LocalizationWrapper({self.env!r}, landmarks={self.poses.landmarks!r}, "
             f"detector={self.detector_name!r}, mode={self.mode!r}, reward={self.reward_name!r}, "
-            f"drop_image={self.drop_image})"
+            f"drop_image={self.drop_image}, temporal={self.temporal})"
         )

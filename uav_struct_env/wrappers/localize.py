@@ -21,6 +21,14 @@ estimate) is :data:`UNDEFINED` (-1.0), never NaN; ``failure_code`` is 0 on succe
 ``1 + list(localization.FailureCode).index(code)`` (:func:`failure_code_number`). The wall-clock
 latency and the failure message, which are not, are in :attr:`last_frames` (``.latency_s``,
 ``.estimate.failure_reason``). Its :attr:`last_frames` also feed the layout and reward wrappers.
+
+With ``temporal=True`` each agent's pose is filtered over time (:mod:`~uav_struct_env.wrappers.temporal`):
+the filter's prediction and sigmas are each frame's association prior, ``pose`` / ``pose_std``
+are the filtered pose and its sigmas at every step (also when the frame fails), ``localized``
+is 1 when the frame's fix was accepted by the filter's gate, and ``info["localization"]`` gains
+``filtered_translation_error_m``, ``filtered_rotation_error_deg``, ``filtered_position_std_m``,
+``fix_accepted``, ``fix_nis`` (UNDEFINED without a fix) and ``gnss_fix``; its
+``prior_translation_error_m`` is then the prediction's.
 """
 
 from __future__ import annotations
@@ -33,9 +41,11 @@ from gymnasium import spaces
 
 from localization.failure import FailureCode
 from localization.geometry import camera_center, invert, quat_wxyz_from_matrix
+from localization.metrics import pose_errors
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.stack import FrameLocalization, LocalizationStack, StackSpec, build_stack
 from uav_struct_env.wrappers.base import ParallelWrapper
+from uav_struct_env.wrappers.temporal import PoseTracks
 
 __all__ = ["POSE_BOUND", "STD_BOUND", "UNDEFINED", "LocalizePoses", "failure_code_number", "find_wrapper"]
 
@@ -73,6 +83,9 @@ class LocalizePoses(ParallelWrapper):
             detector its config's ``landmark_sets`` must include the spec's landmark set.
         spec: the :class:`~uav_struct_env.stack.StackSpec` (default ``StackSpec()``);
             keyword arguments override its fields.
+        temporal: filter each agent's pose over time (module docstring).
+        filter_noise: with ``temporal``, the filters' :class:`~localization.temporal.FilterNoise`
+            (default: matched to the env's sensor model).
         **fields: :class:`~uav_struct_env.stack.StackSpec` fields.
 
     Raises:
@@ -80,7 +93,15 @@ class LocalizePoses(ParallelWrapper):
             provide the landmark truth the projection detector needs.
     """
 
-    def __init__(self, env: Any, spec: StackSpec | None = None, **fields: Any) -> None:
+    def __init__(
+        self,
+        env: Any,
+        spec: StackSpec | None = None,
+        *,
+        temporal: bool = False,
+        filter_noise: Any = None,
+        **fields: Any,
+    ) -> None:
         super().__init__(env)
         spec = StackSpec(**fields) if spec is None else dataclasses.replace(spec, **fields)
         base = env.unwrapped
@@ -134,6 +155,7 @@ class LocalizePoses(ParallelWrapper):
         keys["localized"] = spaces.Box(0.0, 1.0, (1,), np.float32)
         self._observation_space = spaces.Dict(keys)
         self.last_frames: dict[str, FrameLocalization] = {}
+        self.tracks = PoseTracks(base, filter_noise) if temporal else None
 
     @property
     def localizer(self) -> Any:
@@ -152,12 +174,16 @@ class LocalizePoses(ParallelWrapper):
             self.stack.seed(self._rng)
         obs, infos = self.env.reset(seed=seed, options=options)
         self.last_frames = {}
+        if self.tracks is not None:
+            self.tracks.reset()
         for agent in obs:
             self._localize(agent, obs[agent], infos[agent])
         return obs, infos
 
     def step(self, actions: dict[str, Any]):
         """Step the env and localize every agent that produced an observation."""
+        if self.tracks is not None:
+            self.tracks.command(actions)
         obs, rewards, terminations, truncations, infos = self.env.step(actions)
         for agent in obs:
             self._localize(agent, obs[agent], infos[agent])
@@ -168,15 +194,24 @@ class LocalizePoses(ParallelWrapper):
         prior = invert(info["prior_world_from_cam"])
         truth_sets = info.get("landmarks", {})
         truth = truth_sets.get(self.landmarks)
-        frame = self.stack.localize(obs.get("image"), truth_sets, prior, gt)
+        sigmas = None
+        if self.tracks is not None:
+            prior, sigmas = self.tracks.prior(agent, obs, info)
+        frame = self.stack.localize(obs.get("image"), truth_sets, prior, gt, prior_sigmas=sigmas)
         est = frame.estimate
         world_from_cam = invert(est.cam_from_world)
-        pose = np.concatenate([world_from_cam[:3, 3], quat_wxyz_from_matrix(world_from_cam[:3, :3])])
         std = est.pose_std if est.success else self.stack.prior_std
+        localized = est.success
+        if self.tracks is not None:
+            fix = self.tracks.fuse(agent, est)
+            localized = fix is not None and fix.accepted
+            filt = self.tracks.filters[agent]
+            world_from_cam, std = filt.world_from_cam, filt.pose_std
+        pose = np.concatenate([world_from_cam[:3, 3], quat_wxyz_from_matrix(world_from_cam[:3, :3])])
         std = np.where(np.isfinite(std), std, STD_BOUND)
         obs["pose"] = np.clip(pose, -POSE_BOUND, POSE_BOUND).astype(np.float32)
         obs["pose_std"] = np.clip(std, 0.0, STD_BOUND).astype(np.float32)
-        obs["localized"] = np.array([1.0 if est.success else 0.0], np.float32)
+        obs["localized"] = np.array([1.0 if localized else 0.0], np.float32)
         position_std = float(np.sqrt(np.trace(est.covariance[:3, :3]))) if est.success else UNDEFINED
         s = frame.scores
         info["localization"] = {
@@ -195,9 +230,30 @@ class LocalizePoses(ParallelWrapper):
             "failure_code": 0 if est.success else failure_code_number(
                 est.failure_code or FailureCode.UNKNOWN),
         }
+        if self.tracks is not None:
+            info["localization"].update(self._temporal_info(agent, info, gt))
         self.last_frames[agent] = frame
         return frame
 
+    def _temporal_info(self, agent: str, info: dict, gt: np.ndarray) -> dict[str, Any]:
+        """The filter's keys of ``info["localization"]`` (module docstring)."""
+        filt = self.tracks.filters[agent]
+        t_err, r_err = pose_errors(filt.cam_from_world, gt)
+        fix = self.tracks.last_updates[agent].get("pose")
+        return {
+            "filtered_translation_error_m": _number(t_err),
+            "filtered_rotation_error_deg": _number(r_err),
+            "filtered_position_std_m": _number(np.sqrt(np.sum(filt.pose_std[:3] ** 2))),
+            "fix_accepted": bool(fix is not None and fix.accepted),
+            "fix_nis": UNDEFINED if fix is None else _number(fix.nis),
+            "gnss_fix": bool(info.get("gnss_fix", True)),
+        }
+
     def estimated_position(self, agent: str) -> np.ndarray:
-        """(3,) the last estimated camera centre of ``agent`` (the prior's when failed)."""
+        """(3,) the last estimated camera centre of ``agent`` (filtered with ``temporal``).
+
+        Without ``temporal``, the prior's when localization failed.
+        """
+        if self.tracks is not None:
+            return self.tracks.filters[agent].position.copy()
         return camera_center(self.last_frames[agent].estimate.cam_from_world)
