@@ -5,6 +5,7 @@ the wrapped env, under the same seeded actions (``hold``: hover; ``random``: uni
 ends the episode and the next one starts). One agent-step is one agent's observation.
 
     .venv/bin/python benchmarks/wrapper_throughput.py --config state --steps 400
+    .venv/bin/python benchmarks/wrapper_throughput.py --config state --mode robust  # association
     .venv/bin/python benchmarks/wrapper_throughput.py --config state --render-images  # as before
                                                  # ray-cast visibility: frames rendered and dropped
 
@@ -21,12 +22,12 @@ import warnings
 import numpy as np
 
 
-def measure(env, steps: int, policy: str, seed: int) -> tuple[float, int]:
-    """(agent-steps per second, agent-steps) over at least ``steps`` agent-steps."""
+def measure(env, steps: int, policy: str, seed: int) -> tuple[float, int, float]:
+    """(agent-steps per second, agent-steps, CPU seconds) over at least ``steps`` agent-steps."""
     rng = np.random.default_rng(seed)
     obs, _ = env.reset(seed=seed)
     n = 0
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     episode = 0
     while n < steps:
         if not env.agents:
@@ -38,28 +39,35 @@ def measure(env, steps: int, policy: str, seed: int) -> tuple[float, int]:
         }
         obs, *_ = env.step(acts)
         n += len(obs)
-    return n / (time.perf_counter() - t0), n
+    return n / (time.perf_counter() - t0), n, time.process_time() - c0
 
 
 def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: int = 0,
-         render_images: bool = False) -> dict:
+         render_images: bool = False, mode: str | None = None) -> dict:
     warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
     from uav_struct_env.wrappers import make_train_env
+    from uav_struct_env.wrappers.configs import TRAIN_CONFIGS
 
-    wrapped = make_train_env(config, **({"observe_image": True} if render_images else {}))
+    train = TRAIN_CONFIGS[config]
+    if mode is not None:  # the association mode of the named config, overridden
+        train = train.replace(wrapper={"mode": mode})
+    wrapped = make_train_env(train, **({"observe_image": True} if render_images else {}))
     bare = wrapped.env
     measure(wrapped, 40, policy, seed)  # build the world, warm caches
-    bare_rate, _ = measure(bare, steps, policy, seed)
-    rate, n = measure(wrapped, steps, policy, seed)
+    bare_rate, _, bare_cpu = measure(bare, steps, policy, seed)
+    rate, n, cpu = measure(wrapped, steps, policy, seed)
     wrapped.close()
     out = {
         "config": config,
+        "mode": train.wrapper["mode"],
         "policy": policy,
         "observe_image": wrapped.unwrapped.config.observe_image,
         "agent_steps": n,
         "env_agent_steps_per_s": bare_rate,
         "wrapped_agent_steps_per_s": rate,
         "localization_ms_per_agent_step": 1e3 * (1 / rate - 1 / bare_rate),
+        "env_cpu_ms_per_agent_step": 1e3 * bare_cpu / n,
+        "wrapped_cpu_ms_per_agent_step": 1e3 * cpu / n,
         "load_average_1min": os.getloadavg()[0],
         "cpu_count": os.cpu_count(),
     }
@@ -76,4 +84,6 @@ if __name__ == "__main__":
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--render-images", action="store_true",
                    help="render every frame even if the config drops it (the depth-tested truth)")
+    p.add_argument("--mode", default=None, choices=("paper", "robust"),
+                   help="association mode (default: the config's)")
     main(**vars(p.parse_args()))

@@ -125,16 +125,19 @@ def _residuals_and_jacobian(
     fx, fy, s = K[0, 0], K[1, 1], K[0, 1]
     xs, ys = x * iz, y * iz
     ur = fx * xs + K[0, 2] if s == 0.0 else fx * xs + s * ys + K[0, 2]
-    r = np.stack([ur - uv[..., 0], fy * ys + K[1, 2] - uv[..., 1]], axis=-1)
+    r = np.empty(p.shape[:2] + (2,))
+    np.subtract(ur, uv[..., 0], out=r[..., 0])
+    np.subtract(fy * ys + K[1, 2], uv[..., 1], out=r[..., 1])
     a, b, c = fx * iz, s * iz, (K[0, 2] - ur) * iz  # du/dp
     e = fy * iz
     f = -e * ys  # dv/dp = (0, e, f)
-    zero = np.zeros_like(z)
-    J = np.stack(
-        [y * c - z * b, z * a - x * c, x * b - y * a, a, b, c,
-         y * f - z * e, -x * f, x * e, zero, e, f],
-        axis=-1,
-    ).reshape(p.shape[:2] + (2, 6))
+    # filled in place (one allocation, no stack of twelve arrays): the same values
+    J = np.empty(p.shape[:2] + (2, 6))
+    Ju, Jv = J[..., 0, :], J[..., 1, :]
+    Ju[..., 0], Ju[..., 1], Ju[..., 2] = y * c - z * b, z * a - x * c, x * b - y * a
+    Ju[..., 3], Ju[..., 4], Ju[..., 5] = a, b, c
+    Jv[..., 0], Jv[..., 1], Jv[..., 2] = y * f - z * e, -x * f, x * e
+    Jv[..., 3], Jv[..., 4], Jv[..., 5] = 0.0, e, f
     return r, J, z
 
 

@@ -87,9 +87,11 @@ def rotation_error_deg(est_cam_from_world: ArrayLike, gt_cam_from_world: ArrayLi
 
 def pose_errors(est_cam_from_world: ArrayLike, gt_cam_from_world: ArrayLike) -> tuple[float, float]:
     """``(translation_error_m, rotation_error_deg)``."""
+    est = check_transform("est_cam_from_world", est_cam_from_world)  # checked once for both
+    gt = check_transform("gt_cam_from_world", gt_cam_from_world)
     return (
-        translation_error_m(est_cam_from_world, gt_cam_from_world),
-        rotation_error_deg(est_cam_from_world, gt_cam_from_world),
+        float(np.linalg.norm(camera_center(est) - camera_center(gt))),
+        rotation_angle_deg(est[:3, :3], gt[:3, :3]),
     )
 
 

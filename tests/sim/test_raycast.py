@@ -44,6 +44,31 @@ def test_first_hits_are_exact_on_boxes_a_ground_rectangle_and_an_oriented_box():
     np.testing.assert_allclose(scene.first_hit(o, d[2:3]), [3.0 - 0.5 * np.sqrt(2)])
 
 
+def test_several_oriented_boxes_are_tested_at_once_rays_along_an_axis_included():
+    scene = RayScene([])
+    near_box, far_box = np.eye(4), np.eye(4)
+    near_box[:3, 3] = [2.0, 0.0, 0.0]  # faces at x = 1.5 and 2.5
+    c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+    far_box[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+    far_box[:3, 3] = [5.0, 0.0, 0.0]  # turned 45 deg: its near corner at x = 5 - sqrt(2)/2
+    half = np.array([0.5, 0.5, 0.5])
+    scene.boxes = [(far_box, half), (near_box, half)]
+    o = np.zeros(3)
+    d = np.array([[1.0, 0, 0],   # along x (zero y, z): the near box's face first
+                  [0, 1.0, 0],   # along y: nothing
+                  [1.0, 0, 0.5]])  # climbs over both
+    np.testing.assert_allclose(scene.first_hit(o, d), [1.5, np.inf, np.inf])
+    scene.boxes = [(far_box, half)]
+    assert scene.first_hit(o, d[:1])[0] == pytest.approx(5.0 - np.sqrt(0.5))
+    assert scene.first_hit(o, d[:1], t_min=4.0)[0] == pytest.approx(5.0 - np.sqrt(0.5))
+    assert scene.first_hit(o, d[:1], t_min=4.5)[0] == np.inf  # entered before t_min: no hit
+    # each box alone gives the same first hits as both at once
+    scene.boxes = [(near_box, half)]
+    alone = np.minimum(scene.first_hit(o, d), RayScene([]).first_hit(o, d))
+    scene.boxes = [(far_box, half), (near_box, half)]
+    np.testing.assert_array_equal(scene.first_hit(o, d), alone)
+
+
 def _agreement(world: SiteWorld, site, n_views: int, seed: int, camera: Camera) -> tuple[int, int]:
     rng = np.random.default_rng(seed)
     body = world.add_body((0.161, 0.121, 0.042))

@@ -44,6 +44,10 @@ def test_true_attitude_has_zero_roll_and_the_gimbal_pitch():
     s = UavState.make([1, 2, 3], 0.4, 0.5)
     np.testing.assert_allclose(s.attitude, [0.0, 0.5, 0.4])
     assert s.world_from_cam[2, 2] == pytest.approx(-math.sin(0.5))  # optical axis looks down
+    T = s.world_from_cam  # computed once per state; the caller gets its own copy
+    T[:] = 0.0
+    assert s.world_from_cam[2, 2] == pytest.approx(-math.sin(0.5))
+    assert s == UavState.make([1, 2, 3], 0.4, 0.5)
 
 
 def test_geofence():

@@ -446,7 +446,8 @@ class UavStructParallelEnv(ParallelEnv):
             self._states[agent] = step_uav(
                 before, cleaned.get(agent, hover), cfg.limits, cfg.control_period
             )
-            self._motions[agent] = Motion.between(before, self._states[agent], cfg.control_period)
+            if self._lens is not None:  # only a real camera's render blurs and skews by motion
+                self._motions[agent] = Motion.between(before, self._states[agent], cfg.control_period)
         reasons = self._crashes(live)
         if cfg.on_crash == "all" and any(r is not None for r in reasons.values()):
             # The team's episode ends here, by the dynamics and not by a time limit: everyone is

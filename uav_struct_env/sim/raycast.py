@@ -157,8 +157,11 @@ def _slab(o: NDArray, d: NDArray, lo: NDArray, hi: NDArray) -> tuple[NDArray, ND
         inv = 1.0 / d  # (R, 3); +-inf along an axis the ray does not move on
         t1 = (lo[None] - o) * inv[:, None]
         t2 = (hi[None] - o) * inv[:, None]
+    zero = d == 0
+    if not zero.any():
+        return np.minimum(t1, t2).max(axis=2), np.maximum(t1, t2).min(axis=2)
     # A ray parallel to a slab: inside it (0 * inf = nan) never limits, outside it misses.
-    parallel = (d == 0)[:, None, :]
+    parallel = zero[:, None, :]
     inside = (o >= lo) & (o <= hi)  # (G, 3)
     t_lo = np.where(parallel, np.where(inside[None], -np.inf, np.inf), np.minimum(t1, t2))
     t_hi = np.where(parallel, np.where(inside[None], np.inf, -np.inf), np.maximum(t1, t2))

@@ -181,8 +181,12 @@ class UavState:
 
     @property
     def world_from_cam(self) -> NDArray[np.float64]:
-        """Ground-truth 4x4 ``world_from_cam``."""
-        return world_from_cam_from_attitude(self.position, self.attitude)
+        """Ground-truth 4x4 ``world_from_cam`` (a fresh copy; computed once per state)."""
+        cached = self.__dict__.get("_world_from_cam")
+        if cached is None:  # a frozen state's pose never changes; an env step asks several times
+            cached = world_from_cam_from_attitude(self.position, self.attitude)
+            object.__setattr__(self, "_world_from_cam", cached)
+        return cached.copy()
 
 
 def step_uav(
