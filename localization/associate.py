@@ -64,6 +64,7 @@ from scipy.stats import chi2
 from localization.ambiguity import AMBIGUITY_MARGIN, ambiguity, translation_hypotheses
 from localization.batch import (
     assign_many,
+    capped_nearest_sq,
     pose_difference_many,
     project_many,
     refine_many,
@@ -870,9 +871,7 @@ def _upright_hypotheses(
     R = prior[:3, :3] @ Rz_t
     t = -(R @ C[..., None])[..., 0]
     uv, _ = project_many(K, R, t, landmarks_xyz[idx])
-    du = det[None, :, 0, None] - uv[:, None, :, 0]
-    dv = det[None, :, 1, None] - uv[:, None, :, 1]
-    nearest = np.minimum(np.min(np.fmin(du * du + dv * dv, np.inf), axis=2), gate_px**2)
+    nearest = capped_nearest_sq(det, uv, gate_px**2)
     explained = np.sum(nearest < gate_px**2, axis=1)
     misfit = np.sum(nearest, axis=1)
     order = np.lexsort((prior_sq, misfit, -explained))
