@@ -732,7 +732,7 @@ def associate_robust(
     else:
         explore(full(_upright_hypotheses(
             det[good], landmarks_xyz, idx, proj, K, prior, sig, max_prior_mahalanobis_sq, coarse_gate_px,
-            need, 5 * max_hypotheses,
+            need, 5 * max_hypotheses, 2 * max(max_hypotheses, 1),
         )), True)
         if weak():
             explore(layouts(), True)
@@ -825,6 +825,7 @@ def _upright_hypotheses(
     gate_px: float,
     min_pairs: int,
     keep: int,
+    n_distinct: int,
 ) -> list[tuple[NDArray, NDArray]]:
     """Coarse assignments from upright two-point poses (:mod:`localization.upright`).
 
@@ -834,8 +835,9 @@ def _upright_hypotheses(
     terms) are dropped. Each pose is scored like a rival (:func:`localization.ambiguity.
     translation_hypotheses`): detections explained within ``gate_px``, then the sum of squared
     distances to the nearest projection capped at ``gate_px^2``, then the prior distance. The
-    best ``keep`` give gated assignments. Returns ``[(assignment of det rows into landmarks,
-    start cam_from_world), ...]``, best first.
+    best ``keep`` give gated assignments, of which the first ``n_distinct`` different ones with
+    ``min_pairs`` pairs or more are returned: ``[(assignment of det rows into landmarks, start
+    cam_from_world), ...]``, best first.
     """
     pairs = _anchor_pairs(det)
     m = idx.size
@@ -876,9 +878,23 @@ def _upright_hypotheses(
     misfit = np.sum(nearest, axis=1)
     order = np.lexsort((prior_sq, misfit, -explained))
     order = order[explained[order] >= min_pairs][:keep]
-    if order.size == 0:
-        return []
-    local = assign_many(det, uv[order], gate_px)
-    a = np.where(local >= 0, idx[np.maximum(local, 0)], -1)
-    T = to_transforms(R[order], t[order])
-    return [(a[q], T[q]) for q in range(order.size)]
+    out: list[tuple[NDArray, NDArray]] = []
+    seen: set[bytes] = set()
+    # assignments block by block, until `n_distinct` of them differ (a pose that repeats an earlier
+    # one's assignment, or pairs fewer than `min_pairs`, would be dropped by the caller anyway)
+    first = n_distinct + n_distinct // 2
+    for block in (order[:first], order[first:]):
+        if block.size == 0:
+            break
+        local = assign_many(det, uv[block], gate_px)
+        a = np.where(local >= 0, idx[np.maximum(local, 0)], -1)
+        T = to_transforms(R[block], t[block])
+        for q in range(block.size):
+            key = a[q].tobytes()
+            if key in seen or int((a[q] >= 0).sum()) < min_pairs:
+                continue
+            seen.add(key)
+            out.append((a[q], T[q]))
+            if len(out) == n_distinct:
+                return out
+    return out
