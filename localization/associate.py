@@ -545,7 +545,8 @@ def associate_robust(
             38.7 px for the paper's camera and default sigmas, 310 px at f = 8900 px).
         max_hypotheses: twice this many distinct coarse assignments of each source (upright
             poses, then the layout vote if needed) are refined and re-associated in one batch
-            (those agreeing with an already refined result are skipped).
+            (those agreeing with an already refined result are skipped); of the upright ones,
+            the best half first, the other half only with the layout vote.
         max_iterations: PnP / re-association rounds per hypothesis.
         min_correspondences: a hypothesis needs this many pairs to be turned into a pose.
         miss_cost: cost of a landmark predicted inside the image but not detected (about
@@ -626,9 +627,12 @@ def associate_robust(
     explored: list[NDArray] = []
     tried = [0]
 
-    def explore(coarse: list[tuple[NDArray, NDArray]], first_robust: bool) -> list[tuple]:
-        """Refine the not yet covered coarse hypotheses at once; keep those that pass the tests."""
-        chunk = [c for c in coarse if not covered(c[0])][: 2 * max(max_hypotheses, 1)]
+    def explore(coarse: list[tuple[NDArray, NDArray]], first_robust: bool, extra: int = 0) -> list[tuple]:
+        """Refine the not yet covered coarse hypotheses at once; keep those that pass the tests.
+
+        At most ``2 * max_hypotheses + extra`` of them (the first not covered).
+        """
+        chunk = [c for c in coarse if not covered(c[0])][: 2 * max(max_hypotheses, 1) + extra]
         tried[0] += len(chunk)
         if not chunk:
             return []
@@ -730,12 +734,17 @@ def associate_robust(
     if exhaustive is not None:
         explore(exhaustive, False)
     else:
-        explore(full(_upright_hypotheses(
+        upright = full(_upright_hypotheses(
             det[good], landmarks_xyz, idx, proj, K, prior, sig, max_prior_mahalanobis_sq, coarse_gate_px,
             need, 5 * max_hypotheses, 2 * max(max_hypotheses, 1),
-        )), True)
+        ))
+        # the best half first: when they explain the detections the rest would only cost time;
+        # else the other half joins the layout vote's batch
+        first = max(max_hypotheses, 1)
+        explore(upright[:first], True)
         if weak():
-            explore(layouts(), True)
+            rest = upright[first:]
+            explore(rest + layouts(), True, len(rest))
             voted = True
 
     if not finals:
