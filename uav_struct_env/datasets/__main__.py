@@ -26,8 +26,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--activity", default="none", choices=tuple(ACTIVITY_PRESETS),
                     help="site activity per layout: none, light or busy (workers, equipment, "
                          "materials, scaffolding; they hide landmarks)")
-    ap.add_argument("--camera", default="paper", choices=CAMERAS,
-                    help="paper (the paper's ideal pinhole), mavic2pro (lens distortion, rolling shutter "
+    ap.add_argument("--camera", default="paper",
+                    help=f"one of {', '.join(CAMERAS)}: paper (the paper's ideal pinhole), mavic2pro "
+                         "(lens distortion, rolling shutter "
                          "and motion blur of the DJI Mavic 2 Pro, the camera moving within the UAV's "
                          "flight limits) or mixed (every other image mavic2pro)")
     ap.add_argument("--workers", type=int, default=1, help="rendering processes")
