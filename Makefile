@@ -45,6 +45,8 @@ bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in d
 # The learned detector from scratch, as localization/models/MODEL_CARD.md trained it: four
 # rendered datasets (~17 min; existing ones are kept), the keypoint network (42 min), then the
 # patch refiner mined from that network's candidates (1.5 + 15 min), into $(DETECTOR_RUN).
+# The datasets are bare sites through the ideal pinhole; the generator's --activity light|busy and
+# --camera mavic2pro|mixed (lens distortion, rolling shutter, motion blur) render the real conditions.
 # Evaluate the result with benchmarks/detector.py --model/--refiner and uav-struct study
 # --detector learned --detector-model/--refiner-model (docs/study.md, "Evaluating retrained detector weights").
 # make reruns a step only when its output is missing or older than its inputs, so each step

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -18,6 +19,17 @@ def tiny_dataset(tmp_path_factory):
     out = tmp_path_factory.mktemp("lm")
     cli_main([str(out), "--layouts", "1", "--views", "2", "--seed", "7", "--scale", "0.25"])
     return out
+
+
+def _layout_landmarks(seed: int, layout: int) -> dict[int, np.ndarray]:
+    """Landmark id -> world position of a random-site layout (its first draws, as the generator)."""
+    from uav_struct_env.site import random_site
+
+    rng = np.random.default_rng([seed, layout])
+    stage = str(rng.choice(["slab", "columns"]))
+    site = random_site(rng, stage=stage, marker_size=[None, 0.5, 1.0][int(rng.integers(3))])
+    return {i: p for name in LANDMARK_TYPES
+            for i, p in zip(site.landmarks(name).ids, site.landmarks(name).xyz, strict=True)}
 
 
 def test_format_and_labels(tiny_dataset):
@@ -42,14 +54,9 @@ def test_format_and_labels(tiny_dataset):
 def test_labels_match_projection(tiny_dataset):
     """Keypoints are the projections of the site's landmarks with the saved K and pose."""
     from localization.geometry import project
-    from uav_struct_env.site import random_site
 
     data = load_labels(tiny_dataset)
-    rng = np.random.default_rng([7, 0])
-    stage = str(rng.choice(["slab", "columns"]))
-    site = random_site(rng, stage=stage, marker_size=[None, 0.5, 1.0][int(rng.integers(3))])
-    xyz = {i: p for name in LANDMARK_TYPES
-           for i, p in zip(site.landmarks(name).ids, site.landmarks(name).xyz, strict=True)}
+    xyz = _layout_landmarks(7, 0)
     for rec in data["images"]:
         for u, v, _, i in rec["keypoints"]:
             K, T = np.asarray(rec["K"]), np.asarray(rec["cam_from_world"])
@@ -121,3 +128,120 @@ def test_site_activity_hides_labels_and_changes_nothing_else(tmp_path, tiny_data
         assert not np.array_equal(cv2.imread(str(out / b["file"])), cv2.imread(str(tiny_dataset / p["file"])))
     with pytest.raises(ConfigError, match=r"activity must be one of \('none', 'light', 'busy'\)"):
         DatasetConfig(activity="crowded")
+
+
+# ---------------------------------------------------------------- --camera
+
+
+@pytest.fixture(scope="module")
+def camera_datasets(tmp_path_factory):
+    """The tiny dataset's views through ``--camera mavic2pro`` and ``--camera mixed``."""
+    out = {}
+    for camera in ("mavic2pro", "mixed"):
+        out[camera] = tmp_path_factory.mktemp(camera)
+        assert cli_main([str(out[camera]), "--layouts", "1", "--views", "2", "--seed", "7",
+                         "--scale", "0.25", "--camera", camera]) == 0
+    return out
+
+
+def test_mavic_labels_are_where_the_lens_shows_the_landmarks(camera_datasets):
+    """Labels = LensView.project (distortion, rolling shutter) of the landmarks, scaled to the image."""
+    from localization.geometry import project
+    from uav_struct_env.sim.lens import MAVIC2PRO, LensView, Motion
+    from uav_struct_env.sim.uav import FlightLimits
+
+    data = load_labels(camera_datasets["mavic2pro"])
+    assert data["config"]["camera"] == "mavic2pro"
+    lens = LensView(MAVIC2PRO, 1280, 720)
+    xyz = _layout_landmarks(7, 0)
+    limits = FlightLimits()
+    off_pinhole = 0.0
+    for rec in data["images"]:
+        assert rec["camera"] == "mavic2pro"
+        np.testing.assert_array_equal(rec["distortion"], MAVIC2PRO.distortion)
+        np.testing.assert_allclose(rec["K"], lens.camera.scaled(320, 180).K, atol=1e-12)
+        T = np.asarray(rec["cam_from_world"])
+        vel, ang = np.asarray(rec["velocity"]), np.asarray(rec["angular_velocity"])
+        # Within the flight limits: speed, climb/sink, yaw rate (world z), gimbal rate (camera x).
+        assert np.hypot(*vel[:2]) <= limits.max_horizontal_speed
+        assert -limits.max_descent_speed <= vel[2] <= limits.max_ascent_speed
+        assert abs(ang[2]) <= limits.max_yaw_rate + 1e-12
+        assert abs(ang @ T[0, :3]) <= limits.max_gimbal_rate + 1e-12
+        assert np.linalg.norm(ang) > 0
+        kps = np.asarray(rec["keypoints"], dtype=np.float64).reshape(-1, 4)
+        assert len(kps) > 0
+        pts = np.array([xyz[int(i)] for i in kps[:, 3]])
+        uv, _, in_field = lens.project(T, pts, Motion(vel, ang))
+        assert in_field.all()
+        np.testing.assert_allclose(kps[:, :2], (uv + 0.5) * 0.25 - 0.5, atol=1e-6)
+        pin, _ = project(lens.camera.scaled(320, 180).K, T, pts)
+        off_pinhole = max(off_pinhole, float(np.abs(pin - kps[:, :2]).max()))
+    assert off_pinhole > 2.0  # the lens and the shutter move labels by pixels: the test can tell
+
+
+def test_mixed_is_every_other_image_of_the_paper_and_mavic_datasets(tiny_dataset, camera_datasets):
+    """Same views (own seed stream); paper views byte-identical to the paper dataset, others to mavic2pro."""
+    mixed = load_labels(camera_datasets["mixed"])
+    paper = load_labels(tiny_dataset)
+    mavic = load_labels(camera_datasets["mavic2pro"])
+    raw = json.loads((tiny_dataset / "labels.json").read_text())
+    assert "camera" not in raw["config"]  # a paper dataset is written as before cameras existed
+    assert all("camera" not in rec for rec in raw["images"])
+    assert paper["config"]["camera"] == "paper"  # ... and read with the defaults filled in
+    assert [r["camera"] for r in mixed["images"]] == ["paper", "mavic2pro"]
+    for rec in mixed["images"]:
+        twins = paper if rec["camera"] == "paper" else mavic
+        twin = twins["images"][rec["view"]]
+        assert rec == twin
+        image = Path(mixed["root"], rec["file"]).read_bytes()
+        assert image == Path(twins["root"], twin["file"]).read_bytes()
+    assert paper["images"][1]["keypoints"] != mavic["images"][1]["keypoints"]
+    assert paper["images"][1]["cam_from_world"] == mavic["images"][1]["cam_from_world"]
+
+
+def test_a_blob_at_each_landmark_lands_on_its_label():
+    """deliver_view on a synthetic render: blobs at the landmarks end up within 0.1 px of the labels."""
+    from uav_struct_env.datasets.landmarks import _lens_view, deliver_view, random_motion
+
+    lens = _lens_view("mavic2pro", 1280, 720)
+    T = np.eye(4)
+    gx, gy = np.meshgrid(np.linspace(-0.5, 0.5, 7), np.linspace(-0.25, 0.25, 5))
+    X = np.stack([gx.ravel() * 25.0, gy.ravel() * 25.0, np.full(gx.size, 25.0)], axis=1)
+    Kr = lens.render_camera.K
+    q = X[:, :2] / X[:, 2:] * [Kr[0, 0], Kr[1, 1]] + Kr[:2, 2]
+    yy, xx = np.mgrid[0: lens.render_camera.height, 0: lens.render_camera.width]
+    img = np.zeros(xx.shape, np.float32)
+    for u, v in q:  # Gaussian blobs, sigma 3 render px, at the render camera's projections
+        img += 250.0 * np.exp(-((xx - u) ** 2 + (yy - v) ** 2) / 18.0)
+    rgb = np.repeat(np.clip(img, 0, 255).astype(np.uint8)[..., None], 3, axis=2)
+    depth = np.full(xx.shape, 25.0, np.float32)
+    truth = [{"ids": np.arange(len(X)), "xyz": X, "uv": q, "visible": np.ones(len(X), bool)}]
+    motion = random_motion(np.random.default_rng(3), T)
+    out, kps, K = deliver_view(rgb, depth, truth, T, lens, (640, 360), motion)
+    static, *_ = lens.project(T, X)
+    kp = np.array(kps)[:, :2]
+    moved = (static[np.array(kps)[:, 3].astype(int)] + 0.5) * 0.5 - 0.5
+    assert np.abs(kp - moved).max() > 2.0  # the shutter moved the landmarks: the check can fail
+    g = out[..., 0].astype(np.float64)
+    errors = []
+    for u, v in kp:
+        r0, c0 = int(round(v)), int(round(u))
+        if not (7 <= r0 < 360 - 7 and 7 <= c0 < 640 - 7):
+            continue
+        patch = np.clip(g[r0 - 6: r0 + 7, c0 - 6: c0 + 7] - 3.0, 0, None)
+        pr, pc = np.mgrid[r0 - 6: r0 + 7, c0 - 6: c0 + 7]
+        errors.append(np.hypot(np.sum(patch * pc) / patch.sum() - u, np.sum(patch * pr) / patch.sum() - v))
+    assert len(errors) >= 25
+    assert max(errors) <= 0.1, np.round(errors, 3)  # measured: 0.015 px
+
+
+def test_a_bad_camera_is_refused_in_one_line(tmp_path, capsys):
+    expected = r"camera must be one of \('paper', 'mavic2pro', 'mixed'\), got 'gopro'"
+    with pytest.raises(ConfigError, match=expected):
+        DatasetConfig(camera="gopro")
+    out = tmp_path / "never"
+    assert cli_main([str(out), "--camera", "gopro"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "got 'gopro'" in err
+    assert err.startswith("python -m uav_struct_env.datasets: error: DatasetConfig.camera must be one of")
+    assert not out.exists()

@@ -1,6 +1,7 @@
 """Datasets rendered from the simulator (``python -m uav_struct_env.datasets --help``)."""
 
 from uav_struct_env.datasets.landmarks import (
+    CAMERAS,
     LANDMARK_TYPES,
     DatasetConfig,
     generate,
@@ -8,4 +9,4 @@ from uav_struct_env.datasets.landmarks import (
     render_layout,
 )
 
-__all__ = ["LANDMARK_TYPES", "DatasetConfig", "generate", "load_labels", "render_layout"]
+__all__ = ["CAMERAS", "LANDMARK_TYPES", "DatasetConfig", "generate", "load_labels", "render_layout"]

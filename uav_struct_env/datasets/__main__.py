@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from uav_struct_env.datasets.landmarks import DatasetConfig, generate
+from uav_struct_env.datasets.landmarks import CAMERAS, DatasetConfig, generate
 from uav_struct_env.outputs import OutputExistsError
 from uav_struct_env.processes import WorkerDied
 from uav_struct_env.site.activity import ACTIVITY_PRESETS
@@ -26,6 +26,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--activity", default="none", choices=tuple(ACTIVITY_PRESETS),
                     help="site activity per layout: none, light or busy (workers, equipment, "
                          "materials, scaffolding; they hide landmarks)")
+    ap.add_argument("--camera", default="paper",
+                    help=f"one of {', '.join(CAMERAS)}: paper (the paper's ideal pinhole), mavic2pro "
+                         "(lens distortion, rolling shutter "
+                         "and motion blur of the DJI Mavic 2 Pro, the camera moving within the UAV's "
+                         "flight limits) or mixed (every other image mavic2pro)")
     ap.add_argument("--workers", type=int, default=1, help="rendering processes")
     ap.add_argument("--overwrite", action="store_true",
                     help="replace a dataset already in out_dir (otherwise such a folder is refused)")
@@ -34,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         config = DatasetConfig(n_layouts=args.layouts, views_per_layout=args.views, seed=args.seed,
                                scale=args.scale, renderer=args.renderer, site=args.site,
-                               activity=args.activity)
+                               activity=args.activity, camera=args.camera)
         check_option("--workers", args.workers, 1, integer=True)
         check_output_dir(args.out_dir, overwrite=args.overwrite, option="out_dir")
     except INPUT_ERRORS as err:

@@ -16,6 +16,20 @@ view), which hides landmarks like everything else. Every view draws a new sun di
 (elevation 25-85 deg, any azimuth) and TinyRenderer ambient/diffuse coefficients (the EGL
 backend only uses the direction: that limitation is pybullet's).
 
+**Camera** (``camera``, :data:`CAMERAS`). ``"paper"`` (the default) is the paper's ideal pinhole,
+rendered directly. ``"mavic2pro"`` renders every view through
+:class:`uav_struct_env.sim.lens.LensView` with the :data:`~uav_struct_env.sim.lens.MAVIC2PRO`
+preset: lens distortion, rolling shutter and motion blur, exactly as the env delivers its
+images. ``"mixed"`` alternates the two over the dataset's images (image ``n = layout * views +
+view`` is ``mavic2pro`` when ``n`` is odd): half of each. A ``mavic2pro`` view's camera moves
+while the frame is read: a velocity drawn uniformly in the UAV's flight limits
+(:class:`~uav_struct_env.sim.uav.FlightLimits` defaults: horizontal speed 0-10 m/s in any
+direction, vertical -3..+4 m/s) and an angular velocity of a yaw rate (+-100 deg/s, about the
+vertical) plus a gimbal pitch rate (+-90 deg/s, about the camera's x axis), all drawn from
+``numpy.random.default_rng([seed, layout, 2])`` -- its own stream, so the views, sites and
+lights are those of the ``paper`` dataset of the same seed. The pose in ``cam_from_world`` is
+the pose at the middle row's exposure (the time convention of :mod:`uav_struct_env.sim.lens`).
+
 Images are rendered at the paper's 1280 x 720 and downscaled by ``scale`` with
 ``cv2.INTER_AREA`` -- exactly what the detector does at inference -- so training and inference
 images come from the same pipeline.
@@ -30,16 +44,30 @@ images come from the same pipeline.
                              "images": [{"file": "images/000000.png", "layout": 0,
                                          "stage": "columns", "K": 3x3 (of the saved image),
                                          "cam_from_world": 4x4,
-                                         "keypoints": [[u, v, type, id], ...]}, ...]}
+                                         "keypoints": [[u, v, type, id], ...],
+                                         ...a real camera's view only:
+                                         "camera": "mavic2pro", "distortion": [k1, k2, p1, p2, k3],
+                                         "velocity": [vx, vy, vz], "angular_velocity": [wx, wy, wz]},
+                                        ...]}
+
+The real-camera keys (world velocities, m/s and rad/s) appear only on such views, so a
+``paper`` dataset is byte for byte what the generator wrote before it had cameras (its
+``config`` has no ``camera`` either); :func:`load_labels` fills in ``"camera": "paper"`` and zero
+distortion and motion for such views and configs, so readers need no special case.
 
 ``keypoints`` are the *visible* landmarks (in frame and not occluded, from
-:meth:`SiteWorld.landmark_truth`) in the saved image's pixel coordinates (integer pixel centres,
+:meth:`SiteWorld.landmark_truth`; through a real camera :meth:`LensView.landmark_truth`, so
+``(u, v)`` is where the landmark appears in the delivered, distorted, rolling-shutter image,
+:meth:`LensView.project`) in the saved image's pixel coordinates (integer pixel centres,
 ``u' + 0.5 = (u + 0.5) * scale``); ``type`` indexes ``types``; ``id`` is the site's landmark id.
+``K`` and ``distortion`` are the saved image's intrinsics (the distortion coefficients act on
+the normalized image plane, so they hold at any ``scale``).
 Everything is drawn from ``numpy.random.default_rng([seed, layout])``: one seed, one dataset.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from dataclasses import asdict, dataclass
@@ -53,14 +81,19 @@ from localization.checks import check_choice, check_number
 from localization.geometry import look_at
 from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.sim.camera import Camera
+from uav_struct_env.sim.lens import CAMERA_MODELS, LensView, Motion
+from uav_struct_env.sim.uav import FlightLimits
 from uav_struct_env.site import Site, make_site, random_site
 from uav_struct_env.site.activity import ACTIVITY_PRESETS, SiteActivity
 
-__all__ = ["LANDMARK_TYPES", "DatasetConfig", "generate", "load_labels", "render_layout"]
+__all__ = ["CAMERAS", "LANDMARK_TYPES", "DatasetConfig", "generate", "load_labels", "render_layout"]
 
 #: Heatmap channel order of the learned detector.
 LANDMARK_TYPES = ("column_tops", "slab_corners", "opening_corners")
 FORMAT = "uav-struct-landmarks-v1"
+#: The generator's ``camera`` choices (module docstring, "Camera").
+CAMERAS = ("paper", "mavic2pro", "mixed")
 
 _MATERIAL_RGB = (
     (0.55, 0.42, 0.28), (0.62, 0.60, 0.57), (0.35, 0.36, 0.38), (0.70, 0.68, 0.62),
@@ -85,6 +118,7 @@ class DatasetConfig:
     source_size: tuple[int, int] = PAPER_IMAGE_SIZE
     site: str = "random"
     activity: str = "none"
+    camera: str = "paper"
 
     def __post_init__(self) -> None:
         if not isinstance(self.site, str) or not (
@@ -98,6 +132,7 @@ class DatasetConfig:
         if self.site != "random":
             object.__setattr__(self, "site", str(Path(self.site).resolve()))
         check_choice("DatasetConfig.activity", self.activity, tuple(ACTIVITY_PRESETS), error=ConfigError)
+        check_choice("DatasetConfig.camera", self.camera, CAMERAS, error=ConfigError)
         for name in ("n_layouts", "views_per_layout", "seed"):
             v = getattr(self, name)
             check_number(f"DatasetConfig.{name}", v, 0 if name == "seed" else 1, integer=True,
@@ -173,6 +208,74 @@ def _random_view(
     return look_at(eye, target)
 
 
+def view_camera(config: DatasetConfig, layout: int, view: int) -> str:
+    """The camera preset (``"paper"`` or ``"mavic2pro"``) of view ``view`` of layout ``layout``."""
+    if config.camera != "mixed":
+        return config.camera
+    return "mavic2pro" if (layout * config.views_per_layout + view) % 2 else "paper"
+
+
+def random_motion(
+    rng: np.random.Generator, cam_from_world: NDArray[np.float64], limits: FlightLimits | None = None
+) -> Motion:
+    """A camera motion within the UAV's flight ``limits`` (default :class:`FlightLimits`).
+
+    Horizontal velocity of a uniform speed in ``[0, max_horizontal_speed]`` in a uniform direction,
+    vertical velocity uniform in ``[-max_descent_speed, max_ascent_speed]``; angular velocity of a
+    yaw rate uniform in ``+-max_yaw_rate`` about the world vertical plus a gimbal pitch rate uniform
+    in ``+-max_gimbal_rate`` about the camera's x axis (``cam_from_world``'s).
+    """
+    limits = limits or FlightLimits()
+    heading = rng.uniform(0, 2 * math.pi)
+    speed = rng.uniform(0, limits.max_horizontal_speed)
+    climb = rng.uniform(-limits.max_descent_speed, limits.max_ascent_speed)
+    yaw_rate = rng.uniform(-limits.max_yaw_rate, limits.max_yaw_rate)
+    pitch_rate = rng.uniform(-limits.max_gimbal_rate, limits.max_gimbal_rate)
+    x_axis = np.asarray(cam_from_world, dtype=np.float64)[0, :3]  # camera x in world coordinates
+    return Motion(np.array([speed * math.cos(heading), speed * math.sin(heading), climb]),
+                  yaw_rate * np.array([0.0, 0.0, 1.0]) + pitch_rate * x_axis)
+
+
+def deliver_view(
+    rgb: NDArray[np.uint8],
+    depth: NDArray[np.float32],
+    truth: list[dict[str, NDArray]],
+    cam_from_world: NDArray[np.float64],
+    camera: Camera | LensView,
+    out_size: tuple[int, int],
+    motion: Motion | None = None,
+) -> tuple[NDArray[np.uint8], list[list], NDArray[np.float64]]:
+    """One view's saved image, ``keypoints`` and ``K`` from its render.
+
+    ``rgb``/``depth`` are the render with ``camera`` (a :class:`LensView`: with its
+    ``render_camera``, then warped through the lens with ``motion``); ``truth`` is
+    ``SiteWorld.landmark_truth`` of that render per :data:`LANDMARK_TYPES`. The image is
+    downscaled to ``out_size`` with ``cv2.INTER_AREA`` and the labels with it.
+    """
+    if isinstance(camera, LensView):
+        rgb, _ = camera.warp(rgb, depth, cam_from_world, motion)
+        truth = [camera.landmark_truth(t, cam_from_world, motion) for t in truth]
+        camera = camera.camera
+    out_w, out_h = out_size
+    sx, sy = out_w / camera.width, out_h / camera.height
+    keypoints = []
+    for t, lm in enumerate(truth):
+        for i, uv, vis in zip(lm["ids"], lm["uv"], lm["visible"], strict=True):
+            if vis:
+                u = (uv[0] + 0.5) * sx - 0.5
+                v = (uv[1] + 0.5) * sy - 0.5
+                keypoints.append([float(u), float(v), t, int(i)])
+    if (out_w, out_h) != (camera.width, camera.height):
+        rgb = cv2.resize(rgb, (out_w, out_h), interpolation=cv2.INTER_AREA)
+    return rgb, keypoints, camera.scaled(out_w, out_h).K
+
+
+@functools.lru_cache(maxsize=4)
+def _lens_view(name: str, width: int, height: int) -> LensView:
+    """One :class:`LensView` per preset and size per process (its maps take a moment to build)."""
+    return LensView(CAMERA_MODELS[name], width, height)
+
+
 def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = None):
     """Render the views of one layout: a list of ``(rgb (H', W', 3), record)``.
 
@@ -180,7 +283,6 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
     given nothing is returned in memory (images are written as ``layout_view.png`` there).
     """
     from uav_struct_env.sim.activity import ActivityBodies
-    from uav_struct_env.sim.camera import Camera
     from uav_struct_env.sim.world import SiteWorld, random_light
 
     rng = np.random.default_rng([config.seed, layout])
@@ -196,8 +298,8 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
     texture_size = int(rng.choice([128, 256, 512]))
     camera = Camera().scaled(*config.source_size)
     out_w, out_h = config.image_size
-    sx, sy = out_w / camera.width, out_h / camera.height
-    K_out = camera.scaled(out_w, out_h).K
+    # The real camera's motion: its own stream (the paper dataset's draws are unchanged).
+    motion_rng = None if config.camera == "paper" else np.random.default_rng([config.seed, layout, 2])
     out = []
     with SiteWorld(site, renderer=config.renderer, image_size=config.source_size,
                    rng=rng.spawn(1)[0], texture_size=texture_size) as world:
@@ -210,20 +312,21 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
                 activity.update(_ACTIVITY_SECONDS_PER_VIEW * view)
             cam_from_world = _random_view(site, rng, config)
             world.light = random_light(rng)
-            result = world.render(cam_from_world, camera, depth=True)
-            keypoints = []
-            for t, name in enumerate(LANDMARK_TYPES):
-                truth = world.landmark_truth(name, cam_from_world, camera, result)
-                for i, uv, vis in zip(truth["ids"], truth["uv"], truth["visible"], strict=True):
-                    if vis:
-                        u = (uv[0] + 0.5) * sx - 0.5
-                        v = (uv[1] + 0.5) * sy - 0.5
-                        keypoints.append([float(u), float(v), t, int(i)])
-            rgb = result.rgb
-            if (out_w, out_h) != (camera.width, camera.height):
-                rgb = cv2.resize(rgb, (out_w, out_h), interpolation=cv2.INTER_AREA)
-            record = {"layout": layout, "view": view, "stage": stage, "K": K_out.tolist(),
-                      "cam_from_world": cam_from_world.tolist(), "keypoints": keypoints}
+            motion = None if motion_rng is None else random_motion(motion_rng, cam_from_world)
+            name = view_camera(config, layout, view)
+            view_cam = camera if name == "paper" else _lens_view(name, *config.source_size)
+            render_cam = camera if name == "paper" else view_cam.render_camera
+            result = world.render(cam_from_world, render_cam, depth=True)
+            truth = [world.landmark_truth(t, cam_from_world, render_cam, result) for t in LANDMARK_TYPES]
+            rgb, keypoints, K_out = deliver_view(result.rgb, result.depth, truth, cam_from_world, view_cam,
+                                                 (out_w, out_h), motion)
+            extra = {} if name == "paper" else {
+                "camera": name, "distortion": view_cam.distortion.tolist(),
+                "velocity": motion.velocity.tolist(), "angular_velocity": motion.angular_velocity.tolist(),
+            }
+            record = {"layout": layout, "view": view, "stage": stage,
+                      "K": K_out.tolist(),
+                      "cam_from_world": cam_from_world.tolist(), "keypoints": keypoints, **extra}
             out.append((rgb, record))
     return out
 
@@ -290,16 +393,23 @@ def generate(config: DatasetConfig, out_dir: str | Path, workers: int = 1,
 
 
 def _write_labels(path: Path, config: DatasetConfig, records: list[dict]) -> None:
+    settings = asdict(config)
+    if config.camera == "paper":  # as written before the generator had cameras (load_labels fills it in)
+        del settings["camera"]
     labels = {
         "format": FORMAT, "types": list(LANDMARK_TYPES), "image_size": list(config.image_size),
         "source_size": list(config.source_size), "scale": config.scale,
-        "config": asdict(config), "images": records,
+        "config": settings, "images": records,
     }
     path.write_text(json.dumps(labels))
 
 
 def load_labels(path: str | Path) -> dict:
-    """Read a ``labels.json`` (or its directory) and check its format."""
+    """Read a ``labels.json`` (or its directory) and check its format.
+
+    A ``paper`` view's (and config's) camera keys are filled in: ``"camera": "paper"``, zero
+    ``distortion``, ``velocity`` and ``angular_velocity``.
+    """
     path = Path(path)
     if path.is_dir():
         path = path / "labels.json"
@@ -307,4 +417,9 @@ def load_labels(path: str | Path) -> dict:
     if data.get("format") != FORMAT:
         raise ValueError(f"{path} is not a {FORMAT} label file (format={data.get('format')!r})")
     data["root"] = str(path.parent)
+    data["config"].setdefault("camera", "paper")
+    for record in data["images"]:
+        record.setdefault("camera", "paper")
+        for key, n in (("distortion", 5), ("velocity", 3), ("angular_velocity", 3)):
+            record.setdefault(key, [0.0] * n)
     return data

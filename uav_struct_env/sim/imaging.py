@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from localization.checks import check_number
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.named import resolve_named
 
 __all__ = ["IMAGING_PRESETS", "ImagingModel", "make_imaging"]
 
@@ -99,10 +100,4 @@ def make_imaging(imaging: str | ImagingModel) -> ImagingModel:
     Raises:
         ConfigError: for an unknown name or another type.
     """
-    if isinstance(imaging, ImagingModel):
-        return imaging
-    if isinstance(imaging, str) and imaging in IMAGING_PRESETS:
-        return IMAGING_PRESETS[imaging]
-    raise ConfigError(
-        f"imaging must be one of {sorted(IMAGING_PRESETS)} or an ImagingModel, got {imaging!r}"
-    )
+    return resolve_named("imaging", imaging, IMAGING_PRESETS, ImagingModel, "an ImagingModel")

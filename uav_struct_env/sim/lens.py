@@ -56,6 +56,7 @@ from localization.distortion import (
 )
 from localization.geometry import check_transform, so3_log
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.named import resolve_named
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.uav import UavState, wrap_angle
 
@@ -207,13 +208,7 @@ def make_camera_model(camera: str | CameraModel) -> CameraModel:
     Raises:
         ConfigError: for an unknown name or another type.
     """
-    if isinstance(camera, CameraModel):
-        return camera
-    if isinstance(camera, str) and camera in CAMERA_MODELS:
-        return CAMERA_MODELS[camera]
-    raise ConfigError(
-        f"camera must be one of {sorted(CAMERA_MODELS)} or a CameraModel, got {camera!r}"
-    )
+    return resolve_named("camera", camera, CAMERA_MODELS, CameraModel, "a CameraModel")
 
 
 class LensView:

@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from localization.checks import check_number
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.named import resolve_named
 
 __all__ = [
     "NOISE_MODELS",
@@ -382,14 +383,4 @@ def make_noise(noise: str | SensorModel) -> SensorModel:
     Raises:
         ConfigError: for an unknown name or an object that is not a sensor model.
     """
-    if isinstance(noise, str):
-        if noise not in NOISE_MODELS:
-            raise ConfigError(
-                f"noise must be one of {sorted(NOISE_MODELS)} or a sensor model, got {noise!r}"
-            )
-        return NOISE_MODELS[noise]
-    if isinstance(noise, SensorModel):
-        return noise
-    raise ConfigError(
-        f"noise must be one of {sorted(NOISE_MODELS)} or a sensor model, got {noise!r}"
-    )
+    return resolve_named("noise", noise, NOISE_MODELS, SensorModel, "a sensor model")

@@ -49,6 +49,7 @@ from numpy.typing import NDArray
 
 from localization.checks import check_number
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.named import resolve_named
 from uav_struct_env.site.elements import Column, Slab
 from uav_struct_env.site.model import Site
 
@@ -175,11 +176,7 @@ def make_activity(activity: str | Activity) -> Activity:
     Raises:
         ConfigError: for an unknown name or another type.
     """
-    if isinstance(activity, Activity):
-        return activity
-    if isinstance(activity, str) and activity in ACTIVITY_PRESETS:
-        return ACTIVITY_PRESETS[activity]
-    raise ConfigError(f"activity must be one of {sorted(ACTIVITY_PRESETS)} or an Activity, got {activity!r}")
+    return resolve_named("activity", activity, ACTIVITY_PRESETS, Activity, "an Activity")
 
 
 @dataclass(frozen=True, eq=False)
