@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from localization.batch import capped_nearest_sq
 from localization.geometry import camera_center
 from localization.pnp import pose_covariance
 
@@ -101,9 +102,7 @@ def translation_hypotheses(
         xy = moved[:, :, :2] / depth[:, :, None]
     uv = xy @ K[:2, :2].T + K[:2, 2]
     uv[depth <= 1e-6] = np.nan
-    d2 = np.sum((det[good][None, :, None, :] - uv[:, None, :, :]) ** 2, axis=3)  # (T, N, M)
-    d2 = np.where(np.isfinite(d2), d2, np.inf)
-    nearest = np.minimum(np.min(d2, axis=2), gate_px**2)  # (T, N)
+    nearest = capped_nearest_sq(det[good], uv, gate_px**2)  # (T, N)
     explained = np.sum(nearest < gate_px**2, axis=1)
     misfit = np.sum(nearest, axis=1)  # an exact self-translation costs only the noise
     order = np.lexsort((prior_sq, misfit))

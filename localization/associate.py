@@ -64,6 +64,7 @@ from scipy.stats import chi2
 from localization.ambiguity import AMBIGUITY_MARGIN, ambiguity, translation_hypotheses
 from localization.batch import (
     assign_many,
+    capped_nearest_sq,
     pose_difference_many,
     project_many,
     refine_many,
@@ -544,7 +545,8 @@ def associate_robust(
             38.7 px for the paper's camera and default sigmas, 310 px at f = 8900 px).
         max_hypotheses: twice this many distinct coarse assignments of each source (upright
             poses, then the layout vote if needed) are refined and re-associated in one batch
-            (those agreeing with an already refined result are skipped).
+            (those agreeing with an already refined result are skipped); of the upright ones,
+            the best half first, the other half only with the layout vote.
         max_iterations: PnP / re-association rounds per hypothesis.
         min_correspondences: a hypothesis needs this many pairs to be turned into a pose.
         miss_cost: cost of a landmark predicted inside the image but not detected (about
@@ -625,9 +627,12 @@ def associate_robust(
     explored: list[NDArray] = []
     tried = [0]
 
-    def explore(coarse: list[tuple[NDArray, NDArray]], first_robust: bool) -> list[tuple]:
-        """Refine the not yet covered coarse hypotheses at once; keep those that pass the tests."""
-        chunk = [c for c in coarse if not covered(c[0])][: 2 * max(max_hypotheses, 1)]
+    def explore(coarse: list[tuple[NDArray, NDArray]], first_robust: bool, extra: int = 0) -> list[tuple]:
+        """Refine the not yet covered coarse hypotheses at once; keep those that pass the tests.
+
+        At most ``2 * max_hypotheses + extra`` of them (the first not covered).
+        """
+        chunk = [c for c in coarse if not covered(c[0])][: 2 * max(max_hypotheses, 1) + extra]
         tried[0] += len(chunk)
         if not chunk:
             return []
@@ -729,12 +734,17 @@ def associate_robust(
     if exhaustive is not None:
         explore(exhaustive, False)
     else:
-        explore(full(_upright_hypotheses(
+        upright = full(_upright_hypotheses(
             det[good], landmarks_xyz, idx, proj, K, prior, sig, max_prior_mahalanobis_sq, coarse_gate_px,
-            need, 5 * max_hypotheses,
-        )), True)
+            need, 5 * max_hypotheses, 2 * max(max_hypotheses, 1),
+        ))
+        # the best half first: when they explain the detections the rest would only cost time;
+        # else the other half joins the layout vote's batch
+        first = max(max_hypotheses, 1)
+        explore(upright[:first], True)
         if weak():
-            explore(layouts(), True)
+            rest = upright[first:]
+            explore(rest + layouts(), True, len(rest))
             voted = True
 
     if not finals:
@@ -824,6 +834,7 @@ def _upright_hypotheses(
     gate_px: float,
     min_pairs: int,
     keep: int,
+    n_distinct: int,
 ) -> list[tuple[NDArray, NDArray]]:
     """Coarse assignments from upright two-point poses (:mod:`localization.upright`).
 
@@ -833,8 +844,9 @@ def _upright_hypotheses(
     terms) are dropped. Each pose is scored like a rival (:func:`localization.ambiguity.
     translation_hypotheses`): detections explained within ``gate_px``, then the sum of squared
     distances to the nearest projection capped at ``gate_px^2``, then the prior distance. The
-    best ``keep`` give gated assignments. Returns ``[(assignment of det rows into landmarks,
-    start cam_from_world), ...]``, best first.
+    best ``keep`` give gated assignments, of which the first ``n_distinct`` different ones with
+    ``min_pairs`` pairs or more are returned: ``[(assignment of det rows into landmarks, start
+    cam_from_world), ...]``, best first.
     """
     pairs = _anchor_pairs(det)
     m = idx.size
@@ -870,16 +882,28 @@ def _upright_hypotheses(
     R = prior[:3, :3] @ Rz_t
     t = -(R @ C[..., None])[..., 0]
     uv, _ = project_many(K, R, t, landmarks_xyz[idx])
-    du = det[None, :, 0, None] - uv[:, None, :, 0]
-    dv = det[None, :, 1, None] - uv[:, None, :, 1]
-    nearest = np.minimum(np.min(np.fmin(du * du + dv * dv, np.inf), axis=2), gate_px**2)
+    nearest = capped_nearest_sq(det, uv, gate_px**2)
     explained = np.sum(nearest < gate_px**2, axis=1)
     misfit = np.sum(nearest, axis=1)
     order = np.lexsort((prior_sq, misfit, -explained))
     order = order[explained[order] >= min_pairs][:keep]
-    if order.size == 0:
-        return []
-    local = assign_many(det, uv[order], gate_px)
-    a = np.where(local >= 0, idx[np.maximum(local, 0)], -1)
-    T = to_transforms(R[order], t[order])
-    return [(a[q], T[q]) for q in range(order.size)]
+    out: list[tuple[NDArray, NDArray]] = []
+    seen: set[bytes] = set()
+    # assignments block by block, until `n_distinct` of them differ (a pose that repeats an earlier
+    # one's assignment, or pairs fewer than `min_pairs`, would be dropped by the caller anyway)
+    first = n_distinct + n_distinct // 2
+    for block in (order[:first], order[first:]):
+        if block.size == 0:
+            break
+        local = assign_many(det, uv[block], gate_px)
+        a = np.where(local >= 0, idx[np.maximum(local, 0)], -1)
+        T = to_transforms(R[block], t[block])
+        for q in range(block.size):
+            key = a[q].tobytes()
+            if key in seen or int((a[q] >= 0).sum()) < min_pairs:
+                continue
+            seen.add(key)
+            out.append((a[q], T[q]))
+            if len(out) == n_distinct:
+                return out
+    return out

@@ -22,6 +22,7 @@ from localization.geometry import so3_log
 
 __all__ = [
     "assign_many",
+    "capped_nearest_sq",
     "pose_difference_many",
     "project_many",
     "refine_many",
@@ -96,11 +97,11 @@ def assign_many(
     d2 = du * du + dv * dv  # NaN for NaN points, and NaN > gate is False: see below
     d2[~(d2 <= gate_px**2)] = np.inf
     rows = np.arange(n)
+    hh = np.arange(h)[:, None]
     for _ in range(rounds):
         jn = np.argmin(d2, axis=2)  # (H, N) nearest projection of each detection
         inn = np.argmin(d2, axis=1)  # (H, M) nearest detection of each projection
-        mutual = np.take_along_axis(inn, jn, axis=1) == rows
-        ok = mutual & (np.take_along_axis(d2, jn[..., None], axis=2)[..., 0] < np.inf)
+        ok = (inn[hh, jn] == rows) & (d2[hh, rows, jn] < np.inf)  # mutual and within the gate
         if not ok.any():
             break
         out[ok] = jn[ok]
@@ -112,12 +113,39 @@ def assign_many(
     return out
 
 
+def capped_nearest_sq(
+    det: NDArray[np.float64], uv: NDArray[np.float64], cap_sq: float
+) -> NDArray[np.float64]:
+    """(H, N) squared distance of each finite detection (N, 2) to its nearest of ``uv`` (H, M, 2).
+
+    Capped at ``cap_sq``; NaN projections (behind the camera) are never nearest. The same
+    numbers as ``min(nanmin_j |det_i - uv_hj|^2, cap_sq)``, without a pass over (H, N, M) to
+    replace NaNs: those projections move far off the image first.
+    """
+    far = np.where(np.isnan(uv), _FAR_PX, uv)
+    du = det[None, :, None, 0] - far[:, None, :, 0]
+    d2 = du * du  # (H, N, M)
+    dv = det[None, :, None, 1] - far[:, None, :, 1]
+    d2 += dv * dv
+    if d2.shape[2] == 0:
+        return np.full(d2.shape[:2], cap_sq)
+    # the minimum gathered at argmin: the same number, and numpy's argmin along a short last
+    # axis takes a third of min's time
+    nearest = d2[np.arange(d2.shape[0])[:, None], np.arange(d2.shape[1]), np.argmin(d2, axis=2)]
+    return np.minimum(nearest, cap_sq)
+
+
+#: A pixel coordinate farther from any detection than every gate (squared distances stay finite).
+_FAR_PX = 1e9
+
+
 def _residuals_and_jacobian(
-    K: NDArray, R: NDArray, t: NDArray, X: NDArray, uv: NDArray
-) -> tuple[NDArray, NDArray, NDArray]:
+    K: NDArray, R: NDArray, t: NDArray, X: NDArray, uv: NDArray, jacobian: bool = True
+) -> tuple[NDArray, NDArray | None, NDArray]:
     """Residuals (H, P, 2), Jacobians (H, P, 2, 6) w.r.t. the update ``(w, d)`` and depth (H, P).
 
-    For ``p' = p + w x p + d``: ``du/dw = p x du/dp`` and ``du/dd = du/dp``.
+    For ``p' = p + w x p + d``: ``du/dw = p x du/dp`` and ``du/dd = du/dp``. With
+    ``jacobian=False`` the Jacobians are not formed (None).
     """
     p = X @ R.transpose(0, 2, 1) + t[:, None, :]
     x, y, z = p[..., 0], p[..., 1], p[..., 2]
@@ -128,6 +156,8 @@ def _residuals_and_jacobian(
     r = np.empty(p.shape[:2] + (2,))
     np.subtract(ur, uv[..., 0], out=r[..., 0])
     np.subtract(fy * ys + K[1, 2], uv[..., 1], out=r[..., 1])
+    if not jacobian:
+        return r, None, z
     a, b, c = fx * iz, s * iz, (K[0, 2] - ur) * iz  # du/dp
     e = fy * iz
     f = -e * ys  # dv/dp = (0, e, f)
@@ -142,14 +172,19 @@ def _residuals_and_jacobian(
 
 
 def _normal_equations(
-    K: NDArray, R: NDArray, t: NDArray, X: NDArray, uv: NDArray, w: NDArray
-) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
-    """(A (H,6,6), g (H,6), weighted cost (H,), residuals (H,P,2), Jacobians) at the poses."""
+    K: NDArray, R: NDArray, t: NDArray, X: NDArray, uv: NDArray, w: NDArray, system: bool = True
+) -> tuple[NDArray | None, NDArray | None, NDArray, NDArray, NDArray]:
+    """(A (H,6,6), g (H,6), weighted cost (H,), residuals (H,P,2), Jacobians) at the poses.
+
+    With ``system=False`` (the caller reweights before solving) ``A`` and ``g`` are None.
+    """
     r, J, z = _residuals_and_jacobian(K, R, t, X, uv)
     w = np.where(z > 1e-6, w, 0.0)
     r = r * (w > 0)[..., None]
-    A, g = _weighted_system(J, r, w)
     cost = np.sum(w * (r[..., 0] ** 2 + r[..., 1] ** 2), axis=1)
+    if not system:
+        return None, None, cost, r, J
+    A, g = _weighted_system(J, r, w)
     return A, g, cost, r, J
 
 
@@ -196,7 +231,9 @@ def refine_many(
     active = np.ones(h, dtype=bool)
     eye = np.eye(6)
     w = w0
-    A, g, cost, r, J = _normal_equations(K, R, t, X, uv, w)
+    # with robust weights the system is rebuilt at the top of every step: never built here
+    plain = robust_px is None
+    A, g, cost, r, J = _normal_equations(K, R, t, X, uv, w, plain)
     for _ in range(iterations):
         if robust_px is not None:
             w = w0 / (1.0 + np.sum(r**2, axis=-1) / robust_px**2)
@@ -211,7 +248,7 @@ def refine_many(
         dR = so3_exp_many(delta[:, :3])
         Rn = dR @ R
         tn = (dR @ t[..., None])[..., 0] + delta[:, 3:]
-        An, gn, costn, rn, Jn = _normal_equations(K, Rn, tn, X, uv, w)
+        An, gn, costn, rn, Jn = _normal_equations(K, Rn, tn, X, uv, w, plain)
         better = active & (costn <= cost)  # False for NaN
         rel = (cost - costn) / np.maximum(cost, 1e-300)
         if better.all():
@@ -219,7 +256,8 @@ def refine_many(
         else:
             b3 = better[:, None, None]
             R, t = np.where(b3, Rn, R), np.where(better[:, None], tn, t)
-            A, g = np.where(b3, An, A), np.where(better[:, None], gn, g)
+            if plain:
+                A, g = np.where(b3, An, A), np.where(better[:, None], gn, g)
             r, J = np.where(b3, rn, r), np.where(better[:, None, None, None], Jn, J)
             cost = np.where(better, costn, cost)
         lam = np.where(better, np.maximum(lam * 0.1, 1e-12), lam * 10.0)
@@ -229,7 +267,7 @@ def refine_many(
     # re-orthonormalize, then the unweighted cost (and inf when a point is behind the camera)
     U, _, Vt = np.linalg.svd(R)
     R = U @ Vt
-    r, _, z = _residuals_and_jacobian(K, R, t, X, uv)
+    r, _, z = _residuals_and_jacobian(K, R, t, X, uv, jacobian=False)
     final = np.sum(w0 * np.sum(r * r, axis=-1), axis=1)
     behind = np.any(mask & (z <= 1e-6), axis=1)
     return R, t, np.where(behind, np.inf, final)

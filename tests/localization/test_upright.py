@@ -7,6 +7,7 @@ import numpy as np
 from localization.associate import _anchor_pairs, assign
 from localization.batch import (
     assign_many,
+    capped_nearest_sq,
     pose_difference_many,
     project_many,
     refine_many,
@@ -114,6 +115,22 @@ def test_assign_many_is_the_minimum_cost_assignment_on_separated_points(rng):
         want[np.flatnonzero(fin)[local >= 0]] = np.flatnonzero(ok_cols)[local[local >= 0]]
         np.testing.assert_array_equal(got[h], want)
     assert got[0, 9] == -1 and got[0, 10] == -1
+
+
+def test_capped_nearest_sq_is_the_capped_nan_ignoring_minimum(rng):
+    det = rng.uniform(0, 100, (6, 2))
+    proj = rng.uniform(0, 100, (5, 8, 2))
+    proj[1, :3] = np.nan  # behind the camera: never nearest
+    proj[2] = np.nan  # nothing in front: every detection at the cap
+    proj[3, 4] = det[2] + [3.0, -4.0]  # 25 px^2 from detection 2
+    got = capped_nearest_sq(det, proj, 400.0)
+    d2 = np.sum((det[None, :, None, :] - proj[:, None, :, :]) ** 2, axis=3)
+    with np.errstate(invalid="ignore"):
+        want = np.minimum(np.min(np.where(np.isnan(d2), np.inf, d2), axis=2), 400.0)
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(got[2], np.full(6, 400.0))
+    assert got[3, 2] <= 25.0 + 1e-9
+    np.testing.assert_array_equal(capped_nearest_sq(det, proj[:, :0], 9.0), np.full((5, 6), 9.0))
 
 
 def test_batched_geometry_matches_the_scalar_functions(rng):
