@@ -14,6 +14,14 @@ from uav_struct_env.datasets.__main__ import main as dataset_main
 from uav_struct_env.demo import main as render_main
 
 
+def _sigint_default() -> None:
+    """In the child before exec: Ctrl-C handled as a terminal's would be, even when this test run
+    was started with SIGINT ignored (a background job of a non-interactive shell), which the child
+    would inherit, and then Python installs no KeyboardInterrupt handler."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+
 def _earlier_run(out, name):
     out.mkdir()
     (out / name).write_text("an earlier run")
@@ -47,6 +55,7 @@ def test_an_interrupted_dataset_leaves_no_labels_and_no_images(tmp_path):
         [sys.executable, "-m", "uav_struct_env.datasets", str(out), "--layouts", "40", "--views",
          "2", "--scale", "0.25", "--renderer", "tiny", "--workers", "2"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        preexec_fn=_sigint_default,
     )
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:  # wait until images are being written (in the stage)

@@ -12,6 +12,14 @@ from pathlib import Path
 import pytest
 
 
+def _sigint_default() -> None:
+    """In the child before exec: Ctrl-C handled as a terminal's would be, even when this test run
+    was started with SIGINT ignored (a background job of a non-interactive shell), which the child
+    would inherit, and then Python installs no KeyboardInterrupt handler."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+
 def _children(pid: int) -> list[int]:
     kids: list[int] = []
     for task in os.listdir(f"/proc/{pid}/task"):
@@ -41,7 +49,7 @@ def _study(out: Path, workers: int, *extra: str) -> subprocess.Popen:
            str(workers), "--no-progress", "--no-figures", "--detector", "projection", *extra]
     # A session of its own, so that a signal to the group is what a terminal's Ctrl-C sends.
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, env=os.environ.copy())
+                            start_new_session=True, env=os.environ.copy(), preexec_fn=_sigint_default)
 
 
 def _wait_for_workers(proc: subprocess.Popen, n: int, timeout: float = 120) -> list[int]:
