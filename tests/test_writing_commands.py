@@ -21,7 +21,6 @@ def _sigint_default() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-
 def _earlier_run(out, name):
     out.mkdir()
     (out / name).write_text("an earlier run")
