@@ -26,6 +26,7 @@ from localization.metrics import (
 )
 from uav_struct_env.outputs import atomic_path, atomic_write_json
 from uav_struct_env.provenance import software
+from uav_struct_env.study.cells import cell, json_ready, pct_cell
 from uav_struct_env.study.protocol import METHODS, Method, StudyConfig
 from uav_struct_env.study.run import ImageResult, bound_source
 
@@ -133,18 +134,7 @@ def results_dict(config: StudyConfig, rows: Sequence[ImageResult], extra_config:
     methods = {}
     for m in config.selected_methods:
         methods[m.key] = summarize(m, [r for r in rows if r.method == m.key], bound_source(config, m))
-    return {"config": cfg, "software": software(), "methods": _clean(methods)}
-
-
-def _clean(obj):
-    """The JSON boundary: NaN and infinities (undefined statistics) become null."""
-    if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    return obj
+    return {"config": cfg, "software": software(), "methods": json_ready(methods)}
 
 
 def write_results_json(path: Path, results: dict) -> None:
@@ -160,14 +150,6 @@ def write_csv(path: Path, rows: Sequence[ImageResult]) -> None:
         writer.writeheader()
         for r in rows:
             writer.writerow(dataclasses.asdict(r))
-
-
-def _f(x: float | None, digits: int = 3) -> str:
-    return "—" if x is None else f"{x:.{digits}f}"
-
-
-def _pct(x: float | None) -> str:
-    return "—" if x is None else f"{100 * x:.2f}"
 
 
 #: The paper's protocol (StudyConfig's defaults): viewpoints per UAV and UAVs; fewer is ``--quick``.
@@ -254,9 +236,9 @@ def table1_markdown(results: dict) -> str:
             continue
         p = m.paper
         lines.append(
-            f"| {m.label} | {_pct(r['detection_rate'])} | {_f(p and p.detection_pct, 2)} | "
-            f"{_pct(r['association_f1'])} | {_f(p and p.association_f1_pct, 2)} | "
-            f"{_f(r['latency_s']['median'], 4)} | {_f(p and p.latency_s, 2)} |"
+            f"| {m.label} | {pct_cell(r['detection_rate'])} | {cell(p and p.detection_pct, 2)} | "
+            f"{pct_cell(r['association_f1'])} | {cell(p and p.association_f1_pct, 2)} | "
+            f"{cell(r['latency_s']['median'], 4)} | {cell(p and p.latency_s, 2)} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -287,17 +269,18 @@ def table2_markdown(results: dict) -> str:
         elif p:
             uncounted.append(p.total)
         lines.append(
-            f"| {m.label} | {r['successful']}/{r['total']}{paper_n} | {_f(t['median'])} / {_f(t['p90'])} | "
-            f"{paper_t} | {_f(r['cramer_rao_translation_m']['median'])} | "
-            f"{_f(rot['median'])} / {_f(rot['p90'])} | {paper_r} | "
-            f"{_f(r['cramer_rao_rotation_deg']['median'])} | {_bound_noise(r)} |"
+            f"| {m.label} | {r['successful']}/{r['total']}{paper_n} | "
+            f"{cell(t['median'])} / {cell(t['p90'])} | "
+            f"{paper_t} | {cell(r['cramer_rao_translation_m']['median'])} | "
+            f"{cell(rot['median'])} / {cell(rot['p90'])} | {paper_r} | "
+            f"{cell(r['cramer_rao_rotation_deg']['median'])} | {_bound_noise(r)} |"
         )
     first = next(iter(results["methods"].values()), None)
     if first is not None:
         t, rot = first["prior_translation_error_m"], first["prior_rotation_error_deg"]
         lines.append(
-            f"| Onboard prior (GNSS + attitude, input) | — | {_f(t['median'])} / {_f(t['p90'])} | — | — "
-            f"| {_f(rot['median'])} / {_f(rot['p90'])} | — | — | — |"
+            f"| Onboard prior (GNSS + attitude, input) | — | {cell(t['median'])} / {cell(t['p90'])} | — | — "
+            f"| {cell(rot['median'])} / {cell(rot['p90'])} | — | — | — |"
         )
     lines += [
         "",

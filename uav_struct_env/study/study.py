@@ -17,6 +17,7 @@ from uav_struct_env.sim.lens import CAMERA_MODELS
 from uav_struct_env.site import make_site
 from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.site.as_built import TOLERANCE_MODELS
+from uav_struct_env.study.cells import json_ready
 from uav_struct_env.study.figures import (
     plot_error_cdfs,
     plot_fig2,
@@ -25,7 +26,6 @@ from uav_struct_env.study.figures import (
 )
 from uav_struct_env.study.protocol import ASSOCIATIONS, DETECTORS, NOISES, StudyConfig
 from uav_struct_env.study.report import (
-    _clean,
     results_dict,
     settings_line,
     table1_markdown,
@@ -93,7 +93,7 @@ def run_study(
         if config.track_workers:
             summary = tracking_summary(tracking, config.worker_pixel_sigma, config.activity,
                                        config.upright_workers)
-            results["worker_tracking"] = _clean(summary)
+            results["worker_tracking"] = json_ready(summary)
             (stage / "worker_tracking.md").write_text(tracking_markdown(results, settings_line(results)))
         write_results_json(stage / "results.json", results)
         (stage / "table1.md").write_text(table1_markdown(results))

@@ -36,8 +36,9 @@ from uav_struct_env.errors import ConfigError
 from uav_struct_env.outputs import StagedOutput, atomic_path, atomic_write_text
 from uav_struct_env.processes import run_chunks
 from uav_struct_env.provenance import software
+from uav_struct_env.study.cells import cell, json_ready
 from uav_struct_env.study.protocol import METHODS, StudyConfig
-from uav_struct_env.study.report import _clean, _f, summarize, write_results_json
+from uav_struct_env.study.report import summarize, write_results_json
 from uav_struct_env.study.run import ImageResult, bound_source, run_units
 from uav_struct_env.validate import CommandParser
 
@@ -267,7 +268,7 @@ def sweep_results(base: StudyConfig, runs: Sequence[SweepRun], extra_config: dic
                 s = summarize(m, rows)
                 methods[m.key] = {k: s[k] for k in _RUN_KEYS}
         per_run.append({"site": run.site, "seed": run.seed, "methods": methods})
-    return {"config": cfg, "software": software(), "methods": _clean(pooled), "runs": _clean(per_run)}
+    return {"config": cfg, "software": software(), "methods": json_ready(pooled), "runs": json_ready(per_run)}
 
 
 def _finite_min(values: Sequence[float]) -> float:
@@ -309,9 +310,9 @@ def table_markdown(results: dict) -> str:
         t, rot, spread = r["translation_error_m"], r["rotation_error_deg"], r["run_translation_median_m"]
         lines.append(
             f"| {m.label} | {r['runs']} | {r['successful']}/{r['total']} "
-            f"| {_f(t['median'])} / {_f(t['p90'])} "
-            f"| {_f(rot['median'])} / {_f(rot['p90'])} "
-            f"| {_f(spread['median'])} [{_f(spread['min'])}, {_f(spread['max'])}] |"
+            f"| {cell(t['median'])} / {cell(t['p90'])} "
+            f"| {cell(rot['median'])} / {cell(rot['p90'])} "
+            f"| {cell(spread['median'])} [{cell(spread['min'])}, {cell(spread['max'])}] |"
         )
     lines += ["", "Errors over successful poses only, pooled over every image of every run (the "
               "study's convention); the last column is the spread of the runs' own medians."]

@@ -41,7 +41,8 @@ from localization.metrics import median_p90, pose_errors
 from uav_struct_env.outputs import prepare_output_dir, save_figure
 from uav_struct_env.provenance import software
 from uav_struct_env.sim.uav import ACTION_COMPONENTS, FlightLimits, UavState, wrap_angle
-from uav_struct_env.study.report import _clean, write_results_json
+from uav_struct_env.study.cells import json_ready
+from uav_struct_env.study.report import write_results_json
 from uav_struct_env.wrappers.base import ParallelWrapper
 
 __all__ = ["NOISES", "fly", "main", "pilot_action", "summarize", "target_position"]
@@ -325,7 +326,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                             progress=not args.no_progress))
         first[noise] = recs[0]
         results["noise"][noise] = summarize(recs)
-    write_results_json(out / "results.json", _clean(results))
+    write_results_json(out / "results.json", json_ready(results))
     plot(first, out / "temporal.png")
     for noise, r in results["noise"].items():
         print(f"{noise}: steps {r['steps']}, GNSS fix {100 * r['gnss_fix_share']:.0f} %")

@@ -20,7 +20,6 @@ gains ``worker_tracking``: ``truth``, ``estimated``, ``prior`` and ``estimated_b
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -29,6 +28,7 @@ import numpy as np
 
 from localization.geometry import invert
 from tracking import error_summary, track_workers, worker_errors
+from uav_struct_env.study.cells import cell
 from uav_struct_env.tracking_sim import DEFAULT_WORKER_SIGMA_PX, SimulatedWorkerDetector, camera_views
 
 __all__ = [
@@ -165,10 +165,6 @@ def tracking_summary(
     }
 
 
-def _f(x: float | None) -> str:
-    return "—" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.3f}"
-
-
 def tracking_markdown(results: dict, settings: str) -> str:
     """The worker-tracking table: 3D worker error with true, estimated and prior camera poses."""
     t = results["worker_tracking"]
@@ -183,7 +179,7 @@ def tracking_markdown(results: dict, settings: str) -> str:
             ("Onboard prior (GNSS + attitude)", t["prior"])]
     rows += [(f"Estimated, {m}", s) for m, s in t["estimated_by_method"].items()]
     for name, s in rows:
-        lines.append(f"| {name} | {_f(s['median_m'])} | {_f(s['p95_m'])} | {s['n_observations']} |")
+        lines.append(f"| {name} | {cell(s['median_m'])} | {cell(s['p95_m'])} | {s['n_observations']} |")
     lines += [
         "",
         f"Workers: {t['activity']} site activity, {t['workers_present']} worker-viewpoints present; "

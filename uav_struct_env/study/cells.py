@@ -1,0 +1,31 @@
+"""What every study output shares at its edges: the JSON boundary and the table cells.
+
+A module of its own (importing nothing of the study) so that the report, the sweep, the temporal
+study and worker tracking (which :mod:`~uav_struct_env.study.protocol` imports) all use it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+
+def json_ready(obj: Any) -> Any:
+    """The JSON boundary: NaN and infinities (undefined statistics) become null."""
+    if isinstance(obj, dict):
+        return {k: json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_ready(v) for v in obj]
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    return obj
+
+
+def cell(x: float | None, digits: int = 3) -> str:
+    """A table cell: ``x`` to ``digits`` decimals, an em dash for None (undefined)."""
+    return "—" if x is None else f"{x:.{digits}f}"
+
+
+def pct_cell(x: float | None) -> str:
+    """A table cell: the fraction ``x`` in percent to 2 decimals, an em dash for None."""
+    return "—" if x is None else f"{100 * x:.2f}"
