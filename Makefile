@@ -42,38 +42,47 @@ bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in d
 	for b in render env_step raycast localizer wrapper_throughput detector ifc_import worker_tracking; do \
 		[ -f benchmarks/$$b.py ] && $(BIN)/python benchmarks/$$b.py || exit 1; done
 
-# The learned detector from scratch, as localization/models/MODEL_CARD.md trained it: four
-# rendered datasets (~17 min; existing ones are kept), the keypoint network (42 min), then the
-# patch refiner mined from that network's candidates (1.5 + 15 min), into $(DETECTOR_RUN).
-# The datasets are bare sites through the ideal pinhole; the generator's --activity light|busy and
-# --camera mavic2pro|mixed (lens distortion, rolling shutter, motion blur) render the real conditions.
+# The learned detector from scratch, as localization/models/MODEL_CARD.md trained it: six
+# rendered datasets (~25 min; existing ones are kept), the keypoint network (42 min), then the
+# patch refiner mined from that network's candidates (~2 + 15 min), into $(DETECTOR_RUN).
+# The data is what an active site through a real camera looks like: site activity none, light and
+# busy in turn over the layouts (--activity mixed) and every other image through the Mavic 2 Pro
+# preset (--camera mixed: lens distortion, rolling shutter, motion blur), on random sites and on
+# the duplex IFC building (tests/data/ifc/duplex.ifc, at its stages).
 # Evaluate the result with benchmarks/detector.py --model/--refiner and uav-struct study
 # --detector learned --detector-model/--refiner-model (docs/study.md, "Evaluating retrained detector weights").
 # make reruns a step only when its output is missing or older than its inputs, so each step
 # replaces the folder it finds there (--overwrite): a stale or half-written earlier run.
 DETECTOR_RUN ?= runs/detector
 DATA := $(DETECTOR_RUN)/data
-DATASET := $(BIN)/python -m uav_struct_env.datasets
+DATASET := $(BIN)/python -m uav_struct_env.datasets --activity mixed --camera mixed --overwrite
+IFC_BUILDING := tests/data/ifc/duplex.ifc
+KEYPOINT_DATA := $(DATA)/keypoint_train $(DATA)/keypoint_ifc
+REFINER_DATA := $(DATA)/refiner_train $(DATA)/refiner_ifc
 
 detector: $(DETECTOR_RUN)/refiner/refiner.onnx
 
 $(DATA)/keypoint_train/labels.json: | $(STAMP)
-	$(DATASET) $(DATA)/keypoint_train --layouts 200 --views 15 --seed 0 --workers 2 --overwrite
+	$(DATASET) $(DATA)/keypoint_train --layouts 200 --views 15 --seed 0 --workers 2
+$(DATA)/keypoint_ifc/labels.json: | $(STAMP)
+	$(DATASET) $(DATA)/keypoint_ifc --site $(IFC_BUILDING) --layouts 30 --views 15 --seed 5 --workers 2
 $(DATA)/keypoint_val/labels.json: | $(STAMP)
-	$(DATASET) $(DATA)/keypoint_val --layouts 6 --views 10 --seed 1 --overwrite
+	$(DATASET) $(DATA)/keypoint_val --layouts 9 --views 10 --seed 1 --workers 2
 $(DATA)/refiner_train/labels.json: | $(STAMP)
-	$(DATASET) $(DATA)/refiner_train --layouts 150 --views 10 --seed 3 --scale 1.0 --workers 2 --overwrite
+	$(DATASET) $(DATA)/refiner_train --layouts 150 --views 10 --seed 3 --scale 1.0 --workers 2
+$(DATA)/refiner_ifc/labels.json: | $(STAMP)
+	$(DATASET) $(DATA)/refiner_ifc --site $(IFC_BUILDING) --layouts 21 --views 10 --seed 6 --scale 1.0 --workers 2
 $(DATA)/refiner_val/labels.json: | $(STAMP)
-	$(DATASET) $(DATA)/refiner_val --layouts 6 --views 10 --seed 1 --scale 1.0 --overwrite
+	$(DATASET) $(DATA)/refiner_val --layouts 9 --views 10 --seed 1 --scale 1.0 --workers 2
 
-$(DETECTOR_RUN)/keypoint/model.onnx: $(DATA)/keypoint_train/labels.json $(DATA)/keypoint_val/labels.json
-	$(BIN)/python -m uav_struct_env.training.train_detector --data $(DATA)/keypoint_train \
+$(DETECTOR_RUN)/keypoint/model.onnx: $(KEYPOINT_DATA:%=%/labels.json) $(DATA)/keypoint_val/labels.json
+	$(BIN)/python -m uav_struct_env.training.train_detector --data $(KEYPOINT_DATA) \
 		--val $(DATA)/keypoint_val --out $(DETECTOR_RUN)/keypoint --minutes 42 --batch 16 \
 		--crop 256 192 --workers 1 --threads 2 --eval-every 400 --seed 0 --overwrite
 
 $(DETECTOR_RUN)/refiner/refiner.onnx: $(DETECTOR_RUN)/keypoint/model.onnx \
-		$(DATA)/refiner_train/labels.json $(DATA)/refiner_val/labels.json
-	$(BIN)/python -m uav_struct_env.training.train_refiner --data $(DATA)/refiner_train \
+		$(REFINER_DATA:%=%/labels.json) $(DATA)/refiner_val/labels.json
+	$(BIN)/python -m uav_struct_env.training.train_refiner --data $(REFINER_DATA) \
 		--val $(DATA)/refiner_val --out $(DETECTOR_RUN)/refiner --minutes 15 --eval-every 1000 \
 		--workers 1 --seed 0 --detector-model $(DETECTOR_RUN)/keypoint/model.onnx --overwrite
 

@@ -15,18 +15,18 @@ rest is deterministic. ``--check`` rewrites nothing and exits 1 when the card di
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 import tempfile
 from pathlib import Path
+
+from generated import END, begin, update_file
 
 from uav_struct_env.study import StudyConfig, run_study
 from uav_struct_env.study.report import settings_line
 
 CARD = Path(__file__).resolve().parents[1] / "localization" / "models" / "MODEL_CARD.md"
 COMMAND = "python benchmarks/model_card_study.py"
-BEGIN = f"<!-- BEGIN generated: {COMMAND} -->"
-END = "<!-- END generated -->"
+BEGIN = begin(COMMAND)
 METHODS = ("slab_corners", "opening_corners", "column_tops")
 IMAGING = ("ideal", "camera")
 
@@ -80,27 +80,9 @@ def run_both(workers: int, keep: Path | None) -> dict[str, dict]:
     return runs
 
 
-def replace_block(text: str, block: str) -> str:
-    """``text`` with its generated block replaced by ``block``."""
-    pattern = re.compile(re.escape(BEGIN) + r".*?" + re.escape(END), flags=re.S)
-    if not pattern.search(text):
-        raise ValueError(f"{CARD} has no {BEGIN} ... {END} block")
-    return pattern.sub(lambda _: block, text)
-
-
 def main(check: bool = False, workers: int = 2, keep: str | None = None) -> int:
     block = card_block(run_both(workers, Path(keep) if keep else None))
-    text = CARD.read_text()
-    new = replace_block(text, block)
-    if check:
-        if new != text:
-            print(f"{CARD} differs from the run:\n{block}", file=sys.stderr)
-            return 1
-        print(f"{CARD}: the generated block matches the run")
-        return 0
-    CARD.write_text(new)
-    print(f"wrote the generated block of {CARD}")
-    return 0
+    return 0 if update_file(CARD, COMMAND, block, check) else 1
 
 
 if __name__ == "__main__":

@@ -126,8 +126,25 @@ def test_site_activity_hides_labels_and_changes_nothing_else(tmp_path, tiny_data
         kp = {tuple(k) for k in p["keypoints"]}
         assert kb <= kp
         assert not np.array_equal(cv2.imread(str(out / b["file"])), cv2.imread(str(tiny_dataset / p["file"])))
-    with pytest.raises(ConfigError, match=r"activity must be one of \('none', 'light', 'busy'\)"):
+    with pytest.raises(ConfigError, match=r"activity must be one of \('none', 'light', 'busy', 'mixed'\)"):
         DatasetConfig(activity="crowded")
+
+
+def test_mixed_activity_cycles_the_presets_over_the_layouts(tmp_path):
+    """--activity mixed: layout i is rendered exactly as the (i % 3)-th preset's dataset renders it."""
+    common = ["--layouts", "3", "--views", "1", "--seed", "7", "--scale", "0.25"]
+    for level in ("mixed", "none", "busy"):
+        assert cli_main([str(tmp_path / level), *common, "--activity", level]) == 0
+    mixed = load_labels(tmp_path / "mixed")
+    assert mixed["config"]["activity"] == "mixed"
+    assert [r["activity"] for r in mixed["images"]] == ["none", "light", "busy"]
+    for layout, level in ((0, "none"), (2, "busy")):
+        same = load_labels(tmp_path / level)["images"][layout]
+        rec = mixed["images"][layout]
+        assert rec["keypoints"] == same["keypoints"] and rec["cam_from_world"] == same["cam_from_world"]
+        image = (tmp_path / "mixed" / rec["file"]).read_bytes()
+        assert image == (tmp_path / level / same["file"]).read_bytes()
+    assert "activity" not in load_labels(tmp_path / "busy")["images"][0]
 
 
 # ---------------------------------------------------------------- --camera

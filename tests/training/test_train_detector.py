@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -9,7 +11,7 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("onnx")
 
 from localization.learned import LearnedDetector, decode  # noqa: E402
-from uav_struct_env.training.train_detector import _targets, main  # noqa: E402
+from uav_struct_env.training.train_detector import _targets, main, pool_labels  # noqa: E402
 
 
 def test_targets_decode_round_trip():
@@ -36,3 +38,26 @@ def test_tiny_training_run_exports_a_working_model(tmp_path):
     det = LearnedDetector("all", model=out / "model.onnx", scale=1.0)
     uv, scores, kinds = det.detect_all(np.zeros((72, 128, 3), np.uint8))
     assert uv.shape[1] == 2 and len(scores) == len(kinds)
+
+
+def test_several_datasets_are_pooled_with_their_own_folders(tmp_path):
+    from uav_struct_env.datasets import load_labels
+    from uav_struct_env.datasets.__main__ import main as make_dataset
+
+    for name, seed in (("a", "3"), ("b", "4")):
+        make_dataset([str(tmp_path / name), "--layouts", "1", "--views", "1", "--seed", seed,
+                      "--scale", "0.25"])
+    pooled = pool_labels([tmp_path / "a", str(tmp_path / "b" / "labels.json")])
+    a, b = load_labels(tmp_path / "a"), load_labels(tmp_path / "b")
+    assert len(pooled["images"]) == len(a["images"]) + len(b["images"]) == 2
+    for rec, (src, orig) in zip(pooled["images"], ((a, a["images"][0]), (b, b["images"][0])), strict=True):
+        assert rec["keypoints"] == orig["keypoints"]
+        image = (Path(pooled["root"]) / rec["file"]).read_bytes()
+        assert image == (Path(src["root"]) / orig["file"]).read_bytes()
+    out = tmp_path / "run"
+    summary = main(["--data", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(out),
+                    "--max-steps", "1", "--batch", "2", "--crop", "64", "64", "--workers", "0",
+                    "--threads", "1", "--width", "8"])
+    assert summary["train_images"] == 2
+    with pytest.raises(ValueError, match="at least one dataset"):
+        pool_labels([])

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import sys
 
-from uav_struct_env.datasets.landmarks import CAMERAS, DatasetConfig, generate
+from uav_struct_env.datasets.landmarks import ACTIVITIES, CAMERAS, DatasetConfig, generate
 from uav_struct_env.outputs import OutputExistsError
 from uav_struct_env.processes import WorkerDied
-from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_option, check_output_dir, refuse
 
 
@@ -23,9 +22,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--site", default="random",
                     help="random (a new random site per layout) or a site file (*.json) / IFC file "
                          "(*.ifc): that building at a stage drawn per layout")
-    ap.add_argument("--activity", default="none", choices=tuple(ACTIVITY_PRESETS),
+    ap.add_argument("--activity", default="none", choices=ACTIVITIES,
                     help="site activity per layout: none, light or busy (workers, equipment, "
-                         "materials, scaffolding; they hide landmarks)")
+                         "materials, scaffolding; they hide landmarks), or mixed (the three in turn)")
     ap.add_argument("--camera", default="paper",
                     help=f"one of {', '.join(CAMERAS)}: paper (the paper's ideal pinhole), mavic2pro "
                          "(lens distortion, rolling shutter "

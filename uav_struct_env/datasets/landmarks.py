@@ -12,7 +12,9 @@ aimed at the building centre with up to +-4 m (horizontal) / +-2 m (vertical) of
 building is sometimes cut by the image border. With ``activity`` (``"light"``, ``"busy"``) each
 layout also gets the site activity of :mod:`uav_struct_env.site.activity` (workers, equipment,
 materials, scaffolding; seeded by ``[seed, layout, 1]``, the workers 3 s further on at each
-view), which hides landmarks like everything else. Every view draws a new sun direction
+view), which hides landmarks like everything else; ``"mixed"`` cycles none, light, busy over the
+layouts (layout ``i`` gets ``("none", "light", "busy")[i % 3]``, recorded as each image's
+``activity``). Every view draws a new sun direction
 (elevation 25-85 deg, any azimuth) and TinyRenderer ambient/diffuse coefficients (the EGL
 backend only uses the direction: that limitation is pybullet's).
 
@@ -47,7 +49,8 @@ images come from the same pipeline.
                                          "keypoints": [[u, v, type, id], ...],
                                          ...a real camera's view only:
                                          "camera": "mavic2pro", "distortion": [k1, k2, p1, p2, k3],
-                                         "velocity": [vx, vy, vz], "angular_velocity": [wx, wy, wz]},
+                                         "velocity": [vx, vy, vz], "angular_velocity": [wx, wy, wz],
+                                         ...with activity "mixed" only: "activity": "busy"},
                                         ...]}
 
 The real-camera keys (world velocities, m/s and rad/s) appear only on such views, so a
@@ -94,6 +97,9 @@ LANDMARK_TYPES = ("column_tops", "slab_corners", "opening_corners")
 FORMAT = "uav-struct-landmarks-v1"
 #: The generator's ``camera`` choices (module docstring, "Camera").
 CAMERAS = ("paper", "mavic2pro", "mixed")
+#: The generator's ``activity`` choices: the presets of :mod:`uav_struct_env.site.activity`, or
+#: ``"mixed"`` (each layout one of them in turn).
+ACTIVITIES = (*ACTIVITY_PRESETS, "mixed")
 
 _MATERIAL_RGB = (
     (0.55, 0.42, 0.28), (0.62, 0.60, 0.57), (0.35, 0.36, 0.38), (0.70, 0.68, 0.62),
@@ -131,7 +137,7 @@ class DatasetConfig:
             )
         if self.site != "random":
             object.__setattr__(self, "site", str(Path(self.site).resolve()))
-        check_choice("DatasetConfig.activity", self.activity, tuple(ACTIVITY_PRESETS), error=ConfigError)
+        check_choice("DatasetConfig.activity", self.activity, ACTIVITIES, error=ConfigError)
         check_choice("DatasetConfig.camera", self.camera, CAMERAS, error=ConfigError)
         for name in ("n_layouts", "views_per_layout", "seed"):
             v = getattr(self, name)
@@ -206,6 +212,13 @@ def _random_view(
                     rng.uniform(*config.height)])
     target = centre + rng.uniform([-4, -4, -2], [4, 4, 2])
     return look_at(eye, target)
+
+
+def layout_activity(config: DatasetConfig, layout: int) -> str:
+    """The activity preset of layout ``layout`` (``"mixed"``: none, light, busy in turn)."""
+    if config.activity != "mixed":
+        return config.activity
+    return tuple(ACTIVITY_PRESETS)[layout % len(ACTIVITY_PRESETS)]
 
 
 def view_camera(config: DatasetConfig, layout: int, view: int) -> str:
@@ -304,9 +317,9 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
     with SiteWorld(site, renderer=config.renderer, image_size=config.source_size,
                    rng=rng.spawn(1)[0], texture_size=texture_size) as world:
         _add_clutter(world, site, rng)
-        activity = None
-        if config.activity != "none":  # its own seed: the layout's other draws are unchanged
-            activity = ActivityBodies(world, SiteActivity(site, config.activity, [config.seed, layout, 1]))
+        activity, level = None, layout_activity(config, layout)
+        if level != "none":  # its own seed: the layout's other draws are unchanged
+            activity = ActivityBodies(world, SiteActivity(site, level, [config.seed, layout, 1]))
         for view in range(config.views_per_layout):
             if activity is not None:
                 activity.update(_ACTIVITY_SECONDS_PER_VIEW * view)
@@ -324,6 +337,8 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
                 "camera": name, "distortion": view_cam.distortion.tolist(),
                 "velocity": motion.velocity.tolist(), "angular_velocity": motion.angular_velocity.tolist(),
             }
+            if config.activity == "mixed":
+                extra["activity"] = level
             record = {"layout": layout, "view": view, "stage": stage,
                       "K": K_out.tolist(),
                       "cam_from_world": cam_from_world.tolist(), "keypoints": keypoints, **extra}

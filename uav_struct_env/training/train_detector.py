@@ -263,11 +263,24 @@ def _evaluate(model: KeypointNet, labels: dict) -> dict:
             "median_err_px": float(np.median(errs)) if errs else float("nan")}
 
 
-def train(data: str, out: str, val: str | None = None, minutes: float = 45.0,
+def pool_labels(paths: list[str | Path]) -> dict:
+    """Several datasets as one: every image's ``file`` made absolute (``root`` is ``/``)."""
+    if not paths:
+        raise ValueError("pool_labels needs at least one dataset")
+    sets = [load_labels(p) for p in paths]
+    images = [{**rec, "file": str((Path(s["root"]) / rec["file"]).resolve())}
+              for s in sets for rec in s["images"]]
+    return {**sets[0], "root": "/", "images": images}
+
+
+def train(data: str | list[str], out: str, val: str | None = None, minutes: float = 45.0,
           max_steps: int | None = None, batch: int = 16, crop: tuple[int, int] = (256, 192),
           lr: float = 3e-3, width: int = 16, seed: int = 0, threads: int = 2,
           eval_every: int = 500, workers: int = 1, log=print) -> dict:
     """Train from scratch; writes ``out/{last,best}.pt``, ``out/log.jsonl``, ``out/model.onnx``.
+
+    ``data`` is one dataset or several (their images pooled: for example random sites and an IFC
+    building).
 
     Stops after ``minutes`` of wall time or ``max_steps`` steps (the cosine learning-rate
     schedule runs over the time budget). Returns a summary dict.
@@ -277,7 +290,7 @@ def train(data: str, out: str, val: str | None = None, minutes: float = 45.0,
     cv2.setNumThreads(1)
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
-    labels = load_labels(data)
+    labels = pool_labels([data] if isinstance(data, (str, Path)) else data)
     val_labels = load_labels(val) if val else None
     loader = make_loader(LandmarkCrops(labels, crop, seed, epoch_size=10**7), batch, workers, seed)
     # Channels-last (NHWC) convolutions: 108-118 instead of 140-167 ms per batch-16 step on this
@@ -305,7 +318,8 @@ def main(argv: list[str] | None = None) -> dict:
     """Command line: ``python -m uav_struct_env.training.train_detector --data DIR --out DIR``."""
     ap = CommandParser(prog="python -m uav_struct_env.training.train_detector",
                                  description="Train the learned landmark detector.")
-    ap.add_argument("--data", required=True, help="training dataset (labels.json or its folder)")
+    ap.add_argument("--data", required=True, nargs="+",
+                    help="training dataset(s) (labels.json or its folder; several are pooled)")
     ap.add_argument("--val", default=None, help="validation dataset (checkpoint selection)")
     ap.add_argument("--out", required=True)
     ap.add_argument("--crop", type=int, nargs=2, default=(256, 192), metavar=("W", "H"))
