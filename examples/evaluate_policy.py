@@ -14,7 +14,17 @@ Metric definitions (the same for every policy):
   ended at; a crash's last step counts): success rate; median / P90 translation error over the
   successful ones (the paper's convention);
 * all steps: the same over every agent-step after the first action;
-* mean reward: the agents' episode returns, averaged.
+* mean reward: the agents' episode returns, averaged;
+* distance to the building: each agent's horizontal distance from its true camera position to the
+  centre of the building's footprint, at the start (after reset) and at the end of the episode
+  (median over agent-episodes): did the policy fly closer?
+
+Several training seeds: ``--model RUN [RUN ...]`` evaluates each run's model on the same episodes
+(rows ``ppo:<folder name>``); the ``ppo`` row pools them, and ``across_runs`` in the JSON holds the
+mean, standard deviation, minimum and maximum over runs of each final-step figure.
+
+    .venv/bin/python examples/evaluate_policy.py --model runs/ppo_s0 runs/ppo_s1 runs/ppo_s2 \
+        --episodes 20 --plot evaluation.png --json-out evaluation.json
 
     .venv/bin/python examples/evaluate_policy.py --model runs/ppo_state --episodes 20 \
         --plot runs/ppo_state/evaluation.png --json-out runs/ppo_state/evaluation.json
@@ -112,12 +122,25 @@ class PpoPolicy:
         return {a: actions[i].astype(np.float32) for i, a in enumerate(agents)}
 
 
+def building_centre(env) -> np.ndarray:
+    """The centre ``(x, y)`` of the footprint of the building ``env`` flies around (metres)."""
+    return np.asarray(env.unwrapped.site.center[:2], dtype=np.float64)
+
+
+def _distance(info: dict, centre: np.ndarray) -> float:
+    return float(np.hypot(*(np.asarray(info["world_from_cam"])[:2, 3] - centre)))
+
+
 def run_policy(policy, env, seeds) -> dict[str, Any]:
-    """Roll ``policy`` over ``seeds``; per-agent final-step and all-step localization records."""
-    final, steps, returns = [], [], []
+    """Roll ``policy`` over ``seeds``: per-agent final-step and all-step localization records,
+    episode returns and each agent's start / end distance to the building centre."""
+    final, steps, returns, start, end = [], [], [], [], []
     for seed in seeds:
         obs, infos = env.reset(seed=int(seed))
+        centre = building_centre(env)
         last = {a: infos[a]["localization"] for a in obs}
+        start += [_distance(infos[a], centre) for a in obs]
+        where = {a: _distance(infos[a], centre) for a in obs}
         ret = dict.fromkeys(obs, 0.0)
         while env.agents:
             live = {a: obs[a] for a in env.agents}
@@ -125,10 +148,13 @@ def run_policy(policy, env, seeds) -> dict[str, Any]:
             for a in rew:
                 ret[a] += rew[a]
                 last[a] = infos[a]["localization"]
+                where[a] = _distance(infos[a], centre)
                 steps.append(last[a])
         final += list(last.values())
         returns += list(ret.values())
-    return {"final": final, "steps": steps, "returns": returns}
+        end += list(where.values())
+    return {"final": final, "steps": steps, "returns": returns, "start_distance_m": start,
+            "end_distance_m": end}
 
 
 def summarize(records: list[dict]) -> dict[str, float]:
@@ -142,6 +168,39 @@ def summarize(records: list[dict]) -> dict[str, float]:
     }
 
 
+def policy_result(rec: dict[str, Any], seconds: float) -> dict[str, Any]:
+    """The summary of one policy's :func:`run_policy` records."""
+    return {
+        "final_step": summarize(rec["final"]),
+        "all_steps": summarize(rec["steps"]),
+        "mean_return": float(np.mean(rec["returns"])),
+        "start_distance_median_m": float(np.median(rec["start_distance_m"])),
+        "end_distance_median_m": float(np.median(rec["end_distance_m"])),
+        "wall_clock_s": seconds,
+        "_final": rec["final"],
+    }
+
+
+def pool(recs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Several runs' :func:`run_policy` records as one."""
+    return {k: [x for rec in recs for x in rec[k]] for k in recs[0]}
+
+
+#: The final-step figures compared across training runs (``across_runs``).
+ACROSS_RUNS = ("success_rate", "translation_median_m", "translation_p90_m")
+
+
+def across_runs(results: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """Mean, standard deviation (ddof 0), minimum and maximum over runs of each final-step figure
+    and of the median end distance."""
+    out = {}
+    for key in (*ACROSS_RUNS, "end_distance_median_m"):
+        v = np.array([r[key] if key in r else r["final_step"][key] for r in results], float)
+        out[key] = {"mean": float(v.mean()), "std": float(v.std()), "min": float(v.min()),
+                    "max": float(v.max()), "runs": len(v)}
+    return out
+
+
 def plot(results: dict[str, dict], path: str | Path) -> None:
     import matplotlib
 
@@ -152,6 +211,13 @@ def plot(results: dict[str, dict], path: str | Path) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(8, 3), dpi=90)
     rates = [results[n]["final_step"]["success_rate"] for n in names]
     axes[0].bar(names, rates, color="0.5")
+    spread = results.get("ppo", {}).get("across_runs")
+    if spread:  # the pooled ppo bar, with the lowest and highest training run
+        s = spread["success_rate"]
+        i = names.index("ppo")
+        axes[0].errorbar([i], [rates[i]], yerr=[[rates[i] - s["min"]], [s["max"] - rates[i]]],
+                         color="k", capsize=4)
+    axes[0].tick_params(axis="x", labelrotation=30, labelsize=8)
     axes[0].set_ylim(0, 1)
     axes[0].set_ylabel("localized at final step")
     for n in names:
@@ -172,8 +238,8 @@ def plot(results: dict[str, dict], path: str | Path) -> None:
 def table(results: dict[str, dict]) -> str:
     rows = [
         "| policy | success (final) | median / P90 t-error final [m] | success (all steps) "
-        "| median / P90 t-error all steps [m] | mean return |",
-        "|---|---|---|---|---|---|",
+        "| median / P90 t-error all steps [m] | mean return | distance start -> end [m] |",
+        "|---|---|---|---|---|---|---|",
     ]
     for n, r in results.items():
         f, s = r["final_step"], r["all_steps"]
@@ -181,8 +247,15 @@ def table(results: dict[str, dict]) -> str:
             f"| {n} | {f['success_rate']:.2f} | {f['translation_median_m']:.3f} / "
             f"{f['translation_p90_m']:.3f} | {s['success_rate']:.2f} | "
             f"{s['translation_median_m']:.3f} / {s['translation_p90_m']:.3f} | "
-            f"{r['mean_return']:.2f} |"
+            f"{r['mean_return']:.2f} | {r['start_distance_median_m']:.1f} -> "
+            f"{r['end_distance_median_m']:.1f} |"
         )
+    spread = results.get("ppo", {}).get("across_runs")
+    if spread:
+        rows.append("")
+        rows.append(f"Across {spread['success_rate']['runs']} training runs (mean ± std, [min, max]): "
+                    + "; ".join(f"{k} {v['mean']:.3f} ± {v['std']:.3f} [{v['min']:.3f}, {v['max']:.3f}]"
+                                for k, v in spread.items()))
     return "\n".join(rows)
 
 
@@ -246,6 +319,13 @@ def plot_curve(curves: dict[str, list[dict]], path: str | Path) -> None:
     plt.close(fig)
 
 
+def model_folders(model: str | Path | list | tuple | None) -> list[str]:
+    """``--model``: one folder or several (one per training seed)."""
+    if model is None:
+        return []
+    return [str(model)] if isinstance(model, (str, Path)) else [str(m) for m in model]
+
+
 def check_options(opt: dict[str, Any]) -> None:
     """Every option (the model folder and the output files too), before any work.
 
@@ -269,9 +349,14 @@ def check_options(opt: dict[str, Any]) -> None:
             raise UsageError(f"--checkpoints {str(run)!r} holds no checkpoints/step_<N>/model.zip "
                              "(a folder written by train_viewpoint_ppo.py)")
     if "ppo" in opt["policies"] and not opt["checkpoints"]:
-        if opt["model"] is None:
-            raise ValueError("policy 'ppo' needs model=<directory with model.zip>")
-        check_input_file(Path(opt["model"]) / "model.zip", option="--model", what="model.zip")
+        if not opt["model"]:
+            raise ValueError("policy 'ppo' needs model=<directory with model.zip> (or a list of them)")
+        for folder in model_folders(opt["model"]):
+            check_input_file(Path(folder) / "model.zip", option="--model", what="model.zip")
+        names = [Path(f).name for f in model_folders(opt["model"])]
+        if len(set(names)) < len(names):
+            raise UsageError(f"--model folders must have distinct names (the rows are named after "
+                             f"them), got {names}")
     for option, path in (("--plot", opt["plot"]), ("--json-out", opt["json_out"])):
         if path:
             check_output_file(path, overwrite=opt["overwrite"], option=option)
@@ -308,22 +393,28 @@ def main(**kwargs: Any) -> dict[str, Any]:
                       f"median {q['final_translation_median_m']:.3f} m, return {q['mean_return']:.2f}")
         return summary
     results: dict[str, dict] = {}
-    try:  # the model folder is read (and refused) before any episode runs
-        ppo = PpoPolicy(opt["model"], env, trust_pickle=opt["trust_pickle"]) if "ppo" in policies else None
+    models = model_folders(opt["model"]) if "ppo" in policies else []
+    try:  # the model folders are read (and refused) before any episode runs
+        ppos = [PpoPolicy(m, env, trust_pickle=opt["trust_pickle"]) for m in models]
     except BaseException:
         env.close()
         raise
     for name in policies:
-        policy = ppo if name == "ppo" else make_baseline(name, env, seed=opt["seed"])
-        t0 = time.perf_counter()
-        rec = run_policy(policy, env, seeds)
-        results[name] = {
-            "final_step": summarize(rec["final"]),
-            "all_steps": summarize(rec["steps"]),
-            "mean_return": float(np.mean(rec["returns"])),
-            "wall_clock_s": time.perf_counter() - t0,
-            "_final": rec["final"],
-        }
+        if name != "ppo":
+            t0 = time.perf_counter()
+            rec = run_policy(make_baseline(name, env, seed=opt["seed"]), env, seeds)
+            results[name] = policy_result(rec, time.perf_counter() - t0)
+            continue
+        runs, t0 = [], time.perf_counter()
+        for folder, ppo in zip(models, ppos, strict=True):
+            t1 = time.perf_counter()
+            runs.append(run_policy(ppo, env, seeds))
+            if len(models) > 1:
+                results[f"ppo:{Path(folder).name}"] = policy_result(runs[-1], time.perf_counter() - t1)
+        results["ppo"] = policy_result(pool(runs), time.perf_counter() - t0)
+        if len(models) > 1:
+            results["ppo"]["across_runs"] = across_runs(
+                [r for n, r in results.items() if n.startswith("ppo:")])
     env.close()
     if opt["plot"]:
         plot(results, opt["plot"])
@@ -338,7 +429,8 @@ def main(**kwargs: Any) -> dict[str, Any]:
 
 def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p = CommandParser(prog="evaluate_policy.py", description=__doc__.split("\n\n")[0])
-    p.add_argument("--model", default=None, help="folder with model.zip and normalization.npz")
+    p.add_argument("--model", default=None, nargs="+", metavar="RUN",
+                   help="folder(s) with model.zip and normalization.npz (several: one per training seed)")
     p.add_argument("--config", default=DEFAULTS["config"], help="TRAIN_CONFIGS name: state | image")
     p.add_argument("--episodes", type=int, default=DEFAULTS["episodes"], help="episodes per policy")
     p.add_argument("--seed", type=int, default=DEFAULTS["seed"], help="seed of the first episode")

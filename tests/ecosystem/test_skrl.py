@@ -48,7 +48,7 @@ class Value(DeterministicMixin, Model):
         return self.net(inputs["states"]), {}
 
 
-def test_skrl_mappo_trains_one_shared_policy_with_a_state_critic():
+def test_skrl_mappo_trains_one_shared_policy_with_a_state_critic(tmp_path):
     torch.manual_seed(0)
     env = wrap_env(make_train_env("state", max_cycles=8), wrapper="pettingzoo")
     agents = env.possible_agents
@@ -65,6 +65,8 @@ def test_skrl_mappo_trains_one_shared_policy_with_a_state_critic():
         action_spaces=env.action_spaces,
         device=env.device,
         cfg={"rollouts": 16, "learning_epochs": 2, "mini_batches": 2, "discount_factor": 0.95,
+             # skrl writes TensorBoard logs and checkpoints to ./runs unless told otherwise
+             "experiment": {"directory": str(tmp_path), "write_interval": 0, "checkpoint_interval": 0},
              # skrl 2.1.1 refuses its own empty-dict defaults as "keys do not match possible agents"
              **{k: {a: {} for a in agents} for k in SKRL_PER_AGENT_KWARGS}},
     )

@@ -115,6 +115,28 @@ def test_evaluate_compares_all_policies_on_the_same_seeds(trained, tmp_path, mon
     assert json.loads((tmp_path / "eval.json").read_text())["seeds"] == [10_000, 10_001]
 
 
+def test_several_training_runs_are_evaluated_and_pooled_with_their_spread(trained, tmp_path):
+    out, _ = trained
+    runs = [tmp_path / "seed_a", tmp_path / "seed_b"]
+    for run in runs:  # the same weights twice: the spread across runs must be zero
+        shutil.copytree(out, run)
+    evaluate = load("evaluate_policy")
+    summary = evaluate.main(model=[str(r) for r in runs], policies=("ppo", "hold"), episodes=1,
+                            max_cycles=3)
+    res = summary["results"]
+    assert list(res) == ["ppo:seed_a", "ppo:seed_b", "ppo", "hold"]
+    assert res["ppo"]["final_step"]["n"] == 8 and res["ppo:seed_a"]["final_step"]["n"] == 4
+    spread = res["ppo"]["across_runs"]
+    assert spread["success_rate"]["runs"] == 2 and spread["success_rate"]["std"] == 0.0
+    assert spread["success_rate"]["mean"] == res["ppo:seed_a"]["final_step"]["success_rate"]
+    # distances to the building centre: the same starts for every policy; hold barely moves
+    starts = {n: r["start_distance_median_m"] for n, r in res.items()}
+    assert len(set(starts.values())) == 1 and 5.0 < starts["hold"] < 100.0
+    assert abs(res["hold"]["end_distance_median_m"] - starts["hold"]) < 1.0
+    with pytest.raises(ValueError, match="distinct names"):
+        evaluate.main(model=[str(runs[0]), str(runs[0])], policies=("ppo",), episodes=1, max_cycles=2)
+
+
 def test_bad_options_are_named():
     with pytest.raises(ValueError, match="unknown options \\['episods'\\]"):
         load("evaluate_policy").main(episods=3)
