@@ -457,7 +457,8 @@ class LearnedDetector:
             ids = np.asarray(truth["ids"]).astype(np.int64).reshape(-1)
             gt_uv = np.asarray(truth["uv"], dtype=np.float64).reshape(-1, 2)
             match, _ = match_detections(uv, gt_uv[visible], self.match_px)
-            true_ids = np.where(match >= 0, ids[visible][np.maximum(match, 0)], -1)
+            true_ids = np.full(len(match), -1, dtype=np.int64)  # also when nothing is visible
+            true_ids[match >= 0] = ids[visible][match[match >= 0]]
         return Detections(uv=uv, scores=scores, true_ids=true_ids)
 
     def __repr__(self) -> str:

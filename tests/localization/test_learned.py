@@ -194,3 +194,21 @@ def test_real_render_column_tops(refiner):
     assert n_true >= n_visible - 2
     assert len(det) - n_true <= 2
     assert det.scores is not None and np.all(det.scores >= 0.3)
+
+
+def test_truth_bookkeeping_with_no_visible_landmark():
+    """Detections in a view whose landmarks are all hidden (a busy site): every one is false.
+
+    The detector's output is fixed here; what is tested is the scoring of ``true_ids``, which
+    indexed an empty array (IndexError in the study) when nothing was visible.
+    """
+    det = LearnedDetector("slab_corners")
+    uv = np.array([[100.0, 50.0], [300.0, 200.0]])
+    det.detect_all = lambda image: (uv, np.array([0.9, 0.8]), np.zeros(2, np.int64))
+    hidden = {"ids": np.array([3, 4]), "uv": np.array([[100.0, 50.0], [9.0, 9.0]]),
+              "visible": np.array([False, False])}
+    out = det.detect(np.zeros((72, 128, 3), np.uint8), {"landmarks": {"slab_corners": hidden}})
+    assert out.true_ids.tolist() == [-1, -1]
+    seen = {**hidden, "visible": np.array([True, False])}
+    out = det.detect(np.zeros((72, 128, 3), np.uint8), {"landmarks": {"slab_corners": seen}})
+    assert out.true_ids.tolist() == [3, -1]
