@@ -42,13 +42,16 @@ bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in d
 	for b in render env_step raycast localizer wrapper_throughput detector ifc_import worker_tracking; do \
 		[ -f benchmarks/$$b.py ] && $(BIN)/python benchmarks/$$b.py || exit 1; done
 
-# The learned detector from scratch, as localization/models/MODEL_CARD.md trained it: six
+# The active-site detector (localization/models/landmarks_active_v1*.onnx) from scratch, as
+# localization/models/MODEL_CARD.md ("Active-site weights") trained it: six
 # rendered datasets (~25 min; existing ones are kept), the keypoint network (42 min), then the
 # patch refiner mined from that network's candidates (~2 + 15 min), into $(DETECTOR_RUN).
 # The data is what an active site through a real camera looks like: site activity none, light and
 # busy in turn over the layouts (--activity mixed) and every other image through the Mavic 2 Pro
 # preset (--camera mixed: lens distortion, rolling shutter, motion blur), on random sites and on
-# the duplex IFC building (tests/data/ifc/duplex.ifc, at its stages).
+# the duplex IFC building (tests/data/ifc/duplex.ifc, at its stages). The default weights
+# landmarks_v1 were trained with the same commands on bare sites through the pinhole
+# (DATASET without --activity/--camera, 200x15 + 6x10 and 150x10 + 6x10 images, no IFC sets).
 # Evaluate the result with benchmarks/detector.py --model/--refiner and uav-struct study
 # --detector learned --detector-model/--refiner-model (docs/study.md, "Evaluating retrained detector weights").
 # make reruns a step only when its output is missing or older than its inputs, so each step

@@ -2,7 +2,7 @@
 
 A block starts with ``<!-- BEGIN generated: COMMAND -->`` (the command that writes it) and ends
 with ``<!-- END generated -->``; the scripts under ``benchmarks/`` that regenerate documentation
-figures (``model_card_study.py``, ``site_conditions_study.py``) rewrite only what lies between.
+figures (``model_card_study.py``) rewrite only what lies between.
 """
 
 from __future__ import annotations
