@@ -212,3 +212,15 @@ def test_truth_bookkeeping_with_no_visible_landmark():
     seen = {**hidden, "visible": np.array([True, False])}
     out = det.detect(np.zeros((72, 128, 3), np.uint8), {"landmarks": {"slab_corners": seen}})
     assert out.true_ids.tolist() == [3, -1]
+
+
+def test_the_opt_in_active_site_weights_ship_and_run():
+    from pathlib import Path
+
+    models = Path(__file__).resolve().parents[2] / "localization" / "models"
+    det = LearnedDetector("all", model=models / "landmarks_active_v1.onnx",
+                          refiner=models / "landmarks_active_v1_refiner.onnx")
+    assert "landmarks_active_v1.onnx" in repr(det)
+    uv, scores, kinds = det.detect_all(np.full((720, 1280, 3), 128, np.uint8))
+    assert uv.shape == (len(scores), 2) and len(kinds) == len(scores)  # a flat image: nothing there
+    assert len(scores) == 0
