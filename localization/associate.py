@@ -67,10 +67,10 @@ from localization.batch import (
     capped_nearest_sq,
     pose_difference_many,
     project_many,
-    refine_many,
     rotation_between,
     to_transforms,
 )
+from localization.compiled import refine_reassign
 from localization.failure import FailureCode
 from localization.geometry import camera_center, project
 from localization.pnp import (
@@ -425,14 +425,6 @@ class _Problem:
         uv = np.where(m[..., None], np.nan_to_num(self.det)[None], 0.0)
         return X, uv, m
 
-    def reassign(self, R: NDArray, t: NDArray, gate: float) -> NDArray:
-        """(H, N) gated assignments of the finite detections at poses (H, ...)."""
-        proj = _candidate_projections(self.K, R, t, self.landmarks_xyz, self.image_size, self.margin_px)
-        local = assign_many(self.det[self.good], proj, gate)
-        a = np.full((R.shape[0], self.det.shape[0]), -1, dtype=np.int64)
-        a[:, self.good] = local
-        return a
-
     def refine(self, a: NDArray, starts: NDArray, first_robust: bool) -> tuple[NDArray, NDArray, NDArray]:
         """Coarse assignments (H, N) and start poses (H, 4, 4) -> (assignments, poses, alive (H,)).
 
@@ -441,39 +433,16 @@ class _Problem:
         every re-assignment at ``gate_px``; else with a gate that tightens from
         ``coarse_gate_px / 4`` to ``gate_px``), re-projects the landmarks and re-assigns, until
         the assignments are stable. A hypothesis
-        with fewer than ``need`` pairs, or with a point behind its camera, dies.
+        with fewer than ``need`` pairs, or with a point behind its camera, dies. Compiled
+        (:func:`localization.compiled.refine_reassign`): one loop per hypothesis.
         """
-        a = a.copy()
-        R, t = starts[:, :3, :3].copy(), starts[:, :3, 3].copy()
-        alive = np.ones(a.shape[0], dtype=bool)
-        moving = alive.copy()
-        for it in range(self.max_iterations):
-            alive &= (a >= 0).sum(axis=1) >= self.need
-            moving &= alive
-            if not moving.any():
-                break
-            mv = np.flatnonzero(moving)
-            step_gate = max(self.gate_px, self.coarse_gate_px / 4 ** (it + 1))
-            if first_robust:
-                step_gate = self.gate_px
-            X, uv, m = self.pairs(a[mv])
-            robust = max(self.gate_px, self.coarse_gate_px / 4) if (it == 0 and first_robust) else None
-            Rm, tm, cost = refine_many(
-                self.K, R[mv], t[mv], X, uv, m, iterations=3 if it == 0 else 2, robust_px=robust
-            )
-            R[mv], t[mv] = Rm, tm
-            alive[mv[~np.isfinite(cost)]] = False
-            new = self.reassign(Rm, tm, step_gate)
-            stable = np.all(new == a[mv], axis=1) & (step_gate == self.gate_px)
-            a[mv] = new
-            moving[mv[stable]] = False
-        alive &= (a >= 0).sum(axis=1) >= self.need
-        idx = np.flatnonzero(alive & moving)  # the others were refined on their final pairs
-        if idx.size:
-            X, uv, m = self.pairs(a[idx])
-            Rf, tf, cost = refine_many(self.K, R[idx], t[idx], X, uv, m, iterations=3)
-            R[idx], t[idx] = Rf, tf
-            alive[idx[~np.isfinite(cost)]] = False
+        w, h = self.image_size
+        a, R, t, alive = refine_reassign(
+            self.K, self.landmarks_xyz, self.det, self.good, np.ascontiguousarray(a, dtype=np.int64),
+            np.ascontiguousarray(starts[:, :3, :3]), np.ascontiguousarray(starts[:, :3, 3]),
+            int(w), int(h), float(self.margin_px), float(self.gate_px), float(self.coarse_gate_px),
+            int(self.max_iterations), int(self.need), bool(first_robust),
+        )
         return a, to_transforms(R, t), alive
 
     def prior_sq(self, T: NDArray) -> NDArray:
