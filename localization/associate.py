@@ -64,7 +64,6 @@ from scipy.stats import chi2
 from localization.ambiguity import AMBIGUITY_MARGIN, ambiguity, translation_hypotheses
 from localization.batch import (
     assign_many,
-    capped_nearest_sq,
     pose_difference_many,
     project_many,
     rotation_between,
@@ -81,7 +80,7 @@ from localization.pnp import (
     refine_pose,
     reprojection_residuals,
 )
-from localization.upright import upright_two_point
+from localization.upright import score_upright_poses
 
 __all__ = [
     "Association",
@@ -821,39 +820,19 @@ def _upright_hypotheses(
     m = idx.size
     if not pairs or m < 2:
         return []
-    i1, i2 = (np.array(v) for v in zip(*pairs, strict=True))
-    j1, j2 = (v.reshape(-1) for v in np.meshgrid(np.arange(m), np.arange(m), indexing="ij"))
-    distinct = j1 != j2
-    j1, j2 = j1[distinct], j2[distinct]
-    s_i1, s_i2 = np.repeat(i1, j1.size), np.repeat(i2, j1.size)
-    s_j1, s_j2 = np.tile(j1, i1.size), np.tile(j2, i1.size)
-    # The prior's errors scale and turn the image of a landmark pair only so much: its prior
-    # projection must be within a factor 3 in length and 45 degrees in direction of the
-    # detection pair's (a 9 m / 15 degree error at the nearest views stays well inside).
-    vd = det[s_i2] - det[s_i1]
-    vp = proj[s_j2] - proj[s_j1]
-    dot = np.sum(vd * vp, axis=1)
-    nd, np_ = np.sum(vd * vd, axis=1), np.sum(vp * vp, axis=1)
-    near = (nd <= 9.0 * np_) & (np_ <= 9.0 * nd) & (dot > 0.0) & (2.0 * dot * dot >= nd * np_)
-    s_i1, s_i2, s_j1, s_j2 = s_i1[near], s_i2[near], idx[s_j1[near]], idx[s_j2[near]]
+    i1, i2 = (np.array(v, dtype=np.int64) for v in zip(*pairs, strict=True))
     rays = np.column_stack([det, np.ones(det.shape[0])]) @ np.linalg.inv(K).T @ prior[:3, :3]
-    psi, C, ok = upright_two_point(rays[s_i1], rays[s_i2], landmarks_xyz[s_j1], landmarks_xyz[s_j2])
-    sp = np.asarray(sig.position_m, dtype=np.float64)
-    prior_sq = (psi / sig.rotation_rad[2]) ** 2 + np.sum(((C - camera_center(prior)) / sp) ** 2, axis=1)
-    if max_prior_sq is not None:
-        ok &= prior_sq <= max_prior_sq
-    psi, C, prior_sq = psi[ok], C[ok], prior_sq[ok]
-    if psi.size == 0:
+    f64 = np.float64
+    R, t, uv, prior_sq, explained, misfit = score_upright_poses(
+        np.ascontiguousarray(det, dtype=f64), np.ascontiguousarray(rays), i1, i2,
+        np.ascontiguousarray(idx, dtype=np.int64), np.ascontiguousarray(proj, dtype=f64),
+        np.ascontiguousarray(landmarks_xyz, dtype=f64), np.ascontiguousarray(K, dtype=f64),
+        np.ascontiguousarray(prior[:3, :3]), camera_center(prior), np.asarray(sig.position_m, dtype=f64),
+        float(sig.rotation_rad[2]), np.inf if max_prior_sq is None else float(max_prior_sq),
+        float(gate_px) ** 2,
+    )
+    if prior_sq.size == 0:
         return []
-    c, s = np.cos(psi), np.sin(psi)
-    Rz_t = np.zeros((psi.size, 3, 3))  # Rz(psi)^T
-    Rz_t[:, 0, 0], Rz_t[:, 0, 1], Rz_t[:, 1, 0], Rz_t[:, 1, 1], Rz_t[:, 2, 2] = c, s, -s, c, 1.0
-    R = prior[:3, :3] @ Rz_t
-    t = -(R @ C[..., None])[..., 0]
-    uv, _ = project_many(K, R, t, landmarks_xyz[idx])
-    nearest = capped_nearest_sq(det, uv, gate_px**2)
-    explained = np.sum(nearest < gate_px**2, axis=1)
-    misfit = np.sum(nearest, axis=1)
     order = np.lexsort((prior_sq, misfit, -explained))
     order = order[explained[order] >= min_pairs][:keep]
     out: list[tuple[NDArray, NDArray]] = []
