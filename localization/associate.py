@@ -69,7 +69,7 @@ from localization.batch import (
     rotation_between,
     to_transforms,
 )
-from localization.compiled import refine_reassign
+from localization.compiled import refine_reassign, shift_votes
 from localization.failure import FailureCode
 from localization.geometry import camera_center, project
 from localization.pnp import (
@@ -228,43 +228,13 @@ def _shift_votes(
 
     Every (detection, projection) pair proposes a shift; shifts are binned in cells of
     ``vote_px`` and a cell's vote is the number of shifts in it and its eight neighbours (a Hough
-    vote, O(L N M), one set of numpy calls for all layouts). Each returned shift is the mean of
-    the layout's proposals within ``vote_px`` of its cell's mean. NaN projections propose
-    nothing. Returns ``(layout index (S,), shift (S, 2))``, each layout's best first.
+    vote, O(L N M); compiled, :func:`localization.compiled.shift_votes`). Each returned shift is
+    the mean of the layout's proposals within ``vote_px`` of its cell's mean. NaN projections
+    propose nothing. Returns ``(layout index (S,), shift (S, 2))``, each layout's best first.
     """
-    L = proj.shape[0]
-    shifts = (det[None, :, None, :] - proj[:, None, :, :]).reshape(L, -1, 2)
-    valid = np.isfinite(shifts).all(axis=2)
-    lay, which = np.nonzero(valid)
-    if lay.size == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
-    s = shifts[lay, which]
-    cells = np.floor(s / vote_px).astype(np.int64)
-    cells -= cells.min(axis=0) - 1  # one empty cell of padding on each side
-    s1 = int(cells[:, 1].max()) + 2
-    s0 = int(cells[:, 0].max()) + 2
-    keys = (lay * s0 + cells[:, 0]) * s1 + cells[:, 1]
-    uniq, inv, counts = np.unique(keys, return_inverse=True, return_counts=True)
-    votes = np.zeros(uniq.size, dtype=np.int64)
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            nk = uniq + di * s1 + dj
-            pos = np.minimum(np.searchsorted(uniq, nk), uniq.size - 1)
-            votes += np.where(uniq[pos] == nk, counts[pos], 0)
-    cell_lay = uniq // (s0 * s1)
-    order = np.lexsort((-votes, cell_lay))
-    first = np.searchsorted(cell_lay[order], cell_lay[order], side="left")
-    chosen = order[np.arange(order.size) - first < k]
-    # mean of each chosen cell's proposals, then of the layout's proposals near that mean
-    sums = np.stack([np.bincount(inv, weights=s[:, c], minlength=uniq.size) for c in (0, 1)], axis=1)
-    mean = sums[chosen] / counts[chosen, None]
-    cl = cell_lay[chosen]
-    d2 = np.sum((shifts[cl] - mean[:, None, :]) ** 2, axis=2)
-    near = (d2 <= vote_px**2) & valid[cl]
-    nn = near.sum(axis=1)
-    sel = np.where(near[..., None], shifts[cl], 0.0).sum(axis=1)
-    refined = np.where(nn[:, None] > 0, sel / np.maximum(nn, 1)[:, None], mean)
-    return cl, refined
+    f64 = np.float64
+    det, proj = np.ascontiguousarray(det, dtype=f64), np.ascontiguousarray(proj, dtype=f64)
+    return shift_votes(det, proj, float(vote_px), int(k))
 
 
 def _candidate_projections(
@@ -573,9 +543,15 @@ def associate_robust(
         coarse_gate_px, max_iterations, need,
     )
 
-    def covered(a: NDArray) -> bool:
-        # a hypothesis whose pairs all agree with an explored result would converge to it again
-        return any(np.all((a < 0) | (a == e)) for e in explored)
+    def covered(coarse: list[tuple[NDArray, NDArray]]) -> NDArray:
+        """(C,) whether each hypothesis' pairs all agree with an explored result.
+
+        Such a hypothesis would converge to that result again.
+        """
+        if not explored or not coarse:
+            return np.zeros(len(coarse), dtype=bool)
+        A = np.stack([c[0] for c in coarse])[:, None, :]
+        return np.any(np.all((A < 0) | (A == np.stack(explored)[None]), axis=2), axis=1)
 
     def check(a: NDArray, T: NDArray, alive: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
         """(prior Mahalanobis^2, chi-square, consistent, consistent & fits) of refined hypotheses."""
@@ -600,7 +576,8 @@ def associate_robust(
 
         At most ``2 * max_hypotheses + extra`` of them (the first not covered).
         """
-        chunk = [c for c in coarse if not covered(c[0])][: 2 * max(max_hypotheses, 1) + extra]
+        chunk = [c for c, done in zip(coarse, covered(coarse), strict=True) if not done]
+        chunk = chunk[: 2 * max(max_hypotheses, 1) + extra]
         tried[0] += len(chunk)
         if not chunk:
             return []

@@ -11,7 +11,8 @@ the same algorithms run as one compiled loop per hypothesis:
 - :func:`assign_rounds` -- the greedy mutual-nearest-neighbour assignment of
   :func:`localization.batch.assign_many`;
 - :func:`refine_reassign` -- the refine / re-project / re-assign rounds of a batch of
-  hypotheses until their assignments are stable.
+  hypotheses until their assignments are stable;
+- :func:`shift_votes` -- the Hough vote for image shifts of the layout hypotheses.
 
 They give the numpy versions' results (the same decisions on every benchmark image; poses equal
 to 1e-12 m for the same iterations). The kernels are compiled on first use and cached beside
@@ -25,7 +26,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["assign_rounds", "lm_many", "refine_reassign"]
+__all__ = ["assign_rounds", "lm_many", "refine_reassign", "shift_votes"]
 
 #: A point at or in front of this depth (m) counts as behind the camera.
 MIN_DEPTH = 1e-6
@@ -434,3 +435,114 @@ def refine_reassign(
             if not np.isfinite(_lm_one(K, R[k], t[k], X, uv, w0, 3, 0.0, 1e-6)):
                 alive[k] = False
     return a, R, t, alive
+
+
+#: Most cells of the dense vote grid; a sparser spread of cells is voted by binary search.
+_MAX_GRID = 1 << 20
+
+
+@njit(cache=True, nogil=True)
+def _neighbour_votes(ux: NDArray, uy: NDArray, cnt: NDArray) -> NDArray:
+    """Per distinct cell ``(ux, uy)`` (sorted by x, then y) the counts of its 3 x 3 neighbourhood."""
+    nu = ux.size
+    votes = np.zeros(nu, dtype=np.int64)
+    x0, y0, y1 = ux[0], uy.min(), uy.max()
+    gw, gh = ux[nu - 1] - x0 + 3, y1 - y0 + 3
+    if gw * gh <= _MAX_GRID:  # a dense grid with a border of empty cells
+        grid = np.zeros((gw, gh), dtype=np.int64)
+        for c in range(nu):
+            grid[ux[c] - x0 + 1, uy[c] - y0 + 1] = cnt[c]
+        for c in range(nu):
+            gx, gy = ux[c] - x0 + 1, uy[c] - y0 + 1
+            for di in range(-1, 2):
+                for dj in range(-1, 2):
+                    votes[c] += grid[gx + di, gy + dj]
+        return votes
+    for c in range(nu):
+        for di in range(-1, 2):
+            for dj in range(-1, 2):
+                tx, ty = ux[c] + di, uy[c] + dj
+                lo, hi = 0, nu  # binary search of (tx, ty)
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if ux[mid] < tx or (ux[mid] == tx and uy[mid] < ty):
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                if lo < nu and ux[lo] == tx and uy[lo] == ty:
+                    votes[c] += cnt[lo]
+    return votes
+
+
+@njit(cache=True, nogil=True)
+def shift_votes(det: NDArray, proj: NDArray, vote_px: float, k: int) -> tuple[NDArray, NDArray]:
+    """The ``k`` best-voted image shifts of each layout ``proj`` (L, M, 2) onto ``det`` (N, 2).
+
+    ``associate._shift_votes``' vote: every (detection, projection) pair proposes a shift, binned
+    in cells of ``vote_px`` (cell ``floor(shift / vote_px)``); a cell's vote is the number of
+    proposals in it and its eight neighbours. Per layout the ``k`` cells of most votes (ties: the
+    lower cell, x then y), each giving the mean of the layout's proposals within ``vote_px`` of
+    its own proposals' mean (or that mean if none). NaN projections propose nothing.
+
+    Returns:
+        ``(layout index (S,), shift (S, 2))``, each layout's best first.
+    """
+    nl, m, n = proj.shape[0], proj.shape[1], det.shape[0]
+    out_l = np.empty(nl * k, dtype=np.int64)
+    out_s = np.empty((nl * k, 2))
+    q = 0
+    sx = np.empty(n * m)
+    sy = np.empty(n * m)
+    cx = np.empty(n * m, dtype=np.int64)
+    cy = np.empty(n * m, dtype=np.int64)
+    for lay in range(nl):
+        p = 0
+        for i in range(n):
+            for j in range(m):
+                u = det[i, 0] - proj[lay, j, 0]
+                v = det[i, 1] - proj[lay, j, 1]
+                if np.isfinite(u) and np.isfinite(v):
+                    sx[p], sy[p] = u, v
+                    cx[p] = np.int64(np.floor(u / vote_px))
+                    cy[p] = np.int64(np.floor(v / vote_px))
+                    p += 1
+        if p == 0:
+            continue
+        # distinct cells in (x, y) order, their proposal counts and coordinate sums (in input order)
+        order = np.argsort(cx[:p] * (np.int64(1) << 32) + cy[:p])  # equal keys: one cell, any order
+        ux = np.empty(p, dtype=np.int64)
+        uy = np.empty(p, dtype=np.int64)
+        cnt = np.zeros(p, dtype=np.int64)
+        cell = np.empty(p, dtype=np.int64)
+        nu = 0
+        for r in range(p):
+            e = order[r]
+            if nu == 0 or cx[e] != ux[nu - 1] or cy[e] != uy[nu - 1]:
+                ux[nu], uy[nu] = cx[e], cy[e]
+                nu += 1
+            cell[e] = nu - 1
+            cnt[nu - 1] += 1
+        sumx = np.zeros(nu)
+        sumy = np.zeros(nu)
+        for e in range(p):
+            sumx[cell[e]] += sx[e]
+            sumy[cell[e]] += sy[e]
+        votes = _neighbour_votes(ux[:nu], uy[:nu], cnt[:nu])
+        best = np.argsort((-votes[:nu]) * nu + np.arange(nu))  # most votes, then the lower cell
+        for r in range(min(k, nu)):
+            c = best[r]
+            mx, my = sumx[c] / cnt[c], sumy[c] / cnt[c]
+            ax, ay, na = 0.0, 0.0, 0
+            for e in range(p):
+                du, dv = sx[e] - mx, sy[e] - my
+                if du * du + dv * dv <= vote_px * vote_px:
+                    ax += sx[e]
+                    ay += sy[e]
+                    na += 1
+            out_l[q] = lay
+            if na > 0:
+                out_s[q, 0], out_s[q, 1] = ax / na, ay / na
+            else:
+                out_s[q, 0], out_s[q, 1] = mx, my
+            q += 1
+    return out_l[:q], out_s[:q]

@@ -80,3 +80,35 @@ def test_nan_detections_stay_unassigned_and_clutter_is_not_paired(rng):
     out_a, _, _, alive = _run(L, det, a[None], np.stack([_perturbed(T, rng, 0.3, 0.3)]), first_robust=False)
     assert alive[0]
     np.testing.assert_array_equal(out_a[0], a)
+
+
+def _brute_votes(ux: np.ndarray, uy: np.ndarray, cnt: np.ndarray) -> np.ndarray:
+    near = (np.abs(ux[:, None] - ux[None]) <= 1) & (np.abs(uy[:, None] - uy[None]) <= 1)
+    return near.astype(np.int64) @ cnt
+
+
+def test_neighbour_votes_count_the_3x3_neighbourhood_on_the_grid_and_by_search(rng):
+    from localization.compiled import _MAX_GRID, _neighbour_votes
+
+    cells = np.unique(rng.integers(-6, 7, size=(60, 2)), axis=0)  # sorted by x, then y
+    cnt = rng.integers(1, 5, size=cells.shape[0])
+    ux, uy = cells[:, 0].copy(), cells[:, 1].copy()
+    np.testing.assert_array_equal(_neighbour_votes(ux, uy, cnt), _brute_votes(ux, uy, cnt))
+    # one cell far away makes the dense grid too large: the binary search gives the same counts
+    far = np.vstack([cells, [[10 * _MAX_GRID, 0]]])
+    cnt_far = np.append(cnt, 3)
+    ux, uy = far[:, 0].copy(), far[:, 1].copy()
+    assert (ux.max() - ux.min() + 3) * (uy.max() - uy.min() + 3) > _MAX_GRID
+    np.testing.assert_array_equal(_neighbour_votes(ux, uy, cnt_far), _brute_votes(ux, uy, cnt_far))
+
+
+def test_shift_votes_find_a_planted_image_shift(rng):
+    from localization.compiled import shift_votes
+
+    proj = rng.uniform(100, 1100, size=(3, 12, 2))
+    proj[1, :4] = np.nan  # landmarks behind the camera propose nothing
+    shift = np.array([57.0, -23.0])
+    det = np.vstack([proj[1, 4:] + shift + rng.normal(0, 1.0, (8, 2)), rng.uniform(0, 1280, (3, 2))])
+    lay, s = shift_votes(det, proj, 40.0, 2)
+    assert lay.tolist() == [0, 0, 1, 1, 2, 2]
+    np.testing.assert_allclose(s[2], shift, atol=1.0)  # layout 1's best shift is the planted one
