@@ -17,7 +17,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.associate import Association, associate_paper, associate_robust
-from localization.batch import refine_many, to_transforms
 from localization.checks import check_choice, check_number
 from localization.detect import Detections, check_image_size
 from localization.distortion import check_distortion, is_pinhole, undistort_points
@@ -34,6 +33,7 @@ from localization.pnp import (
     is_coplanar,
     pose_covariance,
     prior_mahalanobis_sq,
+    refine_pose,
     reprojection_residuals,
     solve_pnp,
 )
@@ -383,7 +383,7 @@ class Localizer:
             m = a >= 0
             rmse = res.rmse_px
         else:
-            T, rmse = _refine(X, u, self.K, assoc.cam_from_world)
+            T, rmse = refine_pose(X, u, self.K, assoc.cam_from_world)
             _, depth = reprojection_residuals(self.K, T, X, u)
             if not np.all(depth > 0):
                 timings.update(pnp=time.perf_counter() - t2, covariance=0.0)
@@ -425,18 +425,6 @@ class Localizer:
             prior_mahalanobis_sq=prior_mahalanobis_sq(T, prior, sigmas),
             n_hypotheses=assoc.n_hypotheses,
         )
-
-
-def _refine(X: NDArray, u: NDArray, K: NDArray, start: NDArray) -> tuple[NDArray, float]:
-    """:func:`localization.pnp.refine_pose`'s least squares (to a tighter tolerance), compiled.
-
-    Returns the pose and its RMS reprojection error, px (inf with a point at or behind the camera).
-    """
-    R, t, cost = refine_many(
-        K, start[None, :3, :3], start[None, :3, 3], X[None], u[None],
-        np.ones((1, X.shape[0]), dtype=bool), iterations=100, tol=1e-10,
-    )
-    return to_transforms(R, t)[0], float(np.sqrt(cost[0] / max(X.shape[0], 1)))
 
 
 def image_size_from_K(K: ArrayLike) -> tuple[int, int]:

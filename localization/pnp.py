@@ -27,6 +27,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization.compiled import lm_many
 from localization.failure import FailureCode
 from localization.geometry import (
     as_points,
@@ -35,7 +36,6 @@ from localization.geometry import (
     check_transform,
     invert,
     make_transform,
-    so3_exp,
     so3_log,
 )
 
@@ -306,50 +306,23 @@ def refine_pose(
     max_iterations: int = 20,
     tol: float = 1e-8,
 ) -> tuple[NDArray[np.float64], float]:
-    """Levenberg-Marquardt refinement of the reprojection error; returns ``(pose, rmse_px)``."""
-    X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
-    u = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    K = np.asarray(K, dtype=np.float64)
+    """Levenberg-Marquardt refinement of the reprojection error; returns ``(pose, rmse_px)``.
+
+    Compiled (:func:`localization.compiled.lm_many`, one pose): up to ``max_iterations`` accepted
+    steps (with up to ten damping increases each), stopping when the relative cost decrease falls
+    below ``tol``. ``rmse_px`` is inf when the refined pose puts a point at or behind the camera.
+    """
+    X = np.ascontiguousarray(points_xyz, dtype=np.float64).reshape(-1, 3)
+    u = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2)
+    K = np.ascontiguousarray(K, dtype=np.float64)
     T = np.asarray(cam_from_world, dtype=np.float64)
-    R_wc = T[:3, :3].T.copy()
-    C = camera_center(T)
-    J, proj = _jacobian(K, R_wc, C, X)
-    r = (proj - u).reshape(-1)
-    cost = float(r @ r)
-    lam = 1e-3
-    for _ in range(max_iterations):
-        if not np.isfinite(cost):
-            break
-        JtJ = J.T @ J
-        g = J.T @ r
-        improved = False
-        for _ in range(10):
-            A = JtJ + lam * np.diag(np.maximum(np.diag(JtJ), 1e-12))
-            try:
-                delta = -np.linalg.solve(A, g)
-            except np.linalg.LinAlgError:
-                lam *= 10
-                continue
-            C_new = C + delta[:3]
-            R_new = so3_exp(delta[3:]) @ R_wc
-            J_new, proj_new = _jacobian(K, R_new, C_new, X)
-            r_new = (proj_new - u).reshape(-1)
-            cost_new = float(r_new @ r_new)
-            if np.isfinite(cost_new) and cost_new <= cost:
-                improved = True
-                rel = (cost - cost_new) / max(cost, 1e-300)
-                C, R_wc, J, r, cost = C_new, R_new, J_new, r_new, cost_new
-                lam = max(lam / 10, 1e-12)
-                break
-            lam *= 10
-        if not improved or rel < tol:
-            break
-    # re-orthonormalize
-    U, _, Vt = np.linalg.svd(R_wc)
-    R_wc = U @ Vt
-    out = make_transform(R_wc.T, -R_wc.T @ C)
-    rmse = float(np.sqrt(cost / max(X.shape[0], 1)))
-    return out, rmse
+    R, t, cost = lm_many(
+        K, np.ascontiguousarray(T[None, :3, :3]), np.ascontiguousarray(T[None, :3, 3]), X[None], u[None],
+        np.ones((1, X.shape[0]), dtype=np.bool_), 10 * int(max_iterations), 0.0, float(tol),
+    )
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = R[0], t[0]
+    return out, float(np.sqrt(cost[0] / max(X.shape[0], 1)))
 
 
 def _rmse_and_depth_ok(K: NDArray, T: NDArray, X: NDArray, u: NDArray) -> tuple[float, bool]:
