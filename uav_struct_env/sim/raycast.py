@@ -4,7 +4,8 @@ When nothing reads the image (a state-only policy on simulated detections), rend
 only to depth-test the landmarks is most of an env step. :class:`RayScene` holds the triangles
 that a :class:`~uav_struct_env.sim.world.SiteWorld` renders (site elements, ground, markers) and
 the oriented boxes it adds (UAV airframes), and casts rays through pixel centres against them:
-pure numpy, each mesh culled by its bounding box first, Möller–Trumbore on the triangles left.
+one compiled loop per ray (numba), each mesh culled by its bounding box first, Möller–Trumbore on
+the triangles left.
 
 :func:`raycast_visibility` makes the same decision as
 :func:`~uav_struct_env.sim.visibility.landmark_visibility` on a rendered depth image: a ray
@@ -22,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from localization.geometry import as_points, check_transform
@@ -55,7 +57,8 @@ class RayScene:
             hi.append(vhi)
         counts = np.array([len(t) for t in tris], dtype=np.int64)
         allt = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
-        self._v0, self._e1, self._e2 = allt[:, 0], allt[:, 1] - allt[:, 0], allt[:, 2] - allt[:, 0]
+        self._v0 = np.ascontiguousarray(allt[:, 0])
+        self._e1, self._e2 = allt[:, 1] - allt[:, 0], allt[:, 2] - allt[:, 0]
         self._start, self._count = np.cumsum(counts) - counts, counts
         pad = 1e-6  # boxes of flat meshes get a non-zero thickness
         self._lo = np.array(lo).reshape(-1, 3) - pad
@@ -75,7 +78,7 @@ class RayScene:
     def set_boxes(self, poses: ArrayLike, half_extents: ArrayLike) -> None:
         """Set the oriented boxes at once: ``poses`` (B, 4, 4), ``half_extents`` (B, 3)."""
         self._box_poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
-        self._box_halves = np.asarray(half_extents, dtype=np.float64).reshape(-1, 3)
+        self._box_halves = np.ascontiguousarray(half_extents, dtype=np.float64).reshape(-1, 3)
 
     @property
     def n_triangles(self) -> int:
@@ -95,97 +98,113 @@ class RayScene:
         ``skip_box`` (R,) ints: for each ray, the index in :attr:`boxes` of a box that ray passes
         through unseen (-1: none), e.g. the body whose own visibility is asked.
         """
-        o = np.asarray(origin, dtype=np.float64).reshape(3)
-        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-        best = np.full(len(d), np.inf)
-        if len(d) == 0:
-            return best
-        for x0, x1, y0, y1, z in self._rects:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t = (z - o[2]) / d[:, 2]
-                x, y = o[0] + t * d[:, 0], o[1] + t * d[:, 1]
-                hit = (t >= t_min) & (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
-            best = np.where(hit & (t < best), t, best)
-        near, far = _slab(o, d, self._lo, self._hi)  # (R, G)
-        rays, groups = np.nonzero((far >= np.maximum(near, t_min)) & (near < best[:, None]))
-        if len(rays):
-            n = self._count[groups]
-            ray = np.repeat(rays, n)
-            first = np.repeat(self._start[groups] - (np.cumsum(n) - n), n)
-            tri = first + np.arange(len(ray))
-            t = _moller_trumbore(o, d[ray], self._v0[tri], self._e1[tri], self._e2[tri], t_min)
-            np.minimum.at(best, ray, t)
-        if len(self._box_poses):
-            R, c, half = self._box_poses[:, :3, :3], self._box_poses[:, :3, 3], self._box_halves
-            # Cull ray-box pairs by the box's bounding sphere seen from the origin (one matrix
-            # product), then slab-test the pairs left.
-            oc = c - o
-            dist = np.linalg.norm(oc, axis=1)
-            radius = np.linalg.norm(half, axis=1)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                cone = np.sqrt(np.maximum(1.0 - (radius / dist) ** 2, 0.0))  # cos of the half angle
-                cos_limit = np.where(dist > radius, cone, -2.0)
-                unit = d / np.linalg.norm(d, axis=1, keepdims=True)
-                toward = oc / np.maximum(dist, 1e-12)[:, None]
-            ray, box = np.nonzero(unit @ toward.T >= cos_limit[None] - 1e-9)
-            if skip_box is not None and len(ray):
-                keep = np.asarray(skip_box, dtype=np.int64).reshape(-1)[ray] != box
-                ray, box = ray[keep], box[keep]
-            if len(ray):
-                ob = np.einsum("pij,pi->pj", R[box], o - c[box])  # origin in the box frame
-                db = np.einsum("pi,pij->pj", d[ray], R[box])  # direction in the box frame
-                hb = half[box]
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    inv = 1.0 / db
-                    t1, t2 = (-hb - ob) * inv, (hb - ob) * inv
-                inside = np.abs(ob) <= hb  # a ray parallel to a slab is limited only outside it
-                parallel = db == 0
-                t_lo = np.where(parallel, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2)).max(axis=1)
-                t_hi = np.where(parallel, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2)).min(axis=1)
-                entry = np.where((t_hi >= t_lo) & (t_lo >= t_min), t_lo, np.inf)
-                np.minimum.at(best, ray, entry)
-        return best
+        o = np.ascontiguousarray(origin, dtype=np.float64).reshape(3)
+        d = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
+        skip = np.full(len(d), -1, dtype=np.int64) if skip_box is None else (
+            np.ascontiguousarray(skip_box, dtype=np.int64).reshape(-1)
+        )
+        box_R = np.ascontiguousarray(self._box_poses[:, :3, :3])
+        box_c = np.ascontiguousarray(self._box_poses[:, :3, 3])
+        return _first_hit(
+            o, d, float(t_min), skip, self._rects, self._lo, self._hi, self._start, self._count,
+            self._v0, self._e1, self._e2, box_R, box_c, self._box_halves,
+        )
 
 
 def _area(tri: NDArray[np.float64]) -> float:
     return float(0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
 
 
-def _slab(o: NDArray, d: NDArray, lo: NDArray, hi: NDArray) -> tuple[NDArray, NDArray]:
-    """Entry and exit ray parameters of rays ``(R,)`` through axis-aligned boxes ``(G,)``."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / d  # (R, 3); +-inf along an axis the ray does not move on
-        t1 = (lo[None] - o) * inv[:, None]
-        t2 = (hi[None] - o) * inv[:, None]
-    zero = d == 0
-    if not zero.any():
-        return np.minimum(t1, t2).max(axis=2), np.maximum(t1, t2).min(axis=2)
-    # A ray parallel to a slab: inside it (0 * inf = nan) never limits, outside it misses.
-    parallel = zero[:, None, :]
-    inside = (o >= lo) & (o <= hi)  # (G, 3)
-    t_lo = np.where(parallel, np.where(inside[None], -np.inf, np.inf), np.minimum(t1, t2))
-    t_hi = np.where(parallel, np.where(inside[None], np.inf, -np.inf), np.maximum(t1, t2))
-    return t_lo.max(axis=2), t_hi.min(axis=2)
+@njit(cache=True, nogil=True, error_model="numpy")
+def _first_hit(
+    o: NDArray, d: NDArray, t_min: float, skip: NDArray, rects: NDArray, lo: NDArray, hi: NDArray,
+    start: NDArray, count: NDArray, v0: NDArray, e1: NDArray, e2: NDArray, box_R: NDArray,
+    box_c: NDArray, box_half: NDArray,
+) -> NDArray:
+    """:meth:`RayScene.first_hit`, one compiled loop per ray.
 
-
-def _cross(a: NDArray, b: NDArray) -> NDArray:
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
-
-
-def _moller_trumbore(o, d, v0, e1, e2, t_min) -> NDArray[np.float64]:
-    """Hit ``t`` of ray ``d[i]`` with triangle ``i`` (pairs, all ``(P, 3)``); inf: no hit >= t_min."""
-    p = _cross(d, e2)
-    det = (p * e1).sum(axis=1)
-    s = o - v0
-    q = _cross(s, e1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / det
-        u = (p * s).sum(axis=1) * inv
-        v = (d * q).sum(axis=1) * inv
-        t = (e2 * q).sum(axis=1) * inv
-        ok = (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t >= t_min)
-    return np.where(ok, t, np.inf)
+    Flat rectangles first; then each mesh whose bounding box the ray enters before its best hit
+    so far (slab test; a ray parallel to a slab is limited only outside it), Moller-Trumbore on
+    its triangles; then the oriented boxes within the bounding cone seen from ``o``, slab-tested
+    in their own frame. Division by zero gives +-inf (``error_model="numpy"``), as in numpy.
+    """
+    n = d.shape[0]
+    best = np.full(n, np.inf)
+    radius = np.empty(box_half.shape[0])
+    dist = np.empty(box_half.shape[0])
+    toward = np.empty((box_half.shape[0], 3))
+    for b in range(box_half.shape[0]):
+        oc0, oc1, oc2 = box_c[b, 0] - o[0], box_c[b, 1] - o[1], box_c[b, 2] - o[2]
+        dist[b] = np.sqrt(oc0 * oc0 + oc1 * oc1 + oc2 * oc2)
+        radius[b] = np.sqrt(box_half[b, 0] ** 2 + box_half[b, 1] ** 2 + box_half[b, 2] ** 2)
+        m = max(dist[b], 1e-12)
+        toward[b, 0], toward[b, 1], toward[b, 2] = oc0 / m, oc1 / m, oc2 / m
+    for r in range(n):
+        dx, dy, dz = d[r, 0], d[r, 1], d[r, 2]
+        bt = np.inf
+        for k in range(rects.shape[0]):
+            t = (rects[k, 4] - o[2]) / dz
+            x, y = o[0] + t * dx, o[1] + t * dy
+            if t >= t_min and rects[k, 0] <= x <= rects[k, 1] and rects[k, 2] <= y <= rects[k, 3] and t < bt:
+                bt = t
+        for g in range(lo.shape[0]):
+            near, far = -np.inf, np.inf
+            for a in range(3):
+                da = d[r, a]
+                if da == 0.0:
+                    if o[a] < lo[g, a] or o[a] > hi[g, a]:
+                        near, far = np.inf, -np.inf
+                    continue
+                t1, t2 = (lo[g, a] - o[a]) / da, (hi[g, a] - o[a]) / da
+                near = max(near, min(t1, t2))
+                far = min(far, max(t1, t2))
+            if not (far >= max(near, t_min) and near < bt):
+                continue
+            for i in range(start[g], start[g] + count[g]):
+                # Moller-Trumbore
+                p0 = dy * e2[i, 2] - dz * e2[i, 1]
+                p1 = dz * e2[i, 0] - dx * e2[i, 2]
+                p2 = dx * e2[i, 1] - dy * e2[i, 0]
+                det = p0 * e1[i, 0] + p1 * e1[i, 1] + p2 * e1[i, 2]
+                if not abs(det) > 1e-12:
+                    continue
+                s0, s1, s2 = o[0] - v0[i, 0], o[1] - v0[i, 1], o[2] - v0[i, 2]
+                q0 = s1 * e1[i, 2] - s2 * e1[i, 1]
+                q1 = s2 * e1[i, 0] - s0 * e1[i, 2]
+                q2 = s0 * e1[i, 1] - s1 * e1[i, 0]
+                inv = 1.0 / det
+                u = (p0 * s0 + p1 * s1 + p2 * s2) * inv
+                v = (dx * q0 + dy * q1 + dz * q2) * inv
+                t = (e2[i, 0] * q0 + e2[i, 1] * q1 + e2[i, 2] * q2) * inv
+                if u >= 0.0 and v >= 0.0 and u + v <= 1.0 and t >= t_min and t < bt:
+                    bt = t
+        if box_half.shape[0]:
+            norm = np.sqrt(dx * dx + dy * dy + dz * dz)
+            for b in range(box_half.shape[0]):
+                if b == skip[r]:
+                    continue
+                # cull by the box's bounding sphere seen from the origin
+                cone = np.sqrt(max(1.0 - (radius[b] / dist[b]) ** 2, 0.0))
+                cos_limit = cone if dist[b] > radius[b] else -2.0
+                if (dx * toward[b, 0] + dy * toward[b, 1] + dz * toward[b, 2]) / norm < cos_limit - 1e-9:
+                    continue
+                t_lo, t_hi = -np.inf, np.inf
+                for a in range(3):  # origin and direction in the box frame
+                    ob = (box_R[b, 0, a] * (o[0] - box_c[b, 0]) + box_R[b, 1, a] * (o[1] - box_c[b, 1])
+                          + box_R[b, 2, a] * (o[2] - box_c[b, 2]))
+                    db = box_R[b, 0, a] * dx + box_R[b, 1, a] * dy + box_R[b, 2, a] * dz
+                    h = box_half[b, a]
+                    if db == 0.0:
+                        if abs(ob) > h:
+                            t_lo, t_hi = np.inf, -np.inf
+                        continue
+                    t1, t2 = (-h - ob) / db, (h - ob) / db
+                    t_lo = max(t_lo, min(t1, t2))
+                    t_hi = min(t_hi, max(t1, t2))
+                if t_hi >= t_lo and t_lo >= t_min and t_lo < bt:
+                    bt = t_lo
+        best[r] = bt
+    return best
 
 
 def raycast_visibility(
