@@ -204,6 +204,7 @@ def main(**kwargs: Any) -> dict[str, Any]:
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
 
+    from uav_struct_env.provenance import software
     from uav_struct_env.training.policy_files import NORMALIZATION_FILE, save_normalization
 
     # An earlier run in "out" is refused unless overwrite=True (the error names --overwrite).
@@ -253,9 +254,22 @@ def main(**kwargs: Any) -> dict[str, Any]:
         "wall_clock_s": wall,
         "agent_steps_per_s": model.num_timesteps / wall if wall > 0 else float("nan"),
         "n_agent_slots": n,
+        # what --config named when this run trained (env overrides and wrapper options), and the
+        # code that trained it: a later change of the named config does not change this record
+        "train_config": _resolved_config(opt["config"]),
+        "software": software(),
     }
     atomic_write_json(out / "train.json", summary, indent=2)
     return summary
+
+
+def _resolved_config(name: str) -> dict[str, Any]:
+    """The named training configuration's env overrides and wrapper options, JSON-ready."""
+    from uav_struct_env.study.cells import json_ready
+    from uav_struct_env.wrappers import TRAIN_CONFIGS
+
+    c = TRAIN_CONFIGS[name]
+    return json_ready({"name": c.name, "preset": c.preset, "env": c.env, "wrapper": c.wrapper})
 
 
 def _parse(argv: list[str] | None = None) -> dict[str, Any]:

@@ -52,7 +52,14 @@ def test_train_writes_model_normalization_logs_and_checkpoints(trained):
     assert summary["agent_steps"] >= 256 and summary["n_agent_slots"] == 4
     for name in ("model.zip", "normalization.npz", "vecnormalize.pkl", "train.json"):
         assert (out / name).is_file(), name
-    assert json.loads((out / "train.json").read_text())["options"]["seed"] == 3
+    record = json.loads((out / "train.json").read_text())
+    assert record["options"]["seed"] == 3
+    # the run carries what its --config meant then, and the code that trained it
+    from uav_struct_env.wrappers import TRAIN_CONFIGS
+
+    assert record["train_config"]["wrapper"] == TRAIN_CONFIGS["state"].wrapper
+    assert record["train_config"]["env"]["max_cycles"] == TRAIN_CONFIGS["state"].env["max_cycles"]
+    assert record["software"]["package"] == "uav-struct-env" and record["software"]["version"]
     steps = sorted(d.name for d in (out / "checkpoints").glob("step_*"))
     assert steps == ["step_000000128", "step_000000256"]
     for d in steps:  # model folders the evaluator reads without unpickling
