@@ -406,8 +406,11 @@ class _Problem:
         (:func:`localization.compiled.refine_reassign`): one loop per hypothesis.
         """
         w, h = self.image_size
+        f64 = np.float64
         a, R, t, alive = refine_reassign(
-            self.K, self.landmarks_xyz, self.det, self.good, np.ascontiguousarray(a, dtype=np.int64),
+            np.ascontiguousarray(self.K, dtype=f64), np.ascontiguousarray(self.landmarks_xyz, dtype=f64),
+            np.ascontiguousarray(self.det, dtype=f64), np.ascontiguousarray(self.good, dtype=np.int64),
+            np.ascontiguousarray(a, dtype=np.int64),
             np.ascontiguousarray(starts[:, :3, :3]), np.ascontiguousarray(starts[:, :3, 3]),
             int(w), int(h), float(self.margin_px), float(self.gate_px), float(self.coarse_gate_px),
             int(self.max_iterations), int(self.need), bool(first_robust),

@@ -67,6 +67,7 @@ def _solve(d1: NDArray, d2: NDArray, X1: NDArray, X2: NDArray, sign: float, C: N
 
 @njit(cache=True, nogil=True)
 def _solve_many(d1: NDArray, d2: NDArray, X1: NDArray, X2: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """Both roots of every sample: :func:`upright_two_point`'s ``(psi, C, valid)`` layout."""
     s = d1.shape[0]
     psi = np.empty(2 * s)
     C = np.empty((2 * s, 3))
