@@ -239,6 +239,7 @@ def main(**kwargs: Any) -> dict[str, Any]:
                       out / "progress.jsonl"),
         ]
     )
+    made_by = software()  # the code as training starts (the checkout may change while it runs)
     t0 = time.perf_counter()
     model.learn(total_timesteps=opt["total_timesteps"], callback=callbacks, tb_log_name="ppo")
     wall = time.perf_counter() - t0
@@ -257,7 +258,7 @@ def main(**kwargs: Any) -> dict[str, Any]:
         # what --config named when this run trained (env overrides and wrapper options), and the
         # code that trained it: a later change of the named config does not change this record
         "train_config": _resolved_config(opt["config"]),
-        "software": software(),
+        "software": made_by,
     }
     atomic_write_json(out / "train.json", summary, indent=2)
     return summary
