@@ -6,7 +6,8 @@ overhead of a few dozen small numpy calls, and that overhead, not arithmetic, wa
 latency (12-30 ms per image). Here every step takes a stack of ``H`` hypotheses: projection,
 prior distance and scoring run the same numpy calls once for all of them; the two steps that
 loop (Levenberg-Marquardt and the greedy assignment) call compiled kernels
-(:mod:`localization.compiled`), which took robust association from 3.6-4.2 ms to ~2 ms per image.
+(:mod:`localization.compiled`); with the other compiled steps, robust association went from
+3.8-4.0 ms to 1.5-1.6 ms per column-top image (docs/benchmarks.md).
 
 Poses are held as ``R`` (H, 3, 3) and ``t`` (H, 3) of ``cam_from_world`` (``p_cam = R X + t``).
 Correspondences of different hypotheses are padded to one length ``P`` and carry a (H, P) bool
