@@ -94,6 +94,8 @@ def assign_many(
     """
     f64 = np.float64
     det, proj = np.ascontiguousarray(det, dtype=f64), np.ascontiguousarray(proj, dtype=f64)
+    if det.ndim != 2 or det.shape[1] != 2 or proj.ndim != 3 or proj.shape[2] != 2:
+        raise ValueError(f"assign_many needs det (N, 2) and proj (H, M, 2); got {det.shape} and {proj.shape}")
     return assign_rounds(det, proj, float(gate_px), int(rounds))
 
 
@@ -155,6 +157,13 @@ def refine_many(
         ``(R, t, cost)``: refined poses and their unweighted sum of squared residuals over the
         mask, px^2 (inf for a pose with a masked point at or behind the camera).
     """
+    h, p = np.shape(mask)
+    shapes = (np.shape(R), np.shape(t), np.shape(X), np.shape(uv))
+    if shapes != ((h, 3, 3), (h, 3), (h, p, 3), (h, p, 2)):
+        raise ValueError(
+            f"refine_many needs R (H, 3, 3), t (H, 3), X (H, P, 3), uv (H, P, 2) for mask (H, P) = "
+            f"{(h, p)}; got R {np.shape(R)}, t {np.shape(t)}, X {np.shape(X)}, uv {np.shape(uv)}"
+        )
     f64 = np.float64
     return lm_many(
         np.ascontiguousarray(K, dtype=f64),

@@ -316,6 +316,11 @@ def refine_pose(
     u = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2)
     K = np.ascontiguousarray(K, dtype=np.float64)
     T = np.asarray(cam_from_world, dtype=np.float64)
+    if X.shape[0] != u.shape[0] or K.shape != (3, 3) or T.shape != (4, 4):
+        raise ValueError(
+            f"refine_pose needs (N, 3) points, (N, 2) pixels, a 3x3 K and a 4x4 pose; got "
+            f"{X.shape[0]} points, {u.shape[0]} pixels, K {K.shape}, pose {T.shape}"
+        )
     R, t, cost = lm_many(
         K, np.ascontiguousarray(T[None, :3, :3]), np.ascontiguousarray(T[None, :3, 3]), X[None], u[None],
         np.ones((1, X.shape[0]), dtype=np.bool_), 10 * int(max_iterations), 0.0, float(tol),

@@ -112,3 +112,18 @@ def test_shift_votes_find_a_planted_image_shift(rng):
     lay, s = shift_votes(det, proj, 40.0, 2)
     assert lay.tolist() == [0, 0, 1, 1, 2, 2]
     np.testing.assert_allclose(s[2], shift, atol=1.0)  # layout 1's best shift is the planted one
+
+
+def test_the_compiled_steps_refuse_inconsistent_shapes_before_reading_out_of_bounds():
+    import pytest
+
+    from localization.batch import assign_many, refine_many
+    from localization.pnp import refine_pose
+
+    with pytest.raises(ValueError, match="refine_pose needs"):
+        refine_pose(np.zeros((5, 3)), np.zeros((4, 2)), PAPER_K, np.eye(4))
+    R, t = np.tile(np.eye(3), (2, 1, 1)), np.zeros((2, 3))
+    with pytest.raises(ValueError, match=r"refine_many needs .* \(2, 4\)"):
+        refine_many(PAPER_K, R, t, np.zeros((2, 4, 3)), np.zeros((2, 3, 2)), np.ones((2, 4), bool))
+    with pytest.raises(ValueError, match="assign_many needs"):
+        assign_many(np.zeros((3, 3)), np.zeros((1, 4, 2)), 5.0)

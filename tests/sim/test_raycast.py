@@ -179,3 +179,9 @@ def test_many_oriented_boxes_hit_as_one_by_one_and_a_skipped_box_is_passed_throu
     np.testing.assert_allclose(scene.first_hit(o, d), expected, rtol=1e-12)
     skip = rng.integers(-1, len(boxes), len(d))
     np.testing.assert_allclose(scene.first_hit(o, d, skip_box=skip), reference(skip), rtol=1e-12)
+
+
+def test_first_hit_refuses_a_skip_list_of_the_wrong_length():
+    scene = RayScene([])
+    with pytest.raises(ValueError, match=r"skip_box must hold one box index per ray \(3\)"):
+        scene.first_hit(np.zeros(3), np.ones((3, 3)), skip_box=[0, 1])

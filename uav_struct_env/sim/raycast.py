@@ -103,6 +103,8 @@ class RayScene:
         skip = np.full(len(d), -1, dtype=np.int64) if skip_box is None else (
             np.ascontiguousarray(skip_box, dtype=np.int64).reshape(-1)
         )
+        if skip.shape != (len(d),):  # the compiled loop reads skip[r] for every ray, unchecked
+            raise ValueError(f"skip_box must hold one box index per ray ({len(d)}), got shape {skip.shape}")
         box_R = np.ascontiguousarray(self._box_poses[:, :3, :3])
         box_c = np.ascontiguousarray(self._box_poses[:, :3, 3])
         return _first_hit(
