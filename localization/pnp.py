@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from localization.compiled import lm_many
+from localization.batch import refine_many, to_transforms
 from localization.failure import FailureCode
 from localization.geometry import (
     as_points,
@@ -308,26 +308,24 @@ def refine_pose(
 ) -> tuple[NDArray[np.float64], float]:
     """Levenberg-Marquardt refinement of the reprojection error; returns ``(pose, rmse_px)``.
 
-    Compiled (:func:`localization.compiled.lm_many`, one pose): up to ``max_iterations`` accepted
+    Compiled (:func:`localization.batch.refine_many` on one pose): up to ``max_iterations`` accepted
     steps (with up to ten damping increases each), stopping when the relative cost decrease falls
     below ``tol``. ``rmse_px`` is inf when the refined pose puts a point at or behind the camera.
     """
-    X = np.ascontiguousarray(points_xyz, dtype=np.float64).reshape(-1, 3)
-    u = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2)
-    K = np.ascontiguousarray(K, dtype=np.float64)
+    X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
+    u = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    K = np.asarray(K, dtype=np.float64)
     T = np.asarray(cam_from_world, dtype=np.float64)
     if X.shape[0] != u.shape[0] or K.shape != (3, 3) or T.shape != (4, 4):
         raise ValueError(
             f"refine_pose needs (N, 3) points, (N, 2) pixels, a 3x3 K and a 4x4 pose; got "
             f"{X.shape[0]} points, {u.shape[0]} pixels, K {K.shape}, pose {T.shape}"
         )
-    R, t, cost = lm_many(
-        K, np.ascontiguousarray(T[None, :3, :3]), np.ascontiguousarray(T[None, :3, 3]), X[None], u[None],
-        np.ones((1, X.shape[0]), dtype=np.bool_), 10 * int(max_iterations), 0.0, float(tol),
+    R, t, cost = refine_many(
+        K, T[None, :3, :3], T[None, :3, 3], X[None], u[None], np.ones((1, X.shape[0]), dtype=bool),
+        iterations=10 * int(max_iterations), tol=tol,
     )
-    out = np.eye(4)
-    out[:3, :3], out[:3, 3] = R[0], t[0]
-    return out, float(np.sqrt(cost[0] / max(X.shape[0], 1)))
+    return to_transforms(R, t)[0], float(np.sqrt(cost[0] / max(X.shape[0], 1)))
 
 
 def _rmse_and_depth_ok(K: NDArray, T: NDArray, X: NDArray, u: NDArray) -> tuple[float, bool]:

@@ -27,6 +27,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from localization.compiled import MIN_DEPTH
+
 __all__ = ["score_upright_poses", "upright_two_point"]
 
 
@@ -177,7 +179,7 @@ def score_upright_poses(
             x = R[q, 0, 0] * X[0] + R[q, 0, 1] * X[1] + R[q, 0, 2] * X[2] + t[q, 0]
             y = R[q, 1, 0] * X[0] + R[q, 1, 1] * X[1] + R[q, 1, 2] * X[2] + t[q, 1]
             z = R[q, 2, 0] * X[0] + R[q, 2, 1] * X[1] + R[q, 2, 2] * X[2] + t[q, 2]
-            if z > 1e-6:
+            if z > MIN_DEPTH:
                 uv[q, j, 0] = (K[0, 0] * x + K[0, 1] * y) / z + K[0, 2]
                 uv[q, j, 1] = K[1, 1] * y / z + K[1, 2]
             else:
