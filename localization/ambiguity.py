@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from localization.batch import capped_nearest_sq
+from localization.compiled_scores import translation_scores
 from localization.geometry import camera_center
 from localization.pnp import pose_covariance
 
@@ -83,8 +83,10 @@ def translation_hypotheses(
     anchors = assignment[np.flatnonzero(pairs)[: max(int(good.sum()) - need + 1, 1)]]
     if anchors.size == 0:
         return []
-    t = (landmarks_xyz[None, :, :] - landmarks_xyz[anchors][:, None, :]).reshape(-1, 3)
-    t = np.unique(np.round(t, 3), axis=0)
+    t = np.round((landmarks_xyz[None, :, :] - landmarks_xyz[anchors][:, None, :]).reshape(-1, 3), 3)
+    # the distinct translations in lexicographic order (np.unique(axis=0), without its overhead)
+    t = t[np.lexsort((t[:, 2], t[:, 1], t[:, 0]))]
+    t = t[np.concatenate([[True], np.any(t[1:] != t[:-1], axis=1)])]
     t = t[np.linalg.norm(t, axis=1) > 1e-3]
     centre = camera_center(cam_from_world)
     prior_sq = np.sum(
@@ -95,16 +97,11 @@ def translation_hypotheses(
     if t.shape[0] == 0:
         return []
     R = cam_from_world[:3, :3]
-    p = (landmarks_xyz - centre) @ R.T  # (M, 3) camera-frame landmarks at the winner's pose
-    moved = p[None, :, :] - (t @ R.T)[:, None, :]  # (T, M, 3) after moving the camera by t
-    depth = moved[:, :, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        xy = moved[:, :, :2] / depth[:, :, None]
-    uv = xy @ K[:2, :2].T + K[:2, 2]
-    uv[depth <= 1e-6] = np.nan
-    nearest = capped_nearest_sq(det[good], uv, gate_px**2)  # (T, N)
-    explained = np.sum(nearest < gate_px**2, axis=1)
-    misfit = np.sum(nearest, axis=1)  # an exact self-translation costs only the noise
+    # the landmarks seen from the camera moved by each t, scored against the detections (compiled)
+    uv, depth, explained, misfit = translation_scores(
+        np.ascontiguousarray(det[good], dtype=np.float64), (landmarks_xyz - centre) @ R.T, t @ R.T,
+        np.ascontiguousarray(K, dtype=np.float64), float(gate_px) ** 2,
+    )
     order = np.lexsort((prior_sq, misfit))
     order = order[explained[order] >= need][:limit]
     out = []

@@ -70,6 +70,7 @@ from localization.batch import (
     to_transforms,
 )
 from localization.compiled import refine_reassign, shift_votes
+from localization.compiled_scores import anchor_pairs, check_many, missed_many
 from localization.failure import FailureCode
 from localization.geometry import camera_center, project
 from localization.pnp import (
@@ -387,13 +388,6 @@ class _Problem:
     max_iterations: int
     need: int
 
-    def pairs(self, a: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-        """Padded correspondences (H, N, 3), (H, N, 2) and mask (H, N) of assignments (H, N)."""
-        m = a >= 0
-        X = self.landmarks_xyz[np.maximum(a, 0)]
-        uv = np.where(m[..., None], np.nan_to_num(self.det)[None], 0.0)
-        return X, uv, m
-
     def refine(self, a: NDArray, starts: NDArray, first_robust: bool) -> tuple[NDArray, NDArray, NDArray]:
         """Coarse assignments (H, N) and start poses (H, 4, 4) -> (assignments, poses, alive (H,)).
 
@@ -406,10 +400,8 @@ class _Problem:
         (:func:`localization.compiled.refine_reassign`): one loop per hypothesis.
         """
         w, h = self.image_size
-        f64 = np.float64
         a, R, t, alive = refine_reassign(
-            np.ascontiguousarray(self.K, dtype=f64), np.ascontiguousarray(self.landmarks_xyz, dtype=f64),
-            np.ascontiguousarray(self.det, dtype=f64), np.ascontiguousarray(self.good, dtype=np.int64),
+            self.K, self.landmarks_xyz, self.det, np.ascontiguousarray(self.good, dtype=np.int64),
             np.ascontiguousarray(a, dtype=np.int64),
             np.ascontiguousarray(starts[:, :3, :3]), np.ascontiguousarray(starts[:, :3, 3]),
             int(w), int(h), float(self.margin_px), float(self.gate_px), float(self.coarse_gate_px),
@@ -417,29 +409,32 @@ class _Problem:
         )
         return a, to_transforms(R, t), alive
 
-    def prior_sq(self, T: NDArray) -> NDArray:
-        """(H,) squared Mahalanobis distances of poses (H, 4, 4) from the prior."""
-        d = pose_difference_many(T[:, :3, :3], T[:, :3, 3], self.prior)
-        return np.sum((d / self.sig.as_array()) ** 2, axis=1)
+    def checks(self, a: NDArray, T: NDArray) -> tuple[NDArray, NDArray]:
+        """(H,) prior Mahalanobis^2 and (H,) chi-square of hypotheses (H, N) at poses (H, 4, 4).
 
-    def chi_sq(self, a: NDArray, T: NDArray) -> NDArray:
-        """(H,) sum of squared residuals over ``pixel_sigma^2`` of each hypothesis' pairs."""
-        X, uv, m = self.pairs(a)
-        uvp, _ = project_many(self.K, T[:, :3, :3], T[:, :3, 3], X)
-        r2 = np.where(m, np.sum((np.nan_to_num(uvp, nan=1e6) - uv) ** 2, axis=2), 0.0)
-        return np.sum(r2, axis=1) / self.pixel_sigma**2
+        The squared Mahalanobis distance of each pose from the prior, and the sum of squared
+        residuals of its pairs over ``pixel_sigma^2``; compiled
+        (:func:`localization.compiled_scores.check_many`).
+        """
+        R, t = np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
+        prior_sq, chi, far = check_many(
+            self.K, self.landmarks_xyz, self.det, np.ascontiguousarray(a, dtype=np.int64), R, t,
+            np.ascontiguousarray(self.prior[:3, :3]), camera_center(self.prior), self.sig.as_array(),
+        )
+        for h in np.flatnonzero(far):  # rotations near pi from the prior's: the exact logarithm
+            d = pose_difference_many(R[h : h + 1], t[h : h + 1], self.prior)
+            prior_sq[h] = float(np.sum((d / self.sig.as_array()) ** 2))
+        return prior_sq, chi / self.pixel_sigma**2
 
     def nll(
         self, a: NDArray, T: NDArray, chi: NDArray, prior_sq: NDArray, miss_cost: float
     ) -> tuple[NDArray, NDArray]:
         """(H,) negative log-likelihoods (inliers, clutter, misses, prior) and (H,) miss counts."""
-        R, t = T[:, :3, :3], T[:, :3, 3]
-        uv = _candidate_projections(self.K, R, t, self.landmarks_xyz, self.image_size, 0.0)
-        expected = np.isfinite(uv).all(axis=2)  # (H, M) predicted inside the image
-        hit = np.zeros_like(expected)
-        hi, ii = np.nonzero(a >= 0)
-        hit[hi, a[hi, ii]] = True
-        n_missed = np.sum(expected & ~hit, axis=1)
+        w, h = self.image_size
+        n_missed = missed_many(
+            self.K, self.landmarks_xyz, np.ascontiguousarray(a, dtype=np.int64),
+            np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3]), int(w), int(h),
+        )
         n_unassigned = np.sum(a < 0, axis=1)
         nll = chi + n_unassigned * (self.gate_px / self.pixel_sigma) ** 2 + n_missed * miss_cost + prior_sq
         return nll, n_missed
@@ -541,9 +536,11 @@ def associate_robust(
         )
     det = detections_uv
     need = max(min_correspondences, 3)
-    P = _Problem(
-        det, good, landmarks_xyz, K, prior, image_size, margin_px, pixel_sigma, sig, gate,
-        coarse_gate_px, max_iterations, need,
+    f64 = np.float64
+    P = _Problem(  # contiguous float64 once: the compiled steps take them as they are
+        np.ascontiguousarray(det, dtype=f64), good, np.ascontiguousarray(landmarks_xyz, dtype=f64),
+        np.ascontiguousarray(K, dtype=f64), np.ascontiguousarray(prior, dtype=f64), image_size, margin_px,
+        pixel_sigma, sig, gate, coarse_gate_px, max_iterations, need,
     )
 
     def covered(coarse: list[tuple[NDArray, NDArray]]) -> NDArray:
@@ -558,8 +555,7 @@ def associate_robust(
 
     def check(a: NDArray, T: NDArray, alive: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
         """(prior Mahalanobis^2, chi-square, consistent, consistent & fits) of refined hypotheses."""
-        prior_sq = P.prior_sq(T)
-        chi = P.chi_sq(a, T)
+        prior_sq, chi = P.checks(a, T)
         dof = 2 * (a >= 0).sum(axis=1) - 6
         consistent = alive & (
             prior_sq <= max_prior_mahalanobis_sq if max_prior_mahalanobis_sq is not None else True
@@ -740,34 +736,17 @@ def _chi2_quantiles(quantile: float, max_dof: int) -> NDArray[np.float64]:
     return np.concatenate([[np.inf], chi2.ppf(quantile, np.arange(1, max(max_dof, 1) + 1))])
 
 
-def _anchor_pairs(det: NDArray, k: int = 4) -> list[tuple[int, int]]:
-    """Every pair among ``k`` spread-out detections of the dense part of the image.
+def _anchor_pairs(det: NDArray, k: int = 4) -> NDArray[np.int64]:
+    """(P, 2) every pair among ``k`` spread-out detections of the dense part of the image.
 
     Far-apart anchors condition the two-point pose best, but the extremes of a detection set are
     often clutter (uniform over the image, while landmarks gather on the building): the anchors
     are taken, farthest-point first, among the detections whose median distance to the others
     is at most the median of that (and any detection when there are at most ``k``). Every pair
     of ``k`` anchors leaves a pair of true detections unless ``k - 1`` of them are clutter.
+    Compiled: :func:`localization.compiled_scores.anchor_pairs`.
     """
-    n = det.shape[0]
-    if n < 2:
-        return []
-    d2 = np.sum((det[:, None, :] - det[None, :, :]) ** 2, axis=2)
-    pool = np.arange(n)
-    if n > k:
-        spread = np.median(d2, axis=1)
-        pool = np.flatnonzero(spread <= np.median(spread))
-        if pool.size < k:
-            pool = np.argsort(spread, kind="stable")[:k]
-    sub = d2[np.ix_(pool, pool)]
-    first = int(np.argmax(sub.sum(axis=1)))
-    chosen = [first]
-    dmin = sub[first].copy()
-    for _ in range(min(k, pool.size) - 1):
-        nxt = int(np.argmax(dmin))
-        chosen.append(nxt)
-        dmin = np.minimum(dmin, sub[nxt])
-    return list(itertools.combinations(pool[chosen].tolist(), 2))
+    return anchor_pairs(np.ascontiguousarray(det, dtype=np.float64), int(k))
 
 
 def _upright_hypotheses(
@@ -798,9 +777,9 @@ def _upright_hypotheses(
     """
     pairs = _anchor_pairs(det)
     m = idx.size
-    if not pairs or m < 2:
+    if pairs.shape[0] == 0 or m < 2:
         return []
-    i1, i2 = (np.array(v, dtype=np.int64) for v in zip(*pairs, strict=True))
+    i1, i2 = pairs[:, 0].copy(), pairs[:, 1].copy()
     rays = np.column_stack([det, np.ones(det.shape[0])]) @ np.linalg.inv(K).T @ prior[:3, :3]
     f64 = np.float64
     R, t, uv, prior_sq, explained, misfit = score_upright_poses(

@@ -26,7 +26,6 @@ from localization.geometry import so3_log
 
 __all__ = [
     "assign_many",
-    "capped_nearest_sq",
     "pose_difference_many",
     "project_many",
     "refine_many",
@@ -97,32 +96,6 @@ def assign_many(
     if det.ndim != 2 or det.shape[1] != 2 or proj.ndim != 3 or proj.shape[2] != 2:
         raise ValueError(f"assign_many needs det (N, 2) and proj (H, M, 2); got {det.shape} and {proj.shape}")
     return assign_rounds(det, proj, float(gate_px), int(rounds))
-
-
-def capped_nearest_sq(
-    det: NDArray[np.float64], uv: NDArray[np.float64], cap_sq: float
-) -> NDArray[np.float64]:
-    """(H, N) squared distance of each finite detection (N, 2) to its nearest of ``uv`` (H, M, 2).
-
-    Capped at ``cap_sq``; NaN projections (behind the camera) are never nearest. The same
-    numbers as ``min(nanmin_j |det_i - uv_hj|^2, cap_sq)``, without a pass over (H, N, M) to
-    replace NaNs: those projections move far off the image first.
-    """
-    far = np.where(np.isnan(uv), _FAR_PX, uv)
-    du = det[None, :, None, 0] - far[:, None, :, 0]
-    d2 = du * du  # (H, N, M)
-    dv = det[None, :, None, 1] - far[:, None, :, 1]
-    d2 += dv * dv
-    if d2.shape[2] == 0:
-        return np.full(d2.shape[:2], cap_sq)
-    # the minimum gathered at argmin: the same number, and numpy's argmin along a short last
-    # axis takes a third of min's time
-    nearest = d2[np.arange(d2.shape[0])[:, None], np.arange(d2.shape[1]), np.argmin(d2, axis=2)]
-    return np.minimum(nearest, cap_sq)
-
-
-#: A pixel coordinate farther from any detection than every gate (squared distances stay finite).
-_FAR_PX = 1e9
 
 
 def refine_many(

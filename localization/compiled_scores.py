@@ -1,0 +1,231 @@
+"""Compiled kernels (numba) of robust association's bookkeeping: checks, scores, anchors, rivals.
+
+After the refinement rounds were compiled (:mod:`localization.compiled`), what remained of
+robust association's cost was about a hundred small numpy calls per image that test, score
+and rank the hypotheses (1.2 ms median per image in the ``state`` training configuration, most
+of it call overhead on arrays of 4-20 points). Here the same computations run as one loop each:
+
+- :func:`check_many` -- each refined hypothesis' squared Mahalanobis distance from the prior
+  and the chi-square of its pairs (``associate._Problem.prior_sq`` and ``chi_sq``);
+- :func:`missed_many` -- the landmarks each hypothesis predicts inside the image that it left
+  unmatched (the miss term of the score);
+- :func:`anchor_pairs` -- the spread-out detections of the two-point hypotheses
+  (``associate._anchor_pairs``);
+- :func:`translation_scores` -- the winner's pose moved by each of the layout's
+  self-translations, scored against the detections (``ambiguity.translation_hypotheses``).
+
+They replace numpy code with the same arithmetic (before the commit that added this module):
+on the 2,400 localizations of the localizer benchmark's images and 606 association calls
+captured in the ``state`` training configuration, every success, assignment and failure reason
+is the same. Compiled and cached like :mod:`localization.compiled`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from localization.compiled import MIN_DEPTH, _candidates, _point
+
+__all__ = ["anchor_pairs", "check_many", "missed_many", "translation_scores"]
+
+#: A projection behind the camera counts as this pixel (``np.nan_to_num(nan=1e6)`` before).
+_BEHIND_PX = 1e6
+#: A projection behind the camera lies this far off every detection (``batch._FAR_PX``).
+_FAR_PX = 1e9
+
+
+@njit(cache=True, nogil=True)
+def check_many(
+    K: NDArray, L: NDArray, det: NDArray, a: NDArray, R: NDArray, t: NDArray,
+    prior_R: NDArray, prior_C: NDArray, sigmas: NDArray,
+) -> tuple[NDArray, NDArray, NDArray]:
+    """Prior distance and fit of H hypotheses: ``(prior_sq (H,), chi (H,), far (H,))``.
+
+    Args:
+        K: (3, 3) intrinsics.
+        L: (M, 3) landmarks.
+        det: (N, 2) detections (assigned rows are finite).
+        a: (H, N) landmark of each detection, -1 when unassigned.
+        R: (H, 3, 3) the hypotheses' ``cam_from_world`` rotations.
+        t: (H, 3) their translations.
+        prior_R: (3, 3) the prior's rotation.
+        prior_C: (3,) the prior's camera centre.
+        sigmas: (6,) the prior's sigmas (position m, rotation rad).
+
+    ``prior_sq`` is the squared Mahalanobis distance of the pose difference of
+    :func:`localization.batch.pose_difference_many` (camera centre, world-frame rotation
+    vector); ``far`` marks rotations within about 8 degrees of pi from the prior's, where the
+    skew part loses the axis: the caller recomputes those with the exact logarithm. ``chi`` is
+    the sum of squared residuals of the pairs, px^2 (a point at or behind the camera counts as
+    projecting at (1e6, 1e6) px).
+    """
+    h_n, n = a.shape
+    prior_sq = np.empty(h_n)
+    chi = np.empty(h_n)
+    far = np.zeros(h_n, dtype=np.bool_)
+    for h in range(h_n):
+        Rh = R[h]
+        th = t[h]
+        # camera centre C = -R^T t
+        d0 = -(Rh[0, 0] * th[0] + Rh[1, 0] * th[1] + Rh[2, 0] * th[2]) - prior_C[0]
+        d1 = -(Rh[0, 1] * th[0] + Rh[1, 1] * th[1] + Rh[2, 1] * th[2]) - prior_C[1]
+        d2 = -(Rh[0, 2] * th[0] + Rh[1, 2] * th[1] + Rh[2, 2] * th[2]) - prior_C[2]
+        # Q = R^T prior_R (R_wc R_wc_prior^T), its rotation vector
+        Q = np.empty((3, 3))
+        for r in range(3):
+            for c in range(3):
+                Q[r, c] = Rh[0, r] * prior_R[0, c] + Rh[1, r] * prior_R[1, c] + Rh[2, r] * prior_R[2, c]
+        w0 = Q[2, 1] - Q[1, 2]
+        w1 = Q[0, 2] - Q[2, 0]
+        w2 = Q[1, 0] - Q[0, 1]
+        cos = min(max((Q[0, 0] + Q[1, 1] + Q[2, 2] - 1.0) / 2.0, -1.0), 1.0)
+        s = 0.5 * np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        k = 0.5 if s < 1e-12 else np.arctan2(s, cos) / (2.0 * s)
+        far[h] = cos <= -0.99
+        q = (d0 / sigmas[0]) ** 2 + (d1 / sigmas[1]) ** 2 + (d2 / sigmas[2]) ** 2
+        q += (w0 * k / sigmas[3]) ** 2 + (w1 * k / sigmas[4]) ** 2 + (w2 * k / sigmas[5]) ** 2
+        prior_sq[h] = q
+        total = 0.0
+        for i in range(n):
+            j = a[h, i]
+            if j < 0:
+                continue
+            x, y, z = _point(Rh, th, L, j)
+            if z > MIN_DEPTH:
+                u = (K[0, 0] * x + K[0, 1] * y) / z + K[0, 2]
+                v = K[1, 1] * y / z + K[1, 2]
+            else:
+                u = _BEHIND_PX
+                v = _BEHIND_PX
+            total += (u - det[i, 0]) ** 2 + (v - det[i, 1]) ** 2
+        chi[h] = total
+    return prior_sq, chi, far
+
+
+@njit(cache=True, nogil=True)
+def missed_many(
+    K: NDArray, L: NDArray, a: NDArray, R: NDArray, t: NDArray, width: int, height: int
+) -> NDArray:
+    """(H,) landmarks each hypothesis projects inside the image (in front) and leaves unassigned."""
+    h_n, n = a.shape
+    out = np.zeros(h_n, dtype=np.int64)
+    uv = np.empty((L.shape[0], 2))
+    hit = np.zeros(L.shape[0], dtype=np.bool_)
+    for h in range(h_n):
+        _candidates(K, R[h], t[h], L, width, height, 0.0, uv)
+        hit[:] = False
+        for i in range(n):
+            if a[h, i] >= 0:
+                hit[a[h, i]] = True
+        for j in range(L.shape[0]):
+            if not np.isnan(uv[j, 0]) and not hit[j]:
+                out[h] += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def anchor_pairs(det: NDArray, k: int) -> NDArray:
+    """(P, 2) every pair among ``k`` spread-out detections (N, 2) of the dense part of the image.
+
+    The algorithm of ``associate._anchor_pairs`` (whose docstring says why): detections whose
+    median squared distance to the others is at most the median of that (at least ``k`` of
+    them, the least spread out), then farthest-point selection starting from the one with the
+    largest sum of squared distances; pairs in selection order.
+    """
+    n = det.shape[0]
+    if n < 2:
+        return np.empty((0, 2), dtype=np.int64)
+    d2 = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            du = det[i, 0] - det[j, 0]
+            dv = det[i, 1] - det[j, 1]
+            d2[i, j] = du * du + dv * dv
+    if n > k:
+        spread = np.empty(n)
+        for i in range(n):
+            spread[i] = np.median(d2[i])
+        pool = np.flatnonzero(spread <= np.median(spread))
+        if pool.size < k:
+            pool = np.argsort(spread, kind="mergesort")[:k]
+    else:
+        pool = np.arange(n)
+    p = pool.size
+    sub = np.empty((p, p))
+    for i in range(p):
+        for j in range(p):
+            sub[i, j] = d2[pool[i], pool[j]]
+    chosen = np.empty(min(k, p), dtype=np.int64)
+    chosen[0] = np.argmax(sub.sum(axis=1))
+    dmin = sub[chosen[0]].copy()
+    for c in range(1, chosen.size):
+        chosen[c] = np.argmax(dmin)
+        for j in range(p):
+            dmin[j] = min(dmin[j], sub[chosen[c], j])
+    m = chosen.size
+    out = np.empty((m * (m - 1) // 2, 2), dtype=np.int64)
+    r = 0
+    for i in range(m):
+        for j in range(i + 1, m):
+            out[r, 0] = pool[chosen[i]]
+            out[r, 1] = pool[chosen[j]]
+            r += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def translation_scores(
+    det: NDArray, p: NDArray, shift: NDArray, K: NDArray, cap_sq: float
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """The layout seen from T moved cameras, scored against the detections.
+
+    Args:
+        det: (N, 2) finite detections.
+        p: (M, 3) camera-frame landmarks at the winner's pose.
+        shift: (T, 3) each translation in the camera frame (``t R^T``).
+        K: (3, 3) intrinsics.
+        cap_sq: squared gate.
+
+    Returns:
+        ``(uv (T, M, 2), depth (T, M), explained (T,), misfit (T,))``: projections (NaN at or
+        behind the camera) and depths after each move; how many detections have a projection
+        within the gate; and the sum over detections of the squared distance to the nearest
+        projection, capped at ``cap_sq`` (as ``batch.capped_nearest_sq``).
+    """
+    n_t, m = shift.shape[0], p.shape[0]
+    uv = np.empty((n_t, m, 2))
+    depth = np.empty((n_t, m))
+    explained = np.zeros(n_t, dtype=np.int64)
+    misfit = np.zeros(n_t)
+    for q in range(n_t):
+        for j in range(m):
+            x = p[j, 0] - shift[q, 0]
+            y = p[j, 1] - shift[q, 1]
+            z = p[j, 2] - shift[q, 2]
+            depth[q, j] = z
+            if z > MIN_DEPTH:
+                xs, ys = x / z, y / z
+                uv[q, j, 0] = xs * K[0, 0] + ys * K[0, 1] + K[0, 2]
+                uv[q, j, 1] = xs * K[1, 0] + ys * K[1, 1] + K[1, 2]
+            else:
+                uv[q, j, 0] = np.nan
+                uv[q, j, 1] = np.nan
+        for i in range(det.shape[0]):
+            best = np.inf
+            for j in range(m):
+                if np.isnan(uv[q, j, 0]):
+                    du = det[i, 0] - _FAR_PX
+                    dv = det[i, 1] - _FAR_PX
+                else:
+                    du = det[i, 0] - uv[q, j, 0]
+                    dv = det[i, 1] - uv[q, j, 1]
+                d = du * du + dv * dv
+                if d < best:
+                    best = d
+            best = min(best, cap_sq)
+            if best < cap_sq:
+                explained[q] += 1
+            misfit[q] += best
+    return uv, depth, explained, misfit
