@@ -6,7 +6,8 @@ and rank the hypotheses (1.2 ms median per image in the ``state`` training confi
 of it call overhead on arrays of 4-20 points). Here the same computations run as one loop each:
 
 - :func:`check_many` -- each refined hypothesis' squared Mahalanobis distance from the prior
-  and the chi-square of its pairs (``associate._Problem.prior_sq`` and ``chi_sq``);
+  (:func:`localization.compiled_pose.prior_distance_sq`) and
+  the chi-square of its pairs (``associate._Problem.prior_sq`` and ``chi_sq`` before);
 - :func:`missed_many` -- the landmarks each hypothesis predicts inside the image that it left
   unmatched (the miss term of the score);
 - :func:`anchor_pairs` -- the spread-out detections of the two-point hypotheses
@@ -27,6 +28,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from localization.compiled import MIN_DEPTH, _candidates, _point
+from localization.compiled_pose import prior_distance_sq
 
 __all__ = ["anchor_pairs", "check_many", "missed_many", "translation_scores"]
 
@@ -54,10 +56,7 @@ def check_many(
         prior_C: (3,) the prior's camera centre.
         sigmas: (6,) the prior's sigmas (position m, rotation rad).
 
-    ``prior_sq`` is the squared Mahalanobis distance of the pose difference of
-    :func:`localization.batch.pose_difference_many` (camera centre, world-frame rotation
-    vector); ``far`` marks rotations within about 8 degrees of pi from the prior's, where the
-    skew part loses the axis: the caller recomputes those with the exact logarithm. ``chi`` is
+    ``prior_sq`` and ``far`` are :func:`localization.compiled_pose.prior_distance_sq`'s. ``chi`` is
     the sum of squared residuals of the pairs, px^2 (a point at or behind the camera counts as
     projecting at (1e6, 1e6) px).
     """
@@ -68,25 +67,7 @@ def check_many(
     for h in range(h_n):
         Rh = R[h]
         th = t[h]
-        # camera centre C = -R^T t
-        d0 = -(Rh[0, 0] * th[0] + Rh[1, 0] * th[1] + Rh[2, 0] * th[2]) - prior_C[0]
-        d1 = -(Rh[0, 1] * th[0] + Rh[1, 1] * th[1] + Rh[2, 1] * th[2]) - prior_C[1]
-        d2 = -(Rh[0, 2] * th[0] + Rh[1, 2] * th[1] + Rh[2, 2] * th[2]) - prior_C[2]
-        # Q = R^T prior_R (R_wc R_wc_prior^T), its rotation vector
-        Q = np.empty((3, 3))
-        for r in range(3):
-            for c in range(3):
-                Q[r, c] = Rh[0, r] * prior_R[0, c] + Rh[1, r] * prior_R[1, c] + Rh[2, r] * prior_R[2, c]
-        w0 = Q[2, 1] - Q[1, 2]
-        w1 = Q[0, 2] - Q[2, 0]
-        w2 = Q[1, 0] - Q[0, 1]
-        cos = min(max((Q[0, 0] + Q[1, 1] + Q[2, 2] - 1.0) / 2.0, -1.0), 1.0)
-        s = 0.5 * np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-        k = 0.5 if s < 1e-12 else np.arctan2(s, cos) / (2.0 * s)
-        far[h] = cos <= -0.99
-        q = (d0 / sigmas[0]) ** 2 + (d1 / sigmas[1]) ** 2 + (d2 / sigmas[2]) ** 2
-        q += (w0 * k / sigmas[3]) ** 2 + (w1 * k / sigmas[4]) ** 2 + (w2 * k / sigmas[5]) ** 2
-        prior_sq[h] = q
+        prior_sq[h], far[h] = prior_distance_sq(Rh, th, prior_R, prior_C, sigmas)
         total = 0.0
         for i in range(n):
             j = a[h, i]

@@ -12,6 +12,8 @@ Conventions (documented once, here, and tested against renders in ``tests/sim``)
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -207,9 +209,10 @@ def look_at(
 
 def rotation_angle_deg(R_a: ArrayLike, R_b: ArrayLike) -> float:
     """Geodesic angle between two rotations, ``angle(R_a.T @ R_b)``, in degrees."""
-    R = np.asarray(R_a, dtype=np.float64)[:3, :3].T @ np.asarray(R_b, dtype=np.float64)[:3, :3]
-    cos = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    return float(np.degrees(np.arccos(cos)))
+    R = (np.asarray(R_a, dtype=np.float64)[:3, :3].T @ np.asarray(R_b, dtype=np.float64)[:3, :3]).tolist()
+    # np.trace, np.clip and np.arccos's arithmetic on Python floats (a fifth of their overhead)
+    cos = min(max((R[0][0] + R[1][1] + R[2][2] - 1.0) / 2.0, -1.0), 1.0)
+    return math.degrees(math.acos(cos))
 
 
 def quat_wxyz_from_matrix(R: ArrayLike) -> NDArray[np.float64]:

@@ -451,8 +451,17 @@ def image_size_from_K(K: ArrayLike) -> tuple[int, int]:
 
 
 def _minor_spread_px(uv: NDArray[np.float64]) -> float:
-    """RMS distance of image points from their best-fit line, px (0 for fewer than 3 points)."""
-    if uv.shape[0] < 3:
+    """RMS distance of image points from their best-fit line, px (0 for fewer than 3 points).
+
+    The smaller singular value of the centred points over ``sqrt(N)``, from the smaller
+    eigenvalue of their 2 x 2 scatter matrix in closed form (an SVD per frame cost 30 us; the
+    closed form loses about 1e-5 px to cancellation on exactly collinear points, far below the
+    1-2 px threshold it is compared with).
+    """
+    n = uv.shape[0]
+    if n < 3:
         return 0.0
     centred = uv - uv.mean(axis=0)
-    return float(np.linalg.svd(centred, compute_uv=False)[-1] / np.sqrt(uv.shape[0]))
+    (a, b), (_, c) = (centred.T @ centred).tolist()
+    smaller = 0.5 * (a + c) - math.hypot(0.5 * (a - c), b)
+    return math.sqrt(max(smaller, 0.0) / n)

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.batch import refine_many, to_transforms
+from localization.compiled_pose import covariance, prior_distance_sq
 from localization.failure import FailureCode
 from localization.geometry import (
     as_points,
@@ -210,17 +211,12 @@ def pose_covariance(
     known correspondences. Returns an all-inf matrix when the information is singular (fewer than
     three points, or a degenerate layout).
     """
-    J, _ = pose_jacobian(K, cam_from_world, points_xyz)
-    info = J.T @ J
-    if not np.all(np.isfinite(info)):
-        return np.full((6, 6), np.inf)
-    # scale columns so position (m) and angle (rad) are comparable before judging conditioning
-    d = np.sqrt(np.maximum(np.diag(info), 1e-300))
-    scaled = info / np.outer(d, d)
-    if np.linalg.cond(scaled) > 1e12:
-        return np.full((6, 6), np.inf)
-    cov = np.linalg.inv(scaled) / np.outer(d, d)
-    return pixel_sigma**2 * 0.5 * (cov + cov.T)
+    T = np.asarray(cam_from_world, dtype=np.float64)
+    X = np.ascontiguousarray(np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3))
+    return covariance(  # compiled: the information matrix point by point (pose_jacobian's rows)
+        np.ascontiguousarray(K, dtype=np.float64), np.ascontiguousarray(T[:3, :3]), camera_center(T), X,
+        float(pixel_sigma),
+    )
 
 
 def pose_difference(cam_from_world: ArrayLike, reference_cam_from_world: ArrayLike) -> NDArray[np.float64]:
@@ -244,7 +240,15 @@ def prior_mahalanobis_sq(
     vector ``log(R_wc @ R_wc_prior.T)`` divided by ``sigmas.rotation_rad`` about x, y, z.
     """
     sig = (sigmas or PriorSigmas()).as_array()
-    return float(np.sum((pose_difference(cam_from_world, prior_cam_from_world) / sig) ** 2))
+    T = np.asarray(cam_from_world, dtype=np.float64)
+    P = np.asarray(prior_cam_from_world, dtype=np.float64)
+    q, far = prior_distance_sq(  # compiled; near pi from the prior's rotation the exact logarithm
+        np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]), np.ascontiguousarray(P[:3, :3]),
+        camera_center(P), sig,
+    )
+    if far:
+        return float(np.sum((pose_difference(T, P) / sig) ** 2))
+    return float(q)
 
 
 # --------------------------------------------------------------------------------------------

@@ -95,3 +95,35 @@ def test_translation_scores_is_the_capped_nearest_distance_after_each_move(rng):
         assert explained[q] == np.sum(nearest < 400.0)
     assert explained[0] == 6 and misfit[0] < 6 * 4.0  # no move: every detection within noise
     assert np.isnan(uv[-1]).all() and explained[-1] == 0 and misfit[-1] == 6 * 400.0
+
+
+def test_pose_covariance_is_the_inverse_information_of_pose_jacobian(rng):
+    from localization.pnp import pose_covariance, pose_jacobian
+
+    for _ in range(40):
+        T = _views(rng, 1)[0]
+        X = rng.uniform(-6, 6, (int(rng.integers(4, 20)), 3))
+        J, _ = pose_jacobian(PAPER_K, T, X)
+        want = 0.7**2 * np.linalg.inv(J.T @ J)
+        got = pose_covariance(PAPER_K, T, X, 0.7)
+        np.testing.assert_allclose(got, want, rtol=1e-7, atol=1e-14)
+        np.testing.assert_array_equal(got, got.T)
+    # two points, collinear points, a point at the camera centre: singular, all inf
+    T = _views(rng, 1)[0]
+    line = np.outer(np.linspace(0, 1, 6), [1.0, 2.0, 0.5])
+    at_centre = np.vstack([rng.uniform(-6, 6, (5, 3)), camera_center(T)])
+    for X in (rng.uniform(-6, 6, (2, 3)), line, at_centre):
+        assert np.isinf(pose_covariance(PAPER_K, T, X)).all()
+
+
+def test_prior_mahalanobis_sq_matches_the_pose_difference_also_near_pi(rng):
+    from localization.pnp import PriorSigmas, pose_difference, prior_mahalanobis_sq
+
+    sig = PriorSigmas().as_array()
+    T = _views(rng, 1)[0]
+    for angle in (0.0, 1e-9, 0.3, 2.0, np.pi - 0.05, np.pi):  # the last two take the exact logarithm
+        P = T.copy()
+        P[:3, :3] = T[:3, :3] @ so3_exp(angle * np.array([0.6, 0.0, 0.8]))
+        P[:3, 3] += [1.0, -2.0, 0.5]
+        want = float(np.sum((pose_difference(T, P) / sig) ** 2))
+        assert prior_mahalanobis_sq(T, P) == pytest.approx(want, rel=1e-9)
