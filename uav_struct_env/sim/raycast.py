@@ -231,15 +231,32 @@ def raycast_visibility(
     T = check_transform("cam_from_world", cam_from_world)
     if not isinstance(camera, Camera):
         raise TypeError(f"camera must be a uav_struct_env.sim.camera.Camera, got {type(camera).__name__}")
-    R, t = T[:3, :3], T[:3, 3]
+    R, t = np.ascontiguousarray(T[:3, :3]), T[:3, 3]
     K_inv = np.linalg.inv(camera.K)
 
     def ray_depths(rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.float64]:
-        pixels = np.stack([cols.ravel(), rows.ravel(), np.ones(cols.size)], axis=1).astype(np.float64)
-        rays_cam = pixels @ K_inv.T  # z = 1: a hit's t is its depth
-        depth = scene.first_hit(-R.T @ t, rays_cam @ R, t_min=camera.near)
+        rays = _pixel_rays(rows.ravel(), cols.ravel(), K_inv, R)
+        depth = scene.first_hit(-R.T @ t, rays, t_min=camera.near)
         return np.minimum(depth, camera.far).reshape(rows.shape)
 
     # The depth is exact (no buffer quantization): the tolerance of a 24-bit buffer.
     return window_visibility(xyz, ids_arr, T, camera, ray_depths, radius=radius, abs_tol=abs_tol,
                              rel_tol=rel_tol, depth_bits=24)
+
+
+@njit(cache=True, nogil=True)
+def _pixel_rays(rows: NDArray, cols: NDArray, K_inv: NDArray, R: NDArray) -> NDArray:
+    """(n, 3) world-frame directions of the rays through pixel centres ``(cols, rows)``.
+
+    ``R^T K^-1 (u, v, 1)``: the camera-frame direction has z = 1, so a hit's ray parameter is its
+    depth along the optical axis.
+    """
+    out = np.empty((rows.shape[0], 3))
+    for i in range(rows.shape[0]):
+        u, v = float(cols[i]), float(rows[i])
+        c0 = u * K_inv[0, 0] + v * K_inv[0, 1] + K_inv[0, 2]
+        c1 = u * K_inv[1, 0] + v * K_inv[1, 1] + K_inv[1, 2]
+        c2 = u * K_inv[2, 0] + v * K_inv[2, 1] + K_inv[2, 2]
+        for a in range(3):
+            out[i, a] = c0 * R[0, a] + c1 * R[1, a] + c2 * R[2, a]
+    return out
