@@ -48,6 +48,7 @@ holds only SB3's ``vecnormalize.pkl``; it is read only with ``--trust-pickle``.
 
 from __future__ import annotations
 
+import json
 import pickle
 import sys
 import time
@@ -72,7 +73,8 @@ from uav_struct_env.validate import (
 POLICIES = ("ppo", *BASELINES)
 DEFAULTS: dict[str, Any] = {
     "model": None,
-    "config": "state",
+    "config": None,
+    "association": None,
     "episodes": 20,
     "seed": 10_000,
     "policies": POLICIES,
@@ -338,8 +340,10 @@ def check_options(opt: dict[str, Any]) -> None:
     bad = [p for p in opt["policies"] if p not in POLICIES]
     if bad:
         raise ValueError(f"unknown policies {bad}; valid: {POLICIES}")
-    if opt["config"] not in TRAIN_CONFIGS:
+    if opt["config"] is not None and opt["config"] not in TRAIN_CONFIGS:
         raise ConfigError(f"config must be one of {sorted(TRAIN_CONFIGS)}, got {opt['config']!r}")
+    if opt["association"] not in (None, "paper", "robust"):
+        raise ConfigError(f"association must be 'paper' or 'robust', got {opt['association']!r}")
     check_option("episodes", opt["episodes"], 1, integer=True)
     check_option("seed", opt["seed"], 0, integer=True)
     if opt["max_cycles"] is not None:
@@ -362,6 +366,54 @@ def check_options(opt: dict[str, Any]) -> None:
             check_output_file(path, overwrite=opt["overwrite"], option=option)
 
 
+def env_config(opt: dict[str, Any]) -> tuple[Any, str]:
+    """The configuration to evaluate in, and where it came from.
+
+    ``--config NAME``: that :data:`~uav_struct_env.wrappers.TRAIN_CONFIGS` entry (for instance to
+    evaluate a policy under another association than it was trained with). Otherwise the
+    configuration the runs recorded in ``train.json`` (all the same, or refused), so a run keeps
+    its meaning when the named configuration changes; ``state`` for runs that recorded none and
+    for baselines alone. ``--association`` and ``--max-cycles`` apply on top.
+
+    Raises:
+        UsageError: if the runs recorded different configurations.
+    """
+    from uav_struct_env.training.policy_files import recorded_config
+    from uav_struct_env.wrappers import TRAIN_CONFIGS
+
+    if opt["config"] is not None:
+        config, source = TRAIN_CONFIGS[opt["config"]], f"--config {opt['config']}"
+    else:
+        models = opt["model"] if "ppo" in opt["policies"] else None
+        runs = list(opt["checkpoints"] or ()) or model_folders(models)
+        try:
+            found = {run: recorded_config(run) for run in runs}
+        except ValueError as err:
+            raise UsageError(str(err)) from None
+        recorded = {run: c for run, c in found.items() if c is not None}
+        if len({json.dumps(c.as_dict(), sort_keys=True) for c in recorded.values()}) > 1:
+            raise UsageError(
+                "the runs were trained in different configurations: "
+                + "; ".join(f"{run}: {c.as_dict()}" for run, c in recorded.items())
+                + " -- evaluate them separately, or pass --config to evaluate all in one"
+            )
+        if recorded:
+            config, source = next(iter(recorded.values())), "recorded by the run(s) in train.json"
+        elif runs:
+            config, source = TRAIN_CONFIGS["state"], (
+                "the runs recorded no configuration: `state` as named now; runs trained before "
+                "it switched to robust association (2026-11-25) used paper: --association paper"
+            )
+        else:
+            config, source = TRAIN_CONFIGS["state"], "state"
+    if opt["association"] is not None:
+        config = config.replace(wrapper={"mode": opt["association"]})
+        source += f"; --association {opt['association']}"
+    if opt["max_cycles"] is not None:
+        config = config.replace(env={"max_cycles": opt["max_cycles"]})
+    return config, source
+
+
 def main(**kwargs: Any) -> dict[str, Any]:
     """Evaluate; returns ``{policy: summary}``. Keys: see :data:`DEFAULTS`."""
     unknown = sorted(set(kwargs) - set(DEFAULTS))
@@ -373,8 +425,9 @@ def main(**kwargs: Any) -> dict[str, Any]:
     warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
     from uav_struct_env.wrappers import make_train_env
 
-    overrides = {} if opt["max_cycles"] is None else {"max_cycles": opt["max_cycles"]}
-    env = make_train_env(opt["config"], **overrides)
+    config, source = env_config({**opt, "policies": policies})
+    print(f"environment: {config.name}, {config.wrapper.get('mode')} association ({source})")
+    env = make_train_env(config)
     seeds = [opt["seed"] + i for i in range(opt["episodes"])]
     if opt["checkpoints"]:
         try:
@@ -383,7 +436,7 @@ def main(**kwargs: Any) -> dict[str, Any]:
             env.close()
         if opt["plot"]:
             plot_curve(curves, opt["plot"])
-        summary = {"options": opt, "seeds": seeds, "learning_curve": curves}
+        summary = {"options": opt, "env_config": config.as_dict(), "seeds": seeds, "learning_curve": curves}
         if opt["json_out"]:
             atomic_write_json(opt["json_out"], summary, indent=2, default=str)
         for run, points in curves.items():
@@ -420,7 +473,8 @@ def main(**kwargs: Any) -> dict[str, Any]:
         plot(results, opt["plot"])
     for r in results.values():
         del r["_final"]
-    summary = {"options": {**opt, "policies": policies}, "seeds": seeds, "results": results}
+    summary = {"options": {**opt, "policies": policies}, "env_config": config.as_dict(), "seeds": seeds,
+               "results": results}
     if opt["json_out"]:
         atomic_write_json(opt["json_out"], summary, indent=2, default=str)
     print(table(results))
@@ -431,7 +485,11 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p = CommandParser(prog="evaluate_policy.py", description=__doc__.split("\n\n")[0])
     p.add_argument("--model", default=None, nargs="+", metavar="RUN",
                    help="folder(s) with model.zip and normalization.npz (several: one per training seed)")
-    p.add_argument("--config", default=DEFAULTS["config"], help="TRAIN_CONFIGS name: state | image")
+    p.add_argument("--config", default=DEFAULTS["config"],
+                   help="TRAIN_CONFIGS name (state | image); default: the configuration the runs "
+                   "recorded in train.json (state when none did)")
+    p.add_argument("--association", default=None, choices=("paper", "robust"),
+                   help="evaluate with this association instead of the configuration's")
     p.add_argument("--episodes", type=int, default=DEFAULTS["episodes"], help="episodes per policy")
     p.add_argument("--seed", type=int, default=DEFAULTS["seed"], help="seed of the first episode")
     p.add_argument("--policies", nargs="+", default=list(POLICIES), choices=POLICIES)

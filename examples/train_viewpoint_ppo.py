@@ -257,20 +257,23 @@ def main(**kwargs: Any) -> dict[str, Any]:
         "n_agent_slots": n,
         # what --config named when this run trained (env overrides and wrapper options), and the
         # code that trained it: a later change of the named config does not change this record
-        "train_config": _resolved_config(opt["config"]),
+        "train_config": _resolved_config(opt["config"], opt["max_cycles"]),
         "software": made_by,
     }
     atomic_write_json(out / "train.json", summary, indent=2)
     return summary
 
 
-def _resolved_config(name: str) -> dict[str, Any]:
-    """The named training configuration's env overrides and wrapper options, JSON-ready."""
-    from uav_struct_env.study.cells import json_ready
+def _resolved_config(name: str, max_cycles: int | None) -> dict[str, Any]:
+    """The configuration trained on (the named one with ``--max-cycles`` applied), JSON-ready.
+
+    ``evaluate_policy.py`` rebuilds the env from it, so a run keeps its meaning when the named
+    configuration changes later (as ``state`` did from ``paper`` to ``robust`` association).
+    """
     from uav_struct_env.wrappers import TRAIN_CONFIGS
 
     c = TRAIN_CONFIGS[name]
-    return json_ready({"name": c.name, "preset": c.preset, "env": c.env, "wrapper": c.wrapper})
+    return (c if max_cycles is None else c.replace(env={"max_cycles": max_cycles})).as_dict()
 
 
 def _parse(argv: list[str] | None = None) -> dict[str, Any]:

@@ -15,7 +15,7 @@ import pytest
 pytest.importorskip("stable_baselines3")
 pytest.importorskip("supersuit")
 
-from uav_struct_env.errors import UsageError  # noqa: E402
+from uav_struct_env.errors import ConfigError, UsageError  # noqa: E402
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -58,7 +58,8 @@ def test_train_writes_model_normalization_logs_and_checkpoints(trained):
     from uav_struct_env.wrappers import TRAIN_CONFIGS
 
     assert record["train_config"]["wrapper"] == TRAIN_CONFIGS["state"].wrapper
-    assert record["train_config"]["env"]["max_cycles"] == TRAIN_CONFIGS["state"].env["max_cycles"]
+    assert record["train_config"]["wrapper"]["mode"] == "robust"  # the training default
+    assert record["train_config"]["env"]["max_cycles"] == 8  # --max-cycles, as trained
     assert record["software"]["package"] == "uav-struct-env" and record["software"]["version"]
     steps = sorted(d.name for d in (out / "checkpoints").glob("step_*"))
     assert steps == ["step_000000128", "step_000000256"]
@@ -120,6 +121,52 @@ def test_evaluate_compares_all_policies_on_the_same_seeds(trained, tmp_path, mon
     assert starts == starts[:2] * 5
     assert (tmp_path / "eval.png").stat().st_size > 1000
     assert json.loads((tmp_path / "eval.json").read_text())["seeds"] == [10_000, 10_001]
+
+
+def test_evaluate_builds_the_env_each_run_recorded(trained, tmp_path):
+    """A run is evaluated in the configuration it recorded, not in what its name means today."""
+    out, _ = trained
+    evaluate = load("evaluate_policy")
+    old = tmp_path / "trained_with_paper"
+    shutil.copytree(out, old)
+    record = json.loads((old / "train.json").read_text())
+    record["train_config"]["wrapper"]["mode"] = "paper"
+    (old / "train.json").write_text(json.dumps(record))
+    summary = evaluate.main(model=str(old), policies=("ppo",), episodes=1)
+    assert summary["env_config"]["wrapper"]["mode"] == "paper"
+    assert summary["env_config"]["env"]["max_cycles"] == 8  # as trained, not the config's 30
+    over = evaluate.main(model=str(old), policies=("ppo",), episodes=1, association="robust", max_cycles=2)
+    assert over["env_config"]["wrapper"]["mode"] == "robust" and over["env_config"]["env"]["max_cycles"] == 2
+    # a checkpoint folder finds its run's train.json two levels up
+    step = sorted((old / "checkpoints").glob("step_*"))[0]
+    from_step = evaluate.main(model=str(step), policies=("ppo",), episodes=1)
+    assert from_step["env_config"]["wrapper"]["mode"] == "paper"
+    with pytest.raises(UsageError, match="trained in different configurations.*evaluate them separately"):
+        evaluate.main(model=[str(out), str(old)], policies=("ppo",), episodes=1)
+    # both, under one named configuration
+    both = evaluate.main(model=[str(out), str(old)], policies=("ppo",), episodes=1, config="state",
+                         max_cycles=2)
+    assert both["env_config"]["wrapper"]["mode"] == "robust"
+    with pytest.raises(ConfigError, match="association must be 'paper' or 'robust', got 'best'"):
+        evaluate.main(model=str(out), policies=("ppo",), episodes=1, association="best")
+    # a run from before the configuration was recorded: the named one as it is now
+    del record["train_config"]
+    (old / "train.json").write_text(json.dumps(record))
+    unrecorded = evaluate.main(model=str(old), policies=("ppo",), episodes=1, max_cycles=2)
+    assert unrecorded["env_config"]["name"] == "state"
+    (old / "train.json").write_text("{not json")
+    with pytest.raises(UsageError, match="is not a train.json written by train_viewpoint_ppo.py"):
+        evaluate.main(model=str(old), policies=("ppo",), episodes=1)
+
+
+def test_train_config_round_trips_through_json():
+    from uav_struct_env.wrappers import TRAIN_CONFIGS, TrainConfig
+
+    for config in TRAIN_CONFIGS.values():
+        back = TrainConfig.from_dict(json.loads(json.dumps(config.as_dict())))
+        assert back == config and isinstance(back.env["image_size"], tuple)
+    with pytest.raises(ConfigError, match="must be a mapping with keys"):
+        TrainConfig.from_dict({"name": "state", "env": {}})
 
 
 def test_several_training_runs_are_evaluated_and_pooled_with_their_spread(trained, tmp_path):

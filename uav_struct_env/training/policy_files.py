@@ -26,7 +26,14 @@ import numpy as np
 
 from uav_struct_env.outputs import atomic_path
 
-__all__ = ["NORMALIZATION_FILE", "ObsNormalizer", "load_normalization", "load_ppo", "save_normalization"]
+__all__ = [
+    "NORMALIZATION_FILE",
+    "ObsNormalizer",
+    "load_normalization",
+    "load_ppo",
+    "recorded_config",
+    "save_normalization",
+]
 
 #: File name of the observation statistics beside ``model.zip``.
 NORMALIZATION_FILE = "normalization.npz"
@@ -93,6 +100,45 @@ def load_normalization(path: str | Path) -> ObsNormalizer:
         if any(not np.all(np.isfinite(v)) or np.any(v < 0) for v in var.values()):
             raise ValueError(f"{str(path)!r}: variances must be finite and >= 0")
         return ObsNormalizer(mean, var, float(z["clip_obs"]), float(z["epsilon"]))
+
+
+def recorded_config(model_dir: str | Path) -> Any:
+    """The training configuration a run recorded (``train.json``'s ``train_config``), or None.
+
+    ``model_dir`` is a run folder or one of its ``checkpoints/step_<N>`` folders (the run's
+    ``train.json`` then lies two levels up). None when there is no ``train.json`` or it predates
+    the recorded configuration (then only the configuration's name is known, and what the name
+    means may have changed since).
+
+    Returns:
+        A :class:`uav_struct_env.wrappers.TrainConfig`, or None.
+
+    Raises:
+        ValueError: if ``train.json`` is not JSON or its ``train_config`` is malformed.
+    """
+    from uav_struct_env.errors import ConfigError
+    from uav_struct_env.wrappers.configs import TrainConfig
+
+    d = Path(model_dir)
+    candidates = [d / "train.json"]
+    if d.parent.name == "checkpoints":
+        candidates.append(d.parent.parent / "train.json")
+    for path in candidates:
+        if not path.is_file():
+            continue
+        try:
+            recorded = json.loads(path.read_text()).get("train_config")
+        except (json.JSONDecodeError, AttributeError) as err:
+            raise ValueError(
+                f"{str(path)!r} is not a train.json written by train_viewpoint_ppo.py: {err}"
+            ) from None
+        if recorded is None:
+            return None
+        try:
+            return TrainConfig.from_dict(recorded)
+        except ConfigError as err:
+            raise ValueError(f"{str(path)!r}: {err}") from None
+    return None
 
 
 def load_ppo(path: str | Path, observation_space: Any, action_space: Any, *, device: str = "cpu"):

@@ -5,8 +5,9 @@ on 2 CPU cores (docs/training.md):
 
 * ``"state"``: state-only. No frame is rendered (``observe_image=False``): landmark visibility is
   ray-cast (:mod:`uav_struct_env.sim.raycast`); the policy sees ``gnss``, ``attitude``, ``pose``,
-  ``pose_std``, ``localized`` and ``layout``. Column tops, paper association on a clean projection
-  detector (1 px noise at the paper's resolution), ``error`` reward, 30-step episodes, random
+  ``pose_std``, ``localized`` and ``layout``. Column tops, robust association (the one that
+  fails rather than accept wrong identities) on a clean projection detector (1 px noise at the
+  paper's resolution), ``error`` reward, 30-step episodes, random
   starts 15-35 m out turned by up to +-60 deg of heading (some start views miss part of the
   structure).
 * ``"image"``: the same plus a low-resolution 64 x 36 RGB ``image`` (``MultiInputPolicy`` with
@@ -16,6 +17,7 @@ on 2 CPU cores (docs/training.md):
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -43,6 +45,29 @@ class TrainConfig:
             self, env={**self.env, **(env or {})}, wrapper={**self.wrapper, **(wrapper or {})}
         )
 
+    def as_dict(self) -> dict[str, Any]:
+        """The configuration as JSON-ready data (tuples as lists); :meth:`from_dict` reads it."""
+        return json.loads(json.dumps(
+            {"name": self.name, "preset": self.preset, "env": self.env, "wrapper": self.wrapper}
+        ))
+
+    @classmethod
+    def from_dict(cls, data: Any) -> TrainConfig:
+        """The configuration :meth:`as_dict` wrote (lists of the env back to tuples).
+
+        Raises:
+            ConfigError: if ``data`` is not such a mapping.
+        """
+        keys = {"name", "preset", "env", "wrapper"}
+        if (not isinstance(data, dict) or set(data) != keys
+                or not all(isinstance(data[k], dict) for k in ("env", "wrapper"))):
+            raise ConfigError(
+                f"a training configuration must be a mapping with keys {sorted(keys)} (env and "
+                f"wrapper mappings), got {data!r}"
+            )
+        env = {k: tuple(v) if isinstance(v, list) else v for k, v in data["env"].items()}
+        return cls(str(data["name"]), env, dict(data["wrapper"]), str(data["preset"]))
+
 
 _STATE_ENV = {
     "image_size": (128, 72),
@@ -53,7 +78,7 @@ _STATE_ENV = {
 _WRAPPER = {
     "landmarks": "column_tops",
     "detector": "projection",
-    "mode": "paper",
+    "mode": "robust",
     "reward": "error",
 }
 
