@@ -597,12 +597,16 @@ def associate_robust(
 
     def full(hyps: list[tuple[NDArray, NDArray]]) -> list[tuple[NDArray, NDArray]]:
         """Hypotheses on the finite detections as assignments of all rows, distinct, >= need pairs."""
-        out, seen = [], set()
-        for local_a, start in hyps:
-            a = np.full(n, -1, dtype=np.int64)
-            a[good] = local_a
+        out: list[tuple[NDArray, NDArray]] = []
+        if not hyps:
+            return out
+        A = np.full((len(hyps), n), -1, dtype=np.int64)
+        A[:, good] = np.stack([h[0] for h in hyps])
+        enough = ((A >= 0).sum(axis=1) >= need).tolist()
+        seen = set()
+        for a, (_, start), ok in zip(A, hyps, enough, strict=True):
             key = a.tobytes()
-            if key not in seen and (a >= 0).sum() >= need:
+            if key not in seen and ok:
                 seen.add(key)
                 out.append((a, start))
         return out
@@ -805,9 +809,10 @@ def _upright_hypotheses(
         local = assign_many(det, uv[block], gate_px)
         a = np.where(local >= 0, idx[np.maximum(local, 0)], -1)
         T = to_transforms(R[block], t[block])
+        pairs = (a >= 0).sum(axis=1).tolist()
         for q in range(block.size):
             key = a[q].tobytes()
-            if key in seen or int((a[q] >= 0).sum()) < min_pairs:
+            if key in seen or pairs[q] < min_pairs:
                 continue
             seen.add(key)
             out.append((a[q], T[q]))
