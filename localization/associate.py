@@ -809,10 +809,10 @@ def _upright_hypotheses(
         local = assign_many(det, uv[block], gate_px)
         a = np.where(local >= 0, idx[np.maximum(local, 0)], -1)
         T = to_transforms(R[block], t[block])
-        pairs = (a >= 0).sum(axis=1).tolist()
+        n_pairs = (a >= 0).sum(axis=1).tolist()
         for q in range(block.size):
             key = a[q].tobytes()
-            if key in seen or pairs[q] < min_pairs:
+            if key in seen or n_pairs[q] < min_pairs:
                 continue
             seen.add(key)
             out.append((a[q], T[q]))
