@@ -185,3 +185,14 @@ def test_first_hit_refuses_a_skip_list_of_the_wrong_length():
     scene = RayScene([])
     with pytest.raises(ValueError, match=r"skip_box must hold one box index per ray \(3\)"):
         scene.first_hit(np.zeros(3), np.ones((3, 3)), skip_box=[0, 1])
+
+
+def test_raycast_visibility_refuses_a_negative_window_radius():
+    from uav_struct_env.sim.raycast import raycast_visibility
+
+    camera = Camera()
+    pose = look_at(np.array([20.0, 0.0, 10.0]), np.zeros(3))
+    with pytest.raises(ValueError, match="radius"):
+        raycast_visibility(RayScene([]), np.zeros((1, 3)), [0], pose, camera, radius=-1)
+    out = raycast_visibility(RayScene([]), np.zeros((1, 3)), [0], pose, camera, radius=0)
+    assert out["in_frame"][0] and out["visible"][0]  # nothing in the scene hides it

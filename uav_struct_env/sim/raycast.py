@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from localization.checks import check_number
 from localization.geometry import as_points, check_transform
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.visibility import window_visibility
@@ -231,6 +232,7 @@ def raycast_visibility(
     T = check_transform("cam_from_world", cam_from_world)
     if not isinstance(camera, Camera):
         raise TypeError(f"camera must be a uav_struct_env.sim.camera.Camera, got {type(camera).__name__}")
+    check_number("radius (pixels)", radius, 0, integer=True, type_error=ValueError)
     R, t = np.ascontiguousarray(T[:3, :3]), T[:3, 3]
     K_inv = np.linalg.inv(camera.K)
 
