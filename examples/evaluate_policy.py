@@ -48,7 +48,6 @@ holds only SB3's ``vecnormalize.pkl``; it is read only with ``--trust-pickle``.
 
 from __future__ import annotations
 
-import json
 import pickle
 import sys
 import time
@@ -391,7 +390,7 @@ def env_config(opt: dict[str, Any]) -> tuple[Any, str]:
         except ValueError as err:
             raise UsageError(str(err)) from None
         recorded = {run: c for run, c in found.items() if c is not None}
-        if len({json.dumps(c.as_dict(), sort_keys=True) for c in recorded.values()}) > 1:
+        if any(c != next(iter(recorded.values())) for c in recorded.values()):
             raise UsageError(
                 "the runs were trained in different configurations: "
                 + "; ".join(f"{run}: {c.as_dict()}" for run, c in recorded.items())

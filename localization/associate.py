@@ -64,7 +64,6 @@ from scipy.stats import chi2
 from localization.ambiguity import AMBIGUITY_MARGIN, ambiguity, translation_hypotheses
 from localization.batch import (
     assign_many,
-    pose_difference_many,
     project_many,
     rotation_between,
     to_transforms,
@@ -422,8 +421,7 @@ class _Problem:
             np.ascontiguousarray(self.prior[:3, :3]), camera_center(self.prior), self.sig.as_array(),
         )
         for h in np.flatnonzero(far):  # rotations near pi from the prior's: the exact logarithm
-            d = pose_difference_many(R[h : h + 1], t[h : h + 1], self.prior)
-            prior_sq[h] = float(np.sum((d / self.sig.as_array()) ** 2))
+            prior_sq[h] = prior_mahalanobis_sq(T[h], self.prior, self.sig)
         return prior_sq, chi / self.pixel_sigma**2
 
     def nll(
