@@ -48,7 +48,8 @@ bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in d
 # patch refiner mined from that network's candidates (~2 + 15 min), into $(DETECTOR_RUN).
 # The data is what an active site through a real camera looks like: site activity none, light and
 # busy in turn over the layouts (--activity mixed) and every other image through the Mavic 2 Pro
-# preset (--camera mixed: lens distortion, rolling shutter, motion blur), on random sites and on
+# preset (--camera mixed: lens distortion, rolling shutter, motion blur), every other pair of images
+# through the camera imaging (--imaging mixed: optics blur, sensor noise, JPEG), on random sites and on
 # the duplex IFC building (tests/data/ifc/duplex.ifc, at its stages). The default weights
 # landmarks_v1 were trained with the same commands on bare sites through the pinhole
 # (DATASET without --activity/--camera, 200x15 + 6x10 and 150x10 + 6x10 images, no IFC sets).
@@ -58,7 +59,7 @@ bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in d
 # replaces the folder it finds there (--overwrite): a stale or half-written earlier run.
 DETECTOR_RUN ?= runs/detector
 DATA := $(DETECTOR_RUN)/data
-DATASET := $(BIN)/python -m uav_struct_env.datasets --activity mixed --camera mixed --overwrite
+DATASET := $(BIN)/python -m uav_struct_env.datasets --activity mixed --camera mixed --imaging mixed --overwrite
 IFC_BUILDING := tests/data/ifc/duplex.ifc
 KEYPOINT_DATA := $(DATA)/keypoint_train $(DATA)/keypoint_ifc
 REFINER_DATA := $(DATA)/refiner_train $(DATA)/refiner_ifc

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from uav_struct_env.datasets.landmarks import ACTIVITIES, CAMERAS, DatasetConfig, generate
+from uav_struct_env.datasets.landmarks import ACTIVITIES, CAMERAS, IMAGINGS, DatasetConfig, generate
 from uav_struct_env.outputs import OutputExistsError
 from uav_struct_env.processes import WorkerDied
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_option, check_output_dir, refuse
@@ -30,6 +30,10 @@ def main(argv: list[str] | None = None) -> int:
                          "(lens distortion, rolling shutter "
                          "and motion blur of the DJI Mavic 2 Pro, the camera moving within the UAV's "
                          "flight limits) or mixed (every other image mavic2pro)")
+    ap.add_argument("--imaging", default="ideal", choices=IMAGINGS,
+                    help="ideal (the render as it is), camera (optics blur, sensor noise and a JPEG "
+                         "round trip on every image, as the env's imaging='camera') or mixed (every "
+                         "other pair of images)")
     ap.add_argument("--workers", type=int, default=1, help="rendering processes")
     ap.add_argument("--overwrite", action="store_true",
                     help="replace a dataset already in out_dir (otherwise such a folder is refused)")
@@ -38,7 +42,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         config = DatasetConfig(n_layouts=args.layouts, views_per_layout=args.views, seed=args.seed,
                                scale=args.scale, renderer=args.renderer, site=args.site,
-                               activity=args.activity, camera=args.camera)
+                               activity=args.activity, camera=args.camera,
+                               imaging=args.imaging)
         check_option("--workers", args.workers, 1, integer=True)
         check_output_dir(args.out_dir, overwrite=args.overwrite, option="out_dir")
     except INPUT_ERRORS as err:

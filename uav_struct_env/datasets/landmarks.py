@@ -32,6 +32,16 @@ vertical) plus a gimbal pitch rate (+-90 deg/s, about the camera's x axis), all 
 lights are those of the ``paper`` dataset of the same seed. The pose in ``cam_from_world`` is
 the pose at the middle row's exposure (the time convention of :mod:`uav_struct_env.sim.lens`).
 
+**Imaging** (``imaging``, :data:`IMAGINGS`). ``"ideal"`` (the default) saves the render as it is.
+``"camera"`` passes every delivered full-resolution image (after the lens, before downscaling)
+through :data:`uav_struct_env.sim.imaging.IMAGING_PRESETS` ``["camera"]`` -- optics blur, shot and
+read noise, a JPEG round trip: the env's and the study's ``imaging="camera"``, so that a
+``camera="mavic2pro", imaging="camera"`` view is the study's *realistic* imaging. ``"mixed"``
+gives it to image ``n`` when ``n // 2`` is odd: with ``camera="mixed"`` a quarter of the images
+each of pinhole / Mavic x ideal / camera imaging. Its noise is drawn from
+``numpy.random.default_rng([seed, layout, 3])`` (its own stream again), recorded as each such
+image's ``"imaging": "camera"``.
+
 Images are rendered at the paper's 1280 x 720 and downscaled by ``scale`` with
 ``cv2.INTER_AREA`` -- exactly what the detector does at inference -- so training and inference
 images come from the same pipeline.
@@ -50,13 +60,15 @@ images come from the same pipeline.
                                          ...a real camera's view only:
                                          "camera": "mavic2pro", "distortion": [k1, k2, p1, p2, k3],
                                          "velocity": [vx, vy, vz], "angular_velocity": [wx, wy, wz],
-                                         ...with activity "mixed" only: "activity": "busy"},
+                                         ...with activity "mixed" only: "activity": "busy",
+                                         ...camera imaging only: "imaging": "camera"},
                                         ...]}
 
 The real-camera keys (world velocities, m/s and rad/s) appear only on such views, so a
 ``paper`` dataset is byte for byte what the generator wrote before it had cameras (its
-``config`` has no ``camera`` either); :func:`load_labels` fills in ``"camera": "paper"`` and zero
-distortion and motion for such views and configs, so readers need no special case.
+``config`` has no ``camera`` either; likewise ``imaging`` for an ``ideal`` one);
+:func:`load_labels` fills in ``"camera": "paper"``, ``"imaging": "ideal"`` and zero distortion and
+motion for such views and configs, so readers need no special case.
 
 ``keypoints`` are the *visible* landmarks (in frame and not occluded, from
 :meth:`SiteWorld.landmark_truth`; through a real camera :meth:`LensView.landmark_truth`, so
@@ -85,18 +97,21 @@ from localization.geometry import look_at
 from localization.synthetic import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.camera import Camera
+from uav_struct_env.sim.imaging import IMAGING_PRESETS
 from uav_struct_env.sim.lens import CAMERA_MODELS, LensView, Motion
 from uav_struct_env.sim.uav import FlightLimits
 from uav_struct_env.site import Site, make_site, random_site
 from uav_struct_env.site.activity import ACTIVITY_PRESETS, SiteActivity
 
-__all__ = ["CAMERAS", "LANDMARK_TYPES", "DatasetConfig", "generate", "load_labels", "render_layout"]
+__all__ = ["CAMERAS", "IMAGINGS", "LANDMARK_TYPES", "DatasetConfig", "generate", "load_labels", "render_layout"]
 
 #: Heatmap channel order of the learned detector.
 LANDMARK_TYPES = ("column_tops", "slab_corners", "opening_corners")
 FORMAT = "uav-struct-landmarks-v1"
 #: The generator's ``camera`` choices (module docstring, "Camera").
 CAMERAS = ("paper", "mavic2pro", "mixed")
+#: The generator's ``imaging`` choices (module docstring, "Imaging").
+IMAGINGS = ("ideal", "camera", "mixed")
 #: The generator's ``activity`` choices: the presets of :mod:`uav_struct_env.site.activity`, or
 #: ``"mixed"`` (each layout one of them in turn).
 ACTIVITIES = (*ACTIVITY_PRESETS, "mixed")
@@ -125,6 +140,7 @@ class DatasetConfig:
     site: str = "random"
     activity: str = "none"
     camera: str = "paper"
+    imaging: str = "ideal"
 
     def __post_init__(self) -> None:
         if not isinstance(self.site, str) or not (
@@ -139,6 +155,7 @@ class DatasetConfig:
             object.__setattr__(self, "site", str(Path(self.site).resolve()))
         check_choice("DatasetConfig.activity", self.activity, ACTIVITIES, error=ConfigError)
         check_choice("DatasetConfig.camera", self.camera, CAMERAS, error=ConfigError)
+        check_choice("DatasetConfig.imaging", self.imaging, IMAGINGS, error=ConfigError)
         for name in ("n_layouts", "views_per_layout", "seed"):
             v = getattr(self, name)
             check_number(f"DatasetConfig.{name}", v, 0 if name == "seed" else 1, integer=True,
@@ -228,6 +245,13 @@ def view_camera(config: DatasetConfig, layout: int, view: int) -> str:
     return "mavic2pro" if (layout * config.views_per_layout + view) % 2 else "paper"
 
 
+def view_imaging(config: DatasetConfig, layout: int, view: int) -> str:
+    """The imaging preset (``"ideal"`` or ``"camera"``) of view ``view`` of layout ``layout``."""
+    if config.imaging != "mixed":
+        return config.imaging
+    return "camera" if (layout * config.views_per_layout + view) // 2 % 2 else "ideal"
+
+
 def random_motion(
     rng: np.random.Generator, cam_from_world: NDArray[np.float64], limits: FlightLimits | None = None
 ) -> Motion:
@@ -257,18 +281,23 @@ def deliver_view(
     camera: Camera | LensView,
     out_size: tuple[int, int],
     motion: Motion | None = None,
+    imaging: tuple[str, np.random.Generator] | None = None,
 ) -> tuple[NDArray[np.uint8], list[list], NDArray[np.float64]]:
     """One view's saved image, ``keypoints`` and ``K`` from its render.
 
     ``rgb``/``depth`` are the render with ``camera`` (a :class:`LensView`: with its
     ``render_camera``, then warped through the lens with ``motion``); ``truth`` is
-    ``SiteWorld.landmark_truth`` of that render per :data:`LANDMARK_TYPES`. The image is
-    downscaled to ``out_size`` with ``cv2.INTER_AREA`` and the labels with it.
+    ``SiteWorld.landmark_truth`` of that render per :data:`LANDMARK_TYPES`. ``imaging`` (a preset
+    name of :data:`~uav_struct_env.sim.imaging.IMAGING_PRESETS` and the generator of its noise)
+    then degrades the full-resolution image. The image is downscaled to ``out_size`` with
+    ``cv2.INTER_AREA`` and the labels with it.
     """
     if isinstance(camera, LensView):
         rgb, _ = camera.warp(rgb, depth, cam_from_world, motion)
         truth = [camera.landmark_truth(t, cam_from_world, motion) for t in truth]
         camera = camera.camera
+    if imaging is not None:
+        rgb = IMAGING_PRESETS[imaging[0]].apply(rgb, imaging[1])
     out_w, out_h = out_size
     sx, sy = out_w / camera.width, out_h / camera.height
     keypoints = []
@@ -313,6 +342,7 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
     out_w, out_h = config.image_size
     # The real camera's motion: its own stream (the paper dataset's draws are unchanged).
     motion_rng = None if config.camera == "paper" else np.random.default_rng([config.seed, layout, 2])
+    imaging_rng = np.random.default_rng([config.seed, layout, 3])
     out = []
     with SiteWorld(site, renderer=config.renderer, image_size=config.source_size,
                    rng=rng.spawn(1)[0], texture_size=texture_size) as world:
@@ -331,14 +361,17 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
             render_cam = camera if name == "paper" else view_cam.render_camera
             result = world.render(cam_from_world, render_cam, depth=True)
             truth = [world.landmark_truth(t, cam_from_world, render_cam, result) for t in LANDMARK_TYPES]
+            imaging = view_imaging(config, layout, view)
             rgb, keypoints, K_out = deliver_view(result.rgb, result.depth, truth, cam_from_world, view_cam,
-                                                 (out_w, out_h), motion)
+                                                 (out_w, out_h), motion, (imaging, imaging_rng))
             extra = {} if name == "paper" else {
                 "camera": name, "distortion": view_cam.distortion.tolist(),
                 "velocity": motion.velocity.tolist(), "angular_velocity": motion.angular_velocity.tolist(),
             }
             if config.activity == "mixed":
                 extra["activity"] = level
+            if imaging != "ideal":
+                extra["imaging"] = imaging
             record = {"layout": layout, "view": view, "stage": stage,
                       "K": K_out.tolist(),
                       "cam_from_world": cam_from_world.tolist(), "keypoints": keypoints, **extra}
@@ -409,8 +442,9 @@ def generate(config: DatasetConfig, out_dir: str | Path, workers: int = 1,
 
 def _write_labels(path: Path, config: DatasetConfig, records: list[dict]) -> None:
     settings = asdict(config)
-    if config.camera == "paper":  # as written before the generator had cameras (load_labels fills it in)
-        del settings["camera"]
+    for key, default in (("camera", "paper"), ("imaging", "ideal")):
+        if settings[key] == default:  # as written before the generator had them (load_labels fills it in)
+            del settings[key]
     labels = {
         "format": FORMAT, "types": list(LANDMARK_TYPES), "image_size": list(config.image_size),
         "source_size": list(config.source_size), "scale": config.scale,
@@ -423,7 +457,7 @@ def load_labels(path: str | Path) -> dict:
     """Read a ``labels.json`` (or its directory) and check its format.
 
     A ``paper`` view's (and config's) camera keys are filled in: ``"camera": "paper"``, zero
-    ``distortion``, ``velocity`` and ``angular_velocity``.
+    ``distortion``, ``velocity`` and ``angular_velocity``; an ideal one's ``"imaging": "ideal"``.
     """
     path = Path(path)
     if path.is_dir():
@@ -433,8 +467,10 @@ def load_labels(path: str | Path) -> dict:
         raise ValueError(f"{path} is not a {FORMAT} label file (format={data.get('format')!r})")
     data["root"] = str(path.parent)
     data["config"].setdefault("camera", "paper")
+    data["config"].setdefault("imaging", "ideal")
     for record in data["images"]:
         record.setdefault("camera", "paper")
+        record.setdefault("imaging", "ideal")
         for key, n in (("distortion", 5), ("velocity", 3), ("angular_velocity", 3)):
             record.setdefault(key, [0.0] * n)
     return data
