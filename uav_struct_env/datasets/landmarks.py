@@ -103,7 +103,8 @@ from uav_struct_env.sim.uav import FlightLimits
 from uav_struct_env.site import Site, make_site, random_site
 from uav_struct_env.site.activity import ACTIVITY_PRESETS, SiteActivity
 
-__all__ = ["CAMERAS", "IMAGINGS", "LANDMARK_TYPES", "DatasetConfig", "generate", "load_labels", "render_layout"]
+__all__ = ["CAMERAS", "IMAGINGS", "LANDMARK_TYPES", "DatasetConfig", "generate", "load_labels",
+           "render_layout"]
 
 #: Heatmap channel order of the learned detector.
 LANDMARK_TYPES = ("column_tops", "slab_corners", "opening_corners")
