@@ -13,9 +13,10 @@ network, ``cv2.setNumThreads(1)``; all images are rendered before the timed dete
     python benchmarks/detector.py --refiner none --threshold 0.45 --no-votes   # network alone
     python benchmarks/detector.py --no-votes --baseline   # A/B against the default, interleaved
     python benchmarks/detector.py --activity mixed --camera mixed   # an active site, a real camera
+    python benchmarks/detector.py --activity busy --camera mavic2pro --imaging camera   # + noise, JPEG
     python benchmarks/detector.py --site tests/data/ifc/duplex.ifc   # a real (IFC) building
 
-``--activity``, ``--camera`` and ``--site`` are the dataset generator's options
+``--activity``, ``--camera``, ``--imaging`` and ``--site`` are the dataset generator's options
 (:mod:`uav_struct_env.datasets.landmarks`); the labels are where each landmark appears in the
 delivered (distorted) image, so detections are compared there.
 
@@ -38,13 +39,13 @@ from tqdm import tqdm
 
 from localization.learned import LANDMARK_TYPES, LearnedDetector, match_detections
 from uav_struct_env.datasets import DatasetConfig, render_layout
-from uav_struct_env.datasets.landmarks import ACTIVITIES, CAMERAS
+from uav_struct_env.datasets.landmarks import ACTIVITIES, CAMERAS, IMAGINGS
 
 
 def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0,
          threads: int = 1, json_out: str | None = None, baseline: bool = False,
          activity: str = "none", camera: str = "paper", site: str = "random",
-         **detector_kwargs) -> dict:
+         imaging: str = "ideal", **detector_kwargs) -> dict:
     """Run the benchmark; ``detector_kwargs`` go to :class:`LearnedDetector` (None: default).
 
     ``baseline``: also time the default detector at the same operating point, interleaved.
@@ -58,7 +59,7 @@ def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0
         base = LearnedDetector("all", threads=threads, **point)
     base_latencies = []
     config = DatasetConfig(n_layouts=layouts, views_per_layout=views, seed=seed, scale=1.0,
-                           activity=activity, camera=camera, site=site)
+                           activity=activity, camera=camera, site=site, imaging=imaging)
     counts = {t: {"tp": 0, "fp": 0, "fn": 0, "err": []} for t in LANDMARK_TYPES}
     latencies = []
     n_images = 0
@@ -87,13 +88,14 @@ def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0
             c["err"] += d[m >= 0].tolist()
     lat = np.array(latencies) * 1e3
     report = {"seed": seed, "layouts": layouts, "views": views, "images": n_images,
-              "activity": activity, "camera": camera, "site": site,
+              "activity": activity, "camera": camera, "imaging": imaging, "site": site,
               "match_px": match_px, "threads": threads, "detector": repr(det),
               "latency_ms": {"median": float(np.median(lat)), "p90": float(np.percentile(lat, 90)),
                              "mean": float(lat.mean())},
               "types": {}}
     print(f"held-out renders: dataset seed {seed}, {layouts} layouts x {views} views = "
-          f"{n_images} images at 1280x720 (site {site}, activity {activity}, camera {camera}); "
+          f"{n_images} images at 1280x720 (site {site}, activity {activity}, camera {camera}, "
+          f"imaging {imaging}); "
           f"match radius {match_px} px\n{det!r}")
     print(f"{'landmark type':<16} {'GT':>5} {'det':>5} {'precision':>9} {'recall':>7} "
           f"{'median err px':>13}")
@@ -155,13 +157,15 @@ if __name__ == "__main__":
     ap.add_argument("--json", dest="json_out", default=None)
     ap.add_argument("--activity", default="none", choices=ACTIVITIES, help="site activity per layout")
     ap.add_argument("--camera", default="paper", choices=CAMERAS, help="camera per image")
+    ap.add_argument("--imaging", default="ideal", choices=IMAGINGS,
+                    help="camera imaging per image (blur, sensor noise, JPEG)")
     ap.add_argument("--site", default="random", help="random, or a site file / IFC file")
     ap.add_argument("--baseline", action="store_true",
                     help="also time the default detector, interleaved image by image")
     a = ap.parse_args()
     refiner = {None: None, "none": False}.get(a.refiner, a.refiner)
     main(a.seed, a.layouts, a.views, a.match_px, a.threads, a.json_out, a.baseline, a.activity,
-         a.camera, a.site, model=a.model,
+         a.camera, a.site, a.imaging, model=a.model,
          score_threshold=a.threshold, refiner=refiner, refine_iterations=a.iterations,
          refine_threshold=a.refine_threshold, operating_point=a.operating_point,
          votes=not a.no_votes, vote_threshold=a.vote_threshold)
