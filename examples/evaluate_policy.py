@@ -396,8 +396,11 @@ def env_config(opt: dict[str, Any]) -> tuple[Any, str]:
                 + "; ".join(f"{run}: {c.as_dict()}" for run, c in recorded.items())
                 + " -- evaluate them separately, or pass --config to evaluate all in one"
             )
+        unrecorded = [str(run) for run, c in found.items() if c is None]
         if recorded:
             config, source = next(iter(recorded.values())), "recorded by the run(s) in train.json"
+            if unrecorded:  # trained before runs recorded it: say so rather than assume
+                source += f"; {', '.join(unrecorded)} recorded none and are evaluated in it too"
         elif runs:
             config, source = TRAIN_CONFIGS["state"], (
                 "the runs recorded no configuration: `state` as named now; runs trained before "
@@ -435,7 +438,8 @@ def main(**kwargs: Any) -> dict[str, Any]:
             env.close()
         if opt["plot"]:
             plot_curve(curves, opt["plot"])
-        summary = {"options": opt, "env_config": config.as_dict(), "seeds": seeds, "learning_curve": curves}
+        summary = {"options": opt, "env_config": config.as_dict(), "env_config_source": source,
+                   "seeds": seeds, "learning_curve": curves}
         if opt["json_out"]:
             atomic_write_json(opt["json_out"], summary, indent=2, default=str)
         for run, points in curves.items():
@@ -472,7 +476,8 @@ def main(**kwargs: Any) -> dict[str, Any]:
         plot(results, opt["plot"])
     for r in results.values():
         del r["_final"]
-    summary = {"options": {**opt, "policies": policies}, "env_config": config.as_dict(), "seeds": seeds,
+    summary = {"options": {**opt, "policies": policies}, "env_config": config.as_dict(),
+               "env_config_source": source, "seeds": seeds,
                "results": results}
     if opt["json_out"]:
         atomic_write_json(opt["json_out"], summary, indent=2, default=str)

@@ -154,6 +154,12 @@ def test_evaluate_builds_the_env_each_run_recorded(trained, tmp_path):
     (old / "train.json").write_text(json.dumps(record))
     unrecorded = evaluate.main(model=str(old), policies=("ppo",), episodes=1, max_cycles=2)
     assert unrecorded["env_config"]["name"] == "state"
+    assert unrecorded["env_config_source"].startswith("the runs recorded no configuration")
+    # with a recorded run, in its configuration, and the source names the run that recorded none
+    mixed = evaluate.main(model=[str(out), str(old)], policies=("ppo",), episodes=1, max_cycles=2)
+    assert mixed["env_config"]["wrapper"]["mode"] == "robust"
+    assert mixed["env_config_source"] == (f"recorded by the run(s) in train.json; {old} recorded none "
+                                          "and are evaluated in it too")
     (old / "train.json").write_text("{not json")
     with pytest.raises(UsageError, match="is not a train.json written by train_viewpoint_ppo.py"):
         evaluate.main(model=str(old), policies=("ppo",), episodes=1)
