@@ -38,9 +38,15 @@ Two methods:
        per landmark predicted inside the image but not detected (miss), plus the squared
        Mahalanobis distance of the pose from the prior (sigmas 3 m, 2/2/5 degrees by default).
        The prior term is what decides between assignments that fit equally well, such as the
-       permutations of four coplanar corners. A hypothesis whose pose is farther from the prior
-       than the Mahalanobis gate, or whose inlier residuals fail a chi-square test against
-       ``pixel_sigma`` (``1 - 1e-6`` quantile, ``2 n - 6`` dof), is dropped.
+       permutations of four coplanar corners. With detection scores (probabilities that each
+       detection is a landmark, as the learned detector's refiner gives) each assigned detection
+       also adds ``-2 log(s / (1 - s))`` (the log-odds of landmark against clutter; ``s`` clipped to
+       [0.01, 0.99]): of two detections a landmark fits about alike, the likelier one is
+       assigned -- a corner 0.4 px from its projection with score 0.72 rather than a scaffold
+       post 20 px away with score 0.10, which four points alone cannot tell apart. A hypothesis
+       whose pose is farther from the prior than the Mahalanobis gate, or whose inlier
+       residuals fail a chi-square test against ``pixel_sigma`` (``1 - 1e-6`` quantile,
+       ``2 n - 6`` dof), is dropped.
     4. *Rivals and ambiguity* (:mod:`localization.ambiguity`). The winner's pose moved by the
        layout's self-translations gives rival hypotheses, refined and scored the same way; a
        rival with conflicting identities and a distinct pose within ``2 ln 100`` of the best
@@ -386,6 +392,9 @@ class _Problem:
     coarse_gate_px: float
     max_iterations: int
     need: int
+    #: (N,) ``2 log(s / (1 - s))`` of each detection's score (the scoring's reward for assigning
+    #: it), or None without scores.
+    log_odds: NDArray | None = None
 
     def refine(self, a: NDArray, starts: NDArray, first_robust: bool) -> tuple[NDArray, NDArray, NDArray]:
         """Coarse assignments (H, N) and start poses (H, 4, 4) -> (assignments, poses, alive (H,)).
@@ -435,6 +444,8 @@ class _Problem:
         )
         n_unassigned = np.sum(a < 0, axis=1)
         nll = chi + n_unassigned * (self.gate_px / self.pixel_sigma) ** 2 + n_missed * miss_cost + prior_sq
+        if self.log_odds is not None:
+            nll = nll - (a >= 0) @ self.log_odds
         return nll, n_missed
 
 
@@ -462,6 +473,7 @@ def associate_robust(
     max_rival_rounds: int = 2,
     ambiguity_margin: float = AMBIGUITY_MARGIN,
     fit_quantile: float = 1.0 - 1e-6,
+    detection_scores: NDArray[np.float64] | None = None,
 ) -> Association:
     """Robust association: upright two-point hypotheses, batched re-association, likelihood scoring.
 
@@ -507,6 +519,9 @@ def associate_robust(
             (``2 n - 6`` dof, ``pixel_sigma``) is rejected: it does not fit the noise model. The
             default rejects one correct pose in a million (0.999 lost one of the benchmark's
             200 column-top views, chi-square 42.9 on 18 dof).
+        detection_scores: (N,) probability in [0, 1] that each detection is a landmark (the
+            learned detector's scores), or None; they enter the scoring as log-odds (module
+            docstring, step 3). Not validated here (:meth:`Localizer.localize` does).
     """
     sig = prior_sigmas or PriorSigmas()
     gate = float(gate_px) if gate_px is not None else max(5.0 * pixel_sigma, 3.0)
@@ -538,7 +553,7 @@ def associate_robust(
     P = _Problem(  # contiguous float64 once: the compiled steps take them as they are
         np.ascontiguousarray(det, dtype=f64), good, np.ascontiguousarray(landmarks_xyz, dtype=f64),
         np.ascontiguousarray(K, dtype=f64), np.ascontiguousarray(prior, dtype=f64), image_size, margin_px,
-        pixel_sigma, sig, gate, coarse_gate_px, max_iterations, need,
+        pixel_sigma, sig, gate, coarse_gate_px, max_iterations, need, _log_odds(detection_scores),
     )
 
     def covered(coarse: list[tuple[NDArray, NDArray]]) -> NDArray:
@@ -630,13 +645,40 @@ def associate_robust(
                 a = np.full(n, -1, dtype=np.int64)
                 a[good[local >= 0]] = idx_r[local[local >= 0]]
                 chunk.append((a, start))
-            new = explore([c for c in chunk if (c[0] >= 0).sum() >= need], True)
+            chunk = [c for c in chunk if (c[0] >= 0).sum() >= need]
+            swapped = swaps(best_a, best_T)
+            new = explore(swapped + chunk, True, len(swapped))
             if not new:
                 break
             scored = sorted(scored + score(new), key=lambda h: h[0])
             if scored[0][1] is best_a:
                 break
         return scored, ambiguity([h[:3] for h in scored], landmarks_xyz, K, pixel_sigma, ambiguity_margin)
+
+    def swaps(a: NDArray, T: NDArray) -> list[tuple[NDArray, NDArray]]:
+        """The winner with one pair's detection swapped for an unassigned one near its landmark.
+
+        Every unassigned detection within ``coarse_gate_px`` of an assigned landmark's
+        projection at the winner's pose replaces that landmark's detection (nearest first, at
+        most ``2 * max_hypotheses``). A wrong pair that the pose absorbed hides the right
+        detection outside the inlier gate -- with four corners and a scaffold post 20 px from
+        one of them, the post can win a fit the corner would have won -- and neither the
+        starts nor the rivals (whole-layout moves) revisit one pair.
+        """
+        free = good[a[good] < 0]
+        pairs = np.flatnonzero(a >= 0)
+        if free.size == 0 or pairs.size == 0:
+            return []
+        uv, _ = project(K, T, landmarks_xyz[a[pairs]])
+        d = np.hypot(*(det[free][None, :, :] - uv[:, None, :]).transpose(2, 0, 1))
+        rows, cols = np.nonzero(d <= coarse_gate_px)
+        out = []
+        for k in np.argsort(d[rows, cols], kind="stable")[: 2 * max(max_hypotheses, 1)]:
+            b = a.copy()
+            b[free[cols[k]]] = a[pairs[rows[k]]]
+            b[pairs[rows[k]]] = -1
+            out.append((b, T))
+        return out
 
     cache: dict[int, list[tuple]] = {}
 
@@ -730,6 +772,14 @@ def associate_robust(
     m = a >= 0
     res, _ = reprojection_residuals(K, T, landmarks_xyz[a[m]], det[m])
     return Association(a, T, float(np.sum(res**2)), float(score_best), len(finals), None)
+
+
+def _log_odds(scores: NDArray | None) -> NDArray | None:
+    """``2 log(s / (1 - s))`` of scores clipped to [0.01, 0.99] (NaN: 0), or None."""
+    if scores is None:
+        return None
+    s = np.clip(np.nan_to_num(np.asarray(scores, dtype=np.float64), nan=0.5), 0.01, 0.99)
+    return 2.0 * np.log(s / (1.0 - s))
 
 
 @functools.lru_cache(maxsize=64)

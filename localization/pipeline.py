@@ -130,6 +130,10 @@ class Localizer:
             (:mod:`localization.distortion`), or None for a pinhole. Detections are undistorted
             to pinhole pixels of ``K`` once, on entry; everything after (association, PnP,
             residuals, covariance) is the pinhole model.
+        use_scores: robust mode, with :class:`Detections` that carry ``scores``: read them as the
+            probability that each detection is a landmark (in [0, 1], as the learned detector's
+            refiner gives them) and let their log-odds enter the hypotheses' scoring
+            (:mod:`localization.associate`, step 3). False ignores them.
 
     Raises:
         TypeError, ValueError: on bad arguments, naming the value and what was expected.
@@ -154,6 +158,7 @@ class Localizer:
         max_position_std_m: float | None = None,
         max_prior_mahalanobis_sq: float | None = 22.46,
         distortion: ArrayLike | None = None,
+        use_scores: bool = True,
     ) -> None:
         X = as_points("landmarks_xyz", landmarks_xyz, 3)
         if X.shape[0] == 0:
@@ -197,6 +202,9 @@ class Localizer:
         )
         self.coplanar = is_coplanar(X)
         self.distortion = check_distortion("distortion", distortion)
+        if not isinstance(use_scores, (bool, np.bool_)):
+            raise TypeError(f"use_scores must be True or False, got {use_scores!r}")
+        self.use_scores = bool(use_scores)
 
     @staticmethod
     def _prior_sigmas(value: PriorSigmas | tuple | None) -> PriorSigmas:
@@ -243,8 +251,13 @@ class Localizer:
         detections_uv: NDArray[np.float64],
         prior: NDArray[np.float64],
         prior_sigmas: PriorSigmas | None = None,
+        scores: NDArray[np.float64] | None = None,
     ) -> Association:
-        """Run the configured association only (validated inputs; ``prior_sigmas`` as in localize)."""
+        """Run the configured association only (validated inputs).
+
+        ``prior_sigmas`` as in :meth:`localize`; ``scores`` the detections' probabilities of
+        being landmarks (robust mode only).
+        """
         if self.association == "paper":
             return associate_paper(
                 detections_uv, self.landmarks_xyz, self.K, prior, self.image_size, self.margin_px
@@ -263,6 +276,7 @@ class Localizer:
             min_correspondences=self.min_correspondences,
             prior_sigmas=self.prior_sigmas if prior_sigmas is None else prior_sigmas,
             max_prior_mahalanobis_sq=self.max_prior_mahalanobis_sq,
+            detection_scores=scores,
         )
 
     def localize(
@@ -293,7 +307,10 @@ class Localizer:
         """
         t0 = time.perf_counter()
         timings: dict[str, float] = {}
+        scores = None
         if isinstance(detections_uv, Detections):
+            if self.use_scores and self.association == "robust" and detections_uv.scores is not None:
+                scores = _check_scores(detections_uv.scores)
             detections_uv = detections_uv.uv
         det = as_points("detections_uv", detections_uv, 2)
         if not is_pinhole(self.distortion):  # pinhole pixels from here on
@@ -335,7 +352,7 @@ class Localizer:
             timings.update(associate=0.0, pnp=0.0, covariance=0.0)
             return fail(FailureCode.DEGENERATE_GEOMETRY, edge_on)
 
-        assoc = self.associate(det, prior, sigmas)
+        assoc = self.associate(det, prior, sigmas, scores)
         t2 = time.perf_counter()
         timings["associate"] = t2 - t1
         if assoc.failure_reason is not None:
@@ -465,3 +482,16 @@ def _minor_spread_px(uv: NDArray[np.float64]) -> float:
     (a, b), (_, c) = (centred.T @ centred).tolist()
     smaller = 0.5 * (a + c) - math.hypot(0.5 * (a - c), b)
     return math.sqrt(max(smaller, 0.0) / n)
+
+
+def _check_scores(scores: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Detection scores read as probabilities: each in [0, 1] or NaN (ValueError otherwise)."""
+    finite = scores[np.isfinite(scores)]
+    bad = np.isinf(scores).any() or (finite.size and (finite.min() < 0.0 or finite.max() > 1.0))
+    if bad:
+        raise ValueError(
+            "Detections.scores must be probabilities in [0, 1] (the robust association reads them "
+            f"as the odds that each detection is a landmark), got values in [{np.min(scores):g}, "
+            f"{np.max(scores):g}]; pass use_scores=False to the Localizer to ignore them"
+        )
+    return scores

@@ -83,7 +83,7 @@ def localize_frame(
     t0 = time.perf_counter()
     det = detector.detect(image, context)
     t_detect = time.perf_counter() - t0
-    est = localizer.localize(det.uv, prior_cam_from_world, prior_sigmas=prior_sigmas)
+    est = localizer.localize(det, prior_cam_from_world, prior_sigmas=prior_sigmas)
     latency = t_detect + float(est.timings.get("total", 0.0))
     scores = (
         association_scores(est.assignment, det.true_ids, model_ids)
