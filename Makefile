@@ -42,8 +42,8 @@ bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in d
 	for b in render env_step raycast localizer wrapper_throughput detector ifc_import worker_tracking; do \
 		[ -f benchmarks/$$b.py ] && $(BIN)/python benchmarks/$$b.py || exit 1; done
 
-# The active-site detector (localization/models/landmarks_active_v1*.onnx) from scratch, as
-# localization/models/MODEL_CARD.md ("Active-site weights") trained it: six
+# The active-site detector (localization/models/landmarks_active_v2*.onnx) from scratch, as
+# localization/models/MODEL_CARD.md ("landmarks_active_v2") trained it: six
 # rendered datasets (~25 min; existing ones are kept), the keypoint network (42 min), then the
 # patch refiner mined from that network's candidates (~2 + 15 min), into $(DETECTOR_RUN).
 # The data is what an active site through a real camera looks like: site activity none, light and
