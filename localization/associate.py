@@ -50,7 +50,10 @@ Two methods:
     4. *Rivals and ambiguity* (:mod:`localization.ambiguity`). The winner's pose moved by the
        layout's self-translations gives rival hypotheses, refined and scored the same way; a
        rival with conflicting identities and a distinct pose within ``2 ln 100`` of the best
-       score makes the association fail as ``ambiguous`` instead of guessing.
+       score makes the association fail as ``ambiguous`` instead of guessing. Each round also
+       tries the winner with one pair's detection swapped for an unassigned detection near that
+       landmark's projection (a wrong pair the pose absorbed hides the right detection outside
+       the inlier gate).
 
     Gating means a detection (clutter) or a landmark (miss, occlusion) may stay unassigned.
 """

@@ -486,12 +486,10 @@ def _minor_spread_px(uv: NDArray[np.float64]) -> float:
 
 def _check_scores(scores: NDArray[np.float64]) -> NDArray[np.float64]:
     """Detection scores read as probabilities: each in [0, 1] or NaN (ValueError otherwise)."""
-    finite = scores[np.isfinite(scores)]
-    bad = np.isinf(scores).any() or (finite.size and (finite.min() < 0.0 or finite.max() > 1.0))
-    if bad:
+    if np.any((scores < 0.0) | (scores > 1.0)):  # NaN compares False: allowed
         raise ValueError(
             "Detections.scores must be probabilities in [0, 1] (the robust association reads them "
-            f"as the odds that each detection is a landmark), got values in [{np.min(scores):g}, "
-            f"{np.max(scores):g}]; pass use_scores=False to the Localizer to ignore them"
+            f"as the odds that each detection is a landmark), got values in [{np.nanmin(scores):g}, "
+            f"{np.nanmax(scores):g}]; pass use_scores=False to the Localizer to ignore them"
         )
     return scores
