@@ -1,5 +1,9 @@
 """Compiled kernels (numba) of the per-frame pose steps: the distance from the prior, the covariance.
 
+Also the rigid-transform check under :func:`localization.geometry.check_transform`
+(:func:`transform_fault`); this module imports nothing of the package, so the geometry module
+at the bottom of the layers can use it.
+
 Every localization ends with a few small computations on its one pose -- its squared Mahalanobis
 distance from the prior (:func:`localization.pnp.prior_mahalanobis_sq`) and its covariance from
 the Jacobian of the projections (:func:`localization.pnp.pose_covariance`). As numpy code they
@@ -16,10 +20,43 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["covariance", "prior_distance_sq"]
+__all__ = ["covariance", "prior_distance_sq", "transform_fault"]
 
 #: Information matrices whose column-scaled condition number exceeds this are singular.
 MAX_CONDITION = 1e12
+
+#: :func:`transform_fault`'s answers.
+TRANSFORM_OK, TRANSFORM_NOT_FINITE, TRANSFORM_LAST_ROW, TRANSFORM_NOT_ROTATION = 0, 1, 2, 3
+
+
+@njit(cache=True, nogil=True)
+def transform_fault(T: NDArray) -> int:
+    """What is wrong with a float64 (4, 4) ``T`` as a rigid transform: one of the ``TRANSFORM_*`` codes.
+
+    :func:`localization.geometry.check_transform`'s tests, np.allclose's (``|a - b| <= atol +
+    rtol |b|``, rtol 1e-5): every entry finite; the last row ``[0, 0, 0, 1]`` (atol 1e-9); the
+    rotation block orthonormal (``R^T R = I``, atol 1e-6) with a non-negative determinant.
+    """
+    for i in range(4):
+        for j in range(4):
+            if not np.isfinite(T[i, j]):
+                return TRANSFORM_NOT_FINITE
+    for j in range(3):
+        if abs(T[3, j]) > 1e-9:
+            return TRANSFORM_LAST_ROW
+    if abs(T[3, 3] - 1.0) > 1e-9 + 1e-5:
+        return TRANSFORM_LAST_ROW
+    for r in range(3):
+        for c in range(3):
+            g = T[0, r] * T[0, c] + T[1, r] * T[1, c] + T[2, r] * T[2, c]
+            if (abs(g - 1.0) > 1e-6 + 1e-5) if r == c else (abs(g) > 1e-6):
+                return TRANSFORM_NOT_ROTATION
+    a, b, c = T[0, 0], T[0, 1], T[0, 2]
+    d, e, f = T[1, 0], T[1, 1], T[1, 2]
+    g, h, i = T[2, 0], T[2, 1], T[2, 2]
+    if a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) < 0:
+        return TRANSFORM_NOT_ROTATION
+    return TRANSFORM_OK
 
 
 @njit(cache=True, nogil=True)

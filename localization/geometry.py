@@ -17,6 +17,13 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization.compiled_pose import (
+    TRANSFORM_LAST_ROW,
+    TRANSFORM_NOT_FINITE,
+    TRANSFORM_NOT_ROTATION,
+    transform_fault,
+)
+
 __all__ = [
     "as_points",
     "camera_center",
@@ -64,33 +71,21 @@ def check_transform(name: str, transform: ArrayLike) -> NDArray[np.float64]:
             rotation block is not orthonormal with determinant +1 (tolerance 1e-6).
     """
     arr = np.asarray(transform)
-    if arr.dtype == object or not np.issubdtype(arr.dtype, np.number):
+    if arr.dtype != np.float64 and (arr.dtype == object or not np.issubdtype(arr.dtype, np.number)):
         raise TypeError(f"{name} must be a numeric 4x4 array, got dtype {arr.dtype}")
     if arr.shape != (4, 4):
         raise ValueError(f"{name} must have shape (4, 4), got {arr.shape}")
     arr = arr.astype(np.float64, copy=False)
-    if not np.isfinite(arr).all():
+    # One compiled pass (this check runs on every transform the pipeline and the metrics touch:
+    # as numpy calls it cost ~15 us, five times per agent and env step)
+    fault = transform_fault(arr)
+    if fault == TRANSFORM_NOT_FINITE:
         raise ValueError(f"{name} must be finite, got {arr.tolist()}")
-    # np.allclose's test (|a - b| <= atol + rtol |b|, rtol 1e-5) without its per-call overhead:
-    # this check runs on every transform the pipeline and the metrics touch.
-    if (np.abs(arr[3] - _LAST_ROW) > _LAST_ROW_TOL).any():
+    if fault == TRANSFORM_LAST_ROW:
         raise ValueError(f"{name} last row must be [0, 0, 0, 1], got {arr[3].tolist()}")
-    rot = arr[:3, :3]
-    if (np.abs(rot.T @ rot - _EYE3) > _ORTHO_TOL).any() or _det3(rot) < 0:
-        raise ValueError(f"{name} rotation block must be a proper rotation, got {rot.tolist()}")
+    if fault == TRANSFORM_NOT_ROTATION:
+        raise ValueError(f"{name} rotation block must be a proper rotation, got {arr[:3, :3].tolist()}")
     return arr
-
-
-_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
-_LAST_ROW_TOL = 1e-9 + 1e-5 * _LAST_ROW
-_EYE3 = np.eye(3)
-_ORTHO_TOL = 1e-6 + 1e-5 * _EYE3
-
-
-def _det3(m: NDArray[np.float64]) -> float:
-    """Determinant of a 3x3 matrix by cofactors (its sign only is used, on near-orthonormal ones)."""
-    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
-    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
 
 
 def check_intrinsics(name: str, K: ArrayLike) -> NDArray[np.float64]:

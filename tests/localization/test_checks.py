@@ -15,7 +15,7 @@ from localization import (
 )
 from localization.aruco import MarkerSpec
 from localization.associate import Association
-from localization.geometry import project
+from localization.geometry import check_transform, project
 from localization.pnp import PnPResult
 from localization.synthetic import PAPER_K, paper_prior, sample_viewpoints
 
@@ -90,3 +90,59 @@ def test_equality_of_array_dataclasses_is_identity_and_never_raises():
         assert x == x and not (x == y) and x != y
     est = Localizer(np.eye(3) * 5, PAPER_K).localize(np.zeros((0, 2)), np.eye(4))
     assert est == est and est != Localizer(np.eye(3) * 5, PAPER_K).localize(np.zeros((0, 2)), np.eye(4))
+
+
+def _allclose_reference(T: np.ndarray) -> bool:
+    """check_transform's tests as np.allclose / np.linalg.det (the numpy code it replaced)."""
+    R = T[:3, :3]
+    return bool(np.all(np.isfinite(T)) and np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9)
+                and np.allclose(R.T @ R, np.eye(3), atol=1e-6) and np.linalg.det(R) >= 0)
+
+
+def test_check_transform_names_each_fault_and_agrees_with_allclose_off_the_boundary():
+    rng = np.random.default_rng(7)
+    good = np.eye(4)
+    good[:3, 3] = [1.0, -2.0, 30.0]
+    assert check_transform("T", good) is good  # float64 input: no copy
+    assert check_transform("T", good.astype(np.float32)).dtype == np.float64
+    assert check_transform("T", np.asfortranarray(good)).shape == (4, 4)
+    assert check_transform("T", good.tolist()).shape == (4, 4)
+    off_row = good.copy()
+    off_row[3, 2] = 2e-9
+    cases = {
+        r"T must be finite, got \[\[nan": np.where(np.eye(4, dtype=bool), np.nan, good),
+        r"T last row must be \[0, 0, 0, 1\], got \[0.0, 0.0, 2e-09, 1.0\]": off_row,
+        r"T rotation block must be a proper rotation, got \[\[1.0, 0.0, 0.0\]": np.diag([1.0, 1, -1, 1]),
+    }
+    for message, T in cases.items():
+        with pytest.raises(ValueError, match=message):
+            check_transform("T", T)
+    with pytest.raises(ValueError, match=r"T must have shape \(4, 4\), got \(3, 4\)"):
+        check_transform("T", good[:3])
+    with pytest.raises(TypeError, match="T must be a numeric 4x4 array, got dtype object"):
+        check_transform("T", np.full((4, 4), None))
+    with pytest.raises(TypeError, match="got dtype bool"):
+        check_transform("T", np.eye(4, dtype=bool))
+    # random rotations perturbed on both sides of the tolerances (1e-6 on R^T R, 1e-9 on the last row)
+    verdicts = []
+    for _ in range(400):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        w, x, y, z = q
+        R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+        T = np.eye(4)
+        T[:3, :3] = R + rng.choice([1e-7, 1e-6, 1e-5]) * rng.normal(size=(3, 3))
+        T[:3, 3] = rng.normal(0, 50, 3)
+        T[3, :3] = rng.choice([0.0, 3e-10, 3e-9]) * rng.normal(size=3)
+        if rng.random() < 0.2:
+            T[:3, 0] *= -1  # a reflection
+        try:
+            check_transform("T", T)
+            accepted = True
+        except ValueError:
+            accepted = False
+        assert accepted == _allclose_reference(T)
+        verdicts.append(accepted)
+    assert 0.1 < np.mean(verdicts) < 0.9  # both sides of the boundary were tried
