@@ -214,13 +214,17 @@ def test_truth_bookkeeping_with_no_visible_landmark():
     assert out.true_ids.tolist() == [3, -1]
 
 
-def test_the_opt_in_active_site_weights_ship_and_run():
+@pytest.mark.parametrize("model, refiner", [
+    ("landmarks_active_v1.onnx", "landmarks_active_v1_refiner.onnx"),
+    ("landmarks_active_v2.onnx", "landmarks_active_v2_refiner.onnx"),
+    ("landmarks_active_v2.onnx", "landmarks_active_v3_refiner.onnx"),  # the pair landmarks_active_v3
+])
+def test_the_opt_in_active_site_weights_ship_and_run(model, refiner):
     from pathlib import Path
 
     models = Path(__file__).resolve().parents[2] / "localization" / "models"
-    det = LearnedDetector("all", model=models / "landmarks_active_v1.onnx",
-                          refiner=models / "landmarks_active_v1_refiner.onnx")
-    assert "landmarks_active_v1.onnx" in repr(det)
+    det = LearnedDetector("all", model=models / model, refiner=models / refiner)
+    assert model in repr(det) and refiner in repr(det)
     uv, scores, kinds = det.detect_all(np.full((720, 1280, 3), 128, np.uint8))
     assert uv.shape == (len(scores), 2) and len(kinds) == len(scores)  # a flat image: nothing there
     assert len(scores) == 0
