@@ -15,10 +15,16 @@ network, ``cv2.setNumThreads(1)``; all images are rendered before the timed dete
     python benchmarks/detector.py --activity mixed --camera mixed   # an active site, a real camera
     python benchmarks/detector.py --activity busy --camera mavic2pro --imaging camera   # + noise, JPEG
     python benchmarks/detector.py --site tests/data/ifc/duplex.ifc   # a real (IFC) building
+    python benchmarks/detector.py --breakdown   # where landmarks get lost: candidate or placement
 
 ``--activity``, ``--camera``, ``--imaging`` and ``--site`` are the dataset generator's options
 (:mod:`uav_struct_env.datasets.landmarks`); the labels are where each landmark appears in the
 delivered (distorted) image, so detections are compared there.
+
+``--breakdown`` also prints, per type, how far each ground-truth landmark is from the nearest
+keypoint-network candidate of its type (before refinement), from the nearest refined candidate
+(before the refiner's score cut and the second NMS) and from the nearest final detection: whether a
+landmark is lost because nothing proposed it or because it was placed more than ``--match-px`` off.
 
 This virtual machine's speed drifts by about 10 % within minutes, so two separate runs cannot
 resolve a smaller latency difference. ``--baseline`` also runs the default detector (committed
@@ -45,10 +51,11 @@ from uav_struct_env.datasets.landmarks import ACTIVITIES, CAMERAS, IMAGINGS
 def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0,
          threads: int = 1, json_out: str | None = None, baseline: bool = False,
          activity: str = "none", camera: str = "paper", site: str = "random",
-         imaging: str = "ideal", **detector_kwargs) -> dict:
+         imaging: str = "ideal", breakdown: bool = False, **detector_kwargs) -> dict:
     """Run the benchmark; ``detector_kwargs`` go to :class:`LearnedDetector` (None: default).
 
     ``baseline``: also time the default detector at the same operating point, interleaved.
+    ``breakdown``: also measure the candidate / refined / final distances (module docstring).
     """
     cv2.setNumThreads(threads)
     kwargs = {k: v for k, v in detector_kwargs.items() if v is not None}
@@ -62,6 +69,7 @@ def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0
                            activity=activity, camera=camera, site=site, imaging=imaging)
     counts = {t: {"tp": 0, "fp": 0, "fn": 0, "err": []} for t in LANDMARK_TYPES}
     latencies = []
+    nearest = {t: [] for t in LANDMARK_TYPES}  # per landmark: (candidate, refined, final) distance, px
     n_images = 0
     # Render everything first: the renderer's own threads must not run during the timing.
     frames = [f for layout in tqdm(range(layouts), desc="render", unit="layout")
@@ -78,8 +86,12 @@ def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0
             base_latencies.append(_timed(base, rgb)[0])
         n_images += 1
         kps = np.array(rec["keypoints"], np.float64).reshape(-1, 4)
+        if breakdown:
+            stages = _stages(det, rgb, uv, kinds)
         for t, name in enumerate(LANDMARK_TYPES):
             gt = kps[kps[:, 2] == t, :2]
+            if breakdown:
+                nearest[name] += [tuple(_nearest(p[k == t], g) for p, k in stages) for g in gt]
             m, d = match_detections(uv[kinds == t], gt, match_px)
             c = counts[name]
             c["tp"] += int((m >= 0).sum())
@@ -113,6 +125,8 @@ def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0
               f"{100 * r:>6.1f}% {e:>13.2f}")
     print(f"latency per 1280x720 image, {threads} thread(s): median {np.median(lat):.1f} ms, "
           f"p90 {np.percentile(lat, 90):.1f} ms (resize + network + decoding + refinement)")
+    if breakdown:
+        report["breakdown"] = _print_breakdown(nearest, match_px)
     if base is not None:
         b = np.array(base_latencies) * 1e3
         report["baseline"] = {"detector": repr(base),
@@ -126,6 +140,43 @@ def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0
     if json_out:
         Path(json_out).write_text(json.dumps(report, indent=2))
     return report
+
+
+def _stages(det: LearnedDetector, rgb: np.ndarray, uv: np.ndarray, kinds: np.ndarray) -> list:
+    """``[(uv, types)]`` of the candidates, the refined candidates (all, before the score cut) and
+    the final detections ``uv, kinds`` of one image."""
+    cand, _, cand_kinds = det.candidates(rgb)
+    refined = det.refiner.refine(rgb, cand, cand_kinds)[0] if det.refiner is not None else cand
+    return [(cand, cand_kinds), (refined, cand_kinds), (uv, kinds)]
+
+
+def _nearest(points: np.ndarray, g: np.ndarray) -> float:
+    return float(np.min(np.hypot(*(points - g).T))) if len(points) else float("inf")
+
+
+def _print_breakdown(nearest: dict, match_px: float) -> dict:
+    """Print and return, per type, the shares of ground-truth landmarks by nearest distance."""
+    out = {}
+    print(f"\nwhere landmarks get lost (share of ground truth; nearest of the type, px): candidate "
+          f"within {match_px:g} / 10, refined within {match_px:g}, final within {match_px:g} / "
+          f"{match_px:g}-8 / beyond 8")
+    for name, rows in nearest.items():
+        if not rows:
+            continue
+        d = np.array(rows)
+        c, r, f = d[:, 0], d[:, 1], d[:, 2]
+        out[name] = {"gt": len(d), "candidate_within_match": float(np.mean(c <= match_px)),
+                     "candidate_within_10": float(np.mean(c <= 10)),
+                     "refined_within_match": float(np.mean(r <= match_px)),
+                     "final_within_match": float(np.mean(f <= match_px)),
+                     "final_match_to_8": float(np.mean((f > match_px) & (f <= 8))),
+                     "final_beyond_8": float(np.mean(f > 8))}
+        o = out[name]
+        print(f"{name:<16} {len(d):>5}  candidate {100 * o['candidate_within_match']:5.1f} / "
+              f"{100 * o['candidate_within_10']:5.1f} %  refined {100 * o['refined_within_match']:5.1f} %"
+              f"  final {100 * o['final_within_match']:5.1f} / {100 * o['final_match_to_8']:4.1f} / "
+              f"{100 * o['final_beyond_8']:4.1f} %")
+    return out
 
 
 def _timed(det: LearnedDetector, rgb: np.ndarray) -> tuple[float, tuple]:
@@ -162,10 +213,12 @@ if __name__ == "__main__":
     ap.add_argument("--site", default="random", help="random, or a site file / IFC file")
     ap.add_argument("--baseline", action="store_true",
                     help="also time the default detector, interleaved image by image")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="also show where landmarks get lost: no candidate, or placed too far off")
     a = ap.parse_args()
     refiner = {None: None, "none": False}.get(a.refiner, a.refiner)
     main(a.seed, a.layouts, a.views, a.match_px, a.threads, a.json_out, a.baseline, a.activity,
-         a.camera, a.site, a.imaging, model=a.model,
+         a.camera, a.site, a.imaging, a.breakdown, model=a.model,
          score_threshold=a.threshold, refiner=refiner, refine_iterations=a.iterations,
          refine_threshold=a.refine_threshold, operating_point=a.operating_point,
          votes=not a.no_votes, vote_threshold=a.vote_threshold)

@@ -394,6 +394,22 @@ class LearnedDetector:
             ``uv (N, 2)`` full-resolution pixels, ``scores (N,)``, ``types (N,)`` (indices of
             :data:`LANDMARK_TYPES`).
         """
+        full, scores, kinds = self.candidates(image)
+        if self.refiner is not None:
+            return self._refine(np.asarray(image), full, kinds)
+        corners = kinds != LANDMARK_TYPES.index("column_tops")
+        if self.corner_window and np.any(corners):
+            full[corners] = self._refine_corners(np.asarray(image), full[corners])
+        return full, scores, kinds
+
+    def candidates(
+        self, image: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+        """The keypoint network's candidates before any refinement, as :meth:`detect_all` returns.
+
+        Full-resolution ``uv (N, 2)``, heatmap ``scores (N,)`` and ``types (N,)``; what the
+        refiner (or ``cv2.cornerSubPix``) then places and re-scores.
+        """
         out, (sx, sy) = self.infer(image)
         h, w = np.asarray(image).shape[:2]
         size = (max(1, round(w * self.scale)), max(1, round(h * self.scale)))
@@ -404,11 +420,6 @@ class LearnedDetector:
         full = np.empty_like(uv)
         full[:, 0] = (uv[:, 0] + 0.5) / sx - 0.5
         full[:, 1] = (uv[:, 1] + 0.5) / sy - 0.5
-        if self.refiner is not None:
-            return self._refine(np.asarray(image), full, kinds)
-        corners = kinds != LANDMARK_TYPES.index("column_tops")
-        if self.corner_window and np.any(corners):
-            full[corners] = self._refine_corners(np.asarray(image), full[corners])
         return full, scores, kinds
 
     def _refine(self, image: NDArray[np.uint8], uv: NDArray, kinds: NDArray) -> tuple:

@@ -196,6 +196,29 @@ def test_real_render_column_tops(refiner):
     assert det.scores is not None and np.all(det.scores >= 0.3)
 
 
+@needs_model
+def test_candidates_are_the_network_output_that_the_refiner_then_places():
+    """``candidates`` is ``detect_all`` without refinement; the refiner moves them onto the truth."""
+    pytest.importorskip("pybullet")
+    from localization.geometry import look_at
+    from uav_struct_env.sim.world import SiteWorld
+    from uav_struct_env.site import paper_site
+
+    site = paper_site("columns", marker_size=1.0)
+    with SiteWorld(site, image_size=(1280, 720), rng=np.random.default_rng(123)) as world:
+        cam_from_world = look_at(site.center + np.array([-6.0, -30.0, 16.0]), site.center)
+        res = world.render(cam_from_world, depth=True)
+        truth = world.landmark_truth("column_tops", cam_from_world, None, res)
+    raw = LearnedDetector("column_tops", refiner=False, corner_window=0)
+    cand = raw.candidates(res.rgb)
+    for a, b in zip(cand, raw.detect_all(res.rgb), strict=True):
+        np.testing.assert_array_equal(a, b)
+    refined, _, _ = LearnedDetector("column_tops").detect_all(res.rgb)
+    gt = truth["uv"][truth["visible"]]
+    nearest = [np.median([np.min(np.hypot(*(uv - g).T)) for g in gt]) for uv in (cand[0], refined)]
+    assert len(gt) >= 8 and nearest[1] < nearest[0] < 3.0
+
+
 def test_truth_bookkeeping_with_no_visible_landmark():
     """Detections in a view whose landmarks are all hidden (a busy site): every one is false.
 
