@@ -23,7 +23,8 @@ delivered (distorted) image, so detections are compared there.
 
 ``--breakdown`` also prints, per type, how far each ground-truth landmark is from the nearest
 keypoint-network candidate of its type (before refinement), from the nearest refined candidate
-(before the refiner's score cut and the second NMS) and from the nearest final detection: whether a
+(before the refiner's score cut and the second NMS; the candidates themselves with ``--refiner
+none``) and from the nearest final detection: whether a
 landmark is lost because nothing proposed it or because it was placed more than ``--match-px`` off.
 
 This virtual machine's speed drifts by about 10 % within minutes, so two separate runs cannot
