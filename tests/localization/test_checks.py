@@ -15,7 +15,7 @@ from localization import (
 )
 from localization.aruco import MarkerSpec
 from localization.associate import Association
-from localization.geometry import check_transform, project
+from localization.geometry import check_transform, matrix_from_quat_wxyz, project
 from localization.pnp import PnPResult
 from localization.synthetic import PAPER_K, paper_prior, sample_viewpoints
 
@@ -126,14 +126,9 @@ def test_check_transform_names_each_fault_and_agrees_with_allclose_off_the_bound
     # random rotations perturbed on both sides of the tolerances (1e-6 on R^T R, 1e-9 on the last row)
     verdicts = []
     for _ in range(400):
-        q = rng.normal(size=4)
-        q /= np.linalg.norm(q)
-        w, x, y, z = q
-        R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
         T = np.eye(4)
-        T[:3, :3] = R + rng.choice([1e-7, 1e-6, 1e-5]) * rng.normal(size=(3, 3))
+        noise = rng.choice([1e-7, 1e-6, 1e-5]) * rng.normal(size=(3, 3))
+        T[:3, :3] = matrix_from_quat_wxyz(rng.normal(size=4)) + noise
         T[:3, 3] = rng.normal(0, 50, 3)
         T[3, :3] = rng.choice([0.0, 3e-10, 3e-9]) * rng.normal(size=3)
         if rng.random() < 0.2:

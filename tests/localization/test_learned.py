@@ -169,11 +169,8 @@ def test_bad_image():
         LearnedDetector("column_tops").detect(np.zeros((10, 10)), {})
 
 
-@needs_model
-@pytest.mark.parametrize("refiner", [True, False], ids=["refined", "network-only"])
-def test_real_render_column_tops(refiner):
-    """On a paper-site render the detector finds the visible column tops within 3 px, with or
-    without the full-resolution refiner."""
+def _paper_column_tops_render():
+    """A 1280 x 720 render of the paper site's columns stage and its column-top truth."""
     pytest.importorskip("pybullet")
     from localization.geometry import look_at
     from uav_struct_env.sim.world import SiteWorld
@@ -181,10 +178,17 @@ def test_real_render_column_tops(refiner):
 
     site = paper_site("columns", marker_size=1.0)
     with SiteWorld(site, image_size=(1280, 720), rng=np.random.default_rng(123)) as world:
-        centre = site.center
-        cam_from_world = look_at(centre + np.array([-6.0, -30.0, 16.0]), centre)
+        cam_from_world = look_at(site.center + np.array([-6.0, -30.0, 16.0]), site.center)
         res = world.render(cam_from_world, depth=True)
-        truth = world.landmark_truth("column_tops", cam_from_world, None, res)
+        return res, world.landmark_truth("column_tops", cam_from_world, None, res)
+
+
+@needs_model
+@pytest.mark.parametrize("refiner", [True, False], ids=["refined", "network-only"])
+def test_real_render_column_tops(refiner):
+    """On a paper-site render the detector finds the visible column tops within 3 px, with or
+    without the full-resolution refiner."""
+    res, truth = _paper_column_tops_render()
     det = LearnedDetector("column_tops", refiner=refiner).detect(
         res.rgb, {"landmarks": {"column_tops": truth}, "image_size": (1280, 720)}
     )
@@ -199,16 +203,7 @@ def test_real_render_column_tops(refiner):
 @needs_model
 def test_candidates_are_the_network_output_that_the_refiner_then_places():
     """``candidates`` is ``detect_all`` without refinement; the refiner moves them onto the truth."""
-    pytest.importorskip("pybullet")
-    from localization.geometry import look_at
-    from uav_struct_env.sim.world import SiteWorld
-    from uav_struct_env.site import paper_site
-
-    site = paper_site("columns", marker_size=1.0)
-    with SiteWorld(site, image_size=(1280, 720), rng=np.random.default_rng(123)) as world:
-        cam_from_world = look_at(site.center + np.array([-6.0, -30.0, 16.0]), site.center)
-        res = world.render(cam_from_world, depth=True)
-        truth = world.landmark_truth("column_tops", cam_from_world, None, res)
+    res, truth = _paper_column_tops_render()
     raw = LearnedDetector("column_tops", refiner=False, corner_window=0)
     cand = raw.candidates(res.rgb)
     for a, b in zip(cand, raw.detect_all(res.rgb), strict=True):
