@@ -19,6 +19,7 @@ actually used is returned as ``RenderResult.camera``.
 
 from __future__ import annotations
 
+import functools
 import math
 import tempfile
 import time
@@ -45,6 +46,21 @@ __all__ = ["DEFAULT_LIGHT", "SKY_RGB", "RenderResult", "SiteWorld", "random_ligh
 SKY_RGB = (186, 204, 224)
 #: Depth-buffer value from which a pixel counts as background (TinyRenderer clears to 1 - 1e-7).
 _BACKGROUND_DEPTH = 1.0 - 1e-6
+#: (8, 3) signs of a box's corners about its centre (x slowest), as ``np.meshgrid(..., "ij")``.
+_BOX_SIGNS = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T
+
+
+@functools.lru_cache(maxsize=16)
+def _image_corner_rays(camera: Camera) -> NDArray[np.float64]:
+    """(3, 4) rays ``K^-1 (u, v, 1)`` through the outer corners of the image's corner pixels.
+
+    Cached per camera (a frozen dataclass): the near plane needs them on every render.
+    """
+    W, H = camera.width, camera.height
+    image_corners = [[-0.5, W - 0.5, W - 0.5, -0.5], [-0.5, -0.5, H - 0.5, H - 0.5], [1] * 4]
+    rays = np.linalg.inv(camera.K) @ np.array(image_corners)
+    rays.flags.writeable = False
+    return rays
 #: Sun from the south-east, high; TinyRenderer's lighting coefficients (EGL uses the direction).
 DEFAULT_LIGHT = {
     "lightDirection": (0.45, -0.35, 1.0),
@@ -267,8 +283,7 @@ class SiteWorld:
         corners = self._box_corners
         if self._extra_bodies:
             _, poses, halves = self._added_boxes()
-            signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T
-            local = signs[None] * halves[:, None, :]  # (B, 8, 3)
+            local = _BOX_SIGNS[None] * halves[:, None, :]  # (B, 8, 3)
             extra = np.einsum("bij,bkj->bki", poses[:, :3, :3], local) + poses[:, None, :3, 3]
             # Added bodies wholly outside the view (site activity beside or under the camera)
             # must not pull the near plane in: cull them against the image's side planes.
@@ -291,11 +306,7 @@ class SiteWorld:
         centre_z = float(-(R.T @ t)[2])
         if centre_z <= 0:
             return camera.near
-        K_inv = np.linalg.inv(camera.K)
-        W, H = camera.width, camera.height
-        image_corners = [[-0.5, W - 0.5, W - 0.5, -0.5], [-0.5, -0.5, H - 0.5, H - 0.5], [1] * 4]
-        rays = K_inv @ np.array(image_corners)
-        descent = -(R.T @ rays)[2]  # metres down per metre of depth
+        descent = -(R.T @ _image_corner_rays(camera))[2]  # metres down per metre of depth
         if descent.max() > 0:
             nearest = min(nearest, centre_z / float(descent.max()))
         if not np.isfinite(nearest):
