@@ -56,9 +56,8 @@ DEFAULTS: dict[str, Any] = {
 def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles: int | None = None):
     """SuperSuit vector env over ``n_envs`` copies of the wrapped env (4 agent slots each).
 
-    Copies are seeded ``seed, seed + 1, ...`` (SuperSuit adds the copy index). Seeds are unique
-    only with one copy per subprocess (``num_cpus == n_envs``) or no subprocesses
-    (``num_cpus == 0``): SuperSuit adds both the process and the in-process index.
+    Copy ``k`` is seeded ``seed + k``, every copy its own seed however the copies are spread over
+    the ``num_cpus`` subprocesses (:func:`_seed_copies`).
     """
     import supersuit as ss
     from stable_baselines3.common.vec_env import VecMonitor
@@ -69,8 +68,28 @@ def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles:
     env = make_train_env(config, **overrides)
     vec = ss.pettingzoo_env_to_vec_env_v1(env)
     vec = ss.concat_vec_envs_v1(vec, n_envs, num_cpus=num_cpus, base_class="stable_baselines3")
-    vec.venv.reset(seed=seed)  # SB3's PPO(seed=...) would call vec.seed(), which SuperSuit lacks
+    _seed_copies(vec.venv, seed, n_envs)  # SB3's PPO(seed=...) would call vec.seed(), which SuperSuit lacks
     return VecMonitor(vec)
+
+
+def _seed_copies(venv, seed: int, n_envs: int) -> None:
+    """Reset env copy ``k`` of SuperSuit's vector env ``venv`` with seed ``seed + k``.
+
+    In one process (``ConcatVecEnv``) SuperSuit's own reset does that. Across subprocesses
+    (``ProcConcatVec``) it gives process ``i`` the seed ``seed + i`` and that process's copy ``j``
+    ``seed + i + j``: with two copies per process, copies 1 and 2 would share a seed and start
+    the same episodes. Each process is sent SuperSuit's reset message with the seed of its first
+    copy instead.
+    """
+    from supersuit.vector import ProcConcatVec
+
+    if not isinstance(venv, ProcConcatVec):
+        venv.reset(seed=seed)
+        return
+    slots = venv.num_envs // n_envs  # agent slots per copy
+    for pipe, start in zip(venv.pipes, venv.idx_starts, strict=False):  # idx_starts has one more
+        pipe.send(("reset", (seed + start // slots, None)))
+    venv._receive_info()
 
 
 class _Progress:

@@ -304,3 +304,26 @@ def test_checkpoints_evaluate_into_a_learning_curve_with_a_band_over_runs(traine
     assert direct["results"]["ppo"]["mean_return"] == pytest.approx(curves[str(out)][1]["mean_return"])
     with pytest.raises(UsageError, match="holds no checkpoints/step_<N>/model.zip"):
         evaluate.main(checkpoints=(str(tmp_path),), episodes=1)
+
+
+def test_every_env_copy_gets_its_own_seed_however_they_share_processes():
+    # Copy k must play the episodes of a single env seeded seed + k: SuperSuit alone seeds the
+    # copies of process i with seed + i + j, so with two copies in one process seeds repeat.
+    from uav_struct_env.wrappers import make_train_env
+
+    train = load("train_viewpoint_ppo")
+    single = make_train_env("state")
+    expected = []
+    for k in range(3):
+        single.reset(seed=7 + k)
+        obs, _ = single.reset()  # the copy's second episode, from its seeded generator
+        expected.append(np.concatenate([obs[a]["gnss"] for a in single.possible_agents]))
+    single.close()
+    for num_cpus in (2, 0):  # two processes (two copies, then one) and none
+        vec = train.make_vec_env("state", n_envs=3, num_cpus=num_cpus, seed=7)
+        try:
+            gnss = vec.reset()["gnss"].reshape(3, -1)
+        finally:
+            vec.close()
+        for k in range(3):
+            np.testing.assert_array_equal(gnss[k], expected[k], err_msg=f"copy {k}, num_cpus={num_cpus}")
