@@ -48,19 +48,6 @@ SKY_RGB = (186, 204, 224)
 _BACKGROUND_DEPTH = 1.0 - 1e-6
 #: (8, 3) signs of a box's corners about its centre (x slowest), as ``np.meshgrid(..., "ij")``.
 _BOX_SIGNS = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T
-
-
-@functools.lru_cache(maxsize=16)
-def _image_corner_rays(camera: Camera) -> NDArray[np.float64]:
-    """(3, 4) rays ``K^-1 (u, v, 1)`` through the outer corners of the image's corner pixels.
-
-    Cached per camera (a frozen dataclass): the near plane needs them on every render.
-    """
-    W, H = camera.width, camera.height
-    image_corners = [[-0.5, W - 0.5, W - 0.5, -0.5], [-0.5, -0.5, H - 0.5, H - 0.5], [1] * 4]
-    rays = np.linalg.inv(camera.K) @ np.array(image_corners)
-    rays.flags.writeable = False
-    return rays
 #: Sun from the south-east, high; TinyRenderer's lighting coefficients (EGL uses the direction).
 DEFAULT_LIGHT = {
     "lightDirection": (0.45, -0.35, 1.0),
@@ -87,6 +74,19 @@ def random_light(rng: np.random.Generator) -> dict:
         "lightDiffuseCoeff": float(rng.uniform(0.3, 0.6)),
         "lightSpecularCoeff": 0.0,
     }
+
+
+@functools.lru_cache(maxsize=16)
+def _image_corner_rays(camera: Camera) -> NDArray[np.float64]:
+    """(3, 4) rays ``K^-1 (u, v, 1)`` through the outer corners of the image's corner pixels.
+
+    Cached per camera (a frozen dataclass): the near plane needs them on every render.
+    """
+    W, H = camera.width, camera.height
+    image_corners = [[-0.5, W - 0.5, W - 0.5, -0.5], [-0.5, -0.5, H - 0.5, H - 0.5], [1] * 4]
+    rays = np.linalg.inv(camera.K) @ np.array(image_corners)
+    rays.flags.writeable = False
+    return rays
 
 
 @dataclass(frozen=True, eq=False)
