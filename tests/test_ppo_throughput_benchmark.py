@@ -14,12 +14,18 @@ pytest.importorskip("supersuit")
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "ppo_throughput.py"
 
 
+@pytest.fixture(scope="module")
+def bench():
+    """The benchmark script as a module (loaded once for the tests below)."""
+    spec = importlib.util.spec_from_file_location("ppo_throughput", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
-def test_short_run_reports_the_training_process_and_each_env_worker():
-    spec = importlib.util.spec_from_file_location("ppo_throughput", SCRIPT)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+def test_short_run_reports_the_training_process_and_each_env_worker(bench):
     row = bench.main(minutes=0.1, seed=1, trainer_args=[
         "--n-envs", "2", "--num-cpus", "2", "--n-steps", "16", "--batch-size", "32", "--n-epochs", "1"])
     roles = sorted(p["role"] for p in row["processes"])
@@ -30,9 +36,6 @@ def test_short_run_reports_the_training_process_and_each_env_worker():
         sum(p["cpu_ms_per_agent_step"] for p in row["processes"]), abs=0.01)
 
 
-def test_a_bad_duration_is_refused_before_anything_runs():
-    spec = importlib.util.spec_from_file_location("ppo_throughput", SCRIPT)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+def test_a_bad_duration_is_refused_before_anything_runs(bench):
     with pytest.raises(UsageError, match="--minutes must be positive, got 0"):
         bench.main(minutes=0)
