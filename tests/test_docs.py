@@ -1,7 +1,6 @@
 """The documentation site builds in strict mode and matches the code it documents."""
 
 import dataclasses
-import importlib.util
 import os
 import re
 import subprocess
@@ -98,28 +97,23 @@ def test_license_and_citation_match_the_package():
     assert title in cff and title in (DOCS / "citation.md").read_text()
 
 
-def _benchmark(name: str):
-    """A script of benchmarks/ as a module (its folder on sys.path, as when it is run)."""
-    path = ROOT / "benchmarks" / f"{name}.py"
-    if str(path.parent) not in sys.path:
-        sys.path.insert(0, str(path.parent))
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+@pytest.fixture(scope="module")
+def benchmark(load_script):
+    """``benchmark(name)``: ``benchmarks/<name>.py`` as a fresh module."""
+    return lambda name: load_script(ROOT / "benchmarks" / f"{name}.py")
 
 
-def test_model_card_study_table_is_generated_not_hand_written():
-    card = _benchmark("model_card_study")
+def test_model_card_study_table_is_generated_not_hand_written(benchmark):
+    card = benchmark("model_card_study")
     text = card.CARD.read_text()
     block = text[text.index(card.BEGIN):text.index(card.END)]
     assert block.count("| ideal |") == 3 and block.count("| camera |") == 3
-    assert _benchmark("generated").replace_block(text, card.COMMAND, block + card.END) == text
+    assert benchmark("generated").replace_block(text, card.COMMAND, block + card.END) == text
 
 
 @pytest.mark.slow
-def test_model_card_study_table_matches_a_fresh_run():
-    assert _benchmark("model_card_study").main(check=True) == 0
+def test_model_card_study_table_matches_a_fresh_run(benchmark):
+    assert benchmark("model_card_study").main(check=True) == 0
 
 
 def test_docs_site_builds_in_strict_mode(tmp_path):

@@ -1,6 +1,5 @@
 """benchmarks/ppo_throughput.py runs the real trainer and accounts for every process it starts."""
 
-import importlib.util
 import sys
 from pathlib import Path
 
@@ -15,12 +14,9 @@ SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "ppo_throughput.py
 
 
 @pytest.fixture(scope="module")
-def bench():
+def bench(load_script):
     """The benchmark script as a module (loaded once for the tests below)."""
-    spec = importlib.util.spec_from_file_location("ppo_throughput", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script(SCRIPT)
 
 
 @pytest.mark.slow

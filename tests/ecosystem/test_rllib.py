@@ -5,7 +5,6 @@ truncated; with ``on_crash="all"`` the env therefore terminates the whole team o
 terminated and three truncated agents kept RLlib stepping the finished env with ``{}``).
 """
 
-import importlib.util
 import json
 from pathlib import Path
 
@@ -105,34 +104,31 @@ def test_rllibs_env_runner_never_steps_a_finished_env():
     assert sum(d.steps_after_end for d in dives) == 0
 
 
-def _load_trainer():
-    spec = importlib.util.spec_from_file_location("train_rllib", EXAMPLES / "train_rllib.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+@pytest.fixture
+def train_rllib(load_script):
+    """``examples/train_rllib.py`` as a fresh module."""
+    return load_script(EXAMPLES / "train_rllib.py")
 
 
-def test_train_rllib_refuses_bad_options_before_starting_ray(tmp_path):
+def test_train_rllib_refuses_bad_options_before_starting_ray(train_rllib, tmp_path):
     from uav_struct_env.errors import ConfigError, UsageError
 
-    train = _load_trainer()
     with pytest.raises(UsageError, match="num_env_runners must be an int >= 0, got -1"):
-        train.main(out=str(tmp_path / "a"), num_env_runners=-1)
+        train_rllib.main(out=str(tmp_path / "a"), num_env_runners=-1)
     with pytest.raises(ConfigError, match=r"minibatch_size \(512\) must not exceed train_batch_size \(256\)"):
-        train.main(out=str(tmp_path / "b"), train_batch_size=256, minibatch_size=512)
+        train_rllib.main(out=str(tmp_path / "b"), train_batch_size=256, minibatch_size=512)
     with pytest.raises(ValueError, match=r"unknown options \['n_envs'\]"):
-        train.main(out=str(tmp_path / "c"), n_envs=2)
+        train_rllib.main(out=str(tmp_path / "c"), n_envs=2)
     assert not any(tmp_path.iterdir())
 
 
 @pytest.mark.slow
-def test_train_rllib_trains_on_a_local_ray_with_two_env_runners(tmp_path):
+def test_train_rllib_trains_on_a_local_ray_with_two_env_runners(train_rllib, tmp_path):
     import ray
     from ray.rllib.algorithms.algorithm import Algorithm
 
-    train = _load_trainer()
     out = tmp_path / "rllib"
-    summary = train.main(out=str(out), num_env_runners=2, total_timesteps=1024, train_batch_size=512,
+    summary = train_rllib.main(out=str(out), num_env_runners=2, total_timesteps=1024, train_batch_size=512,
                          minibatch_size=128, num_epochs=2, max_cycles=8, checkpoint_every=1,
                          progress_bar=False, seed=5)
     assert not ray.is_initialized()  # the local instance it started is shut down
@@ -141,17 +137,17 @@ def test_train_rllib_trains_on_a_local_ray_with_two_env_runners(tmp_path):
     assert [r["agent_steps"] for r in rows] == [512, 1024]  # 4 agents through one shared module
     assert all(np.isfinite(r["episode_return_mean"]) for r in rows)
     assert sorted(p.name for p in (out / "checkpoints").iterdir()) == ["iter_000001", "iter_000002"]
-    assert json.loads((out / "train.json").read_text())["options"]["num_env_runners"] == 2
+    assert json.loads((out / "train_rllib.json").read_text())["options"]["num_env_runners"] == 2
     # The checkpoint restores one module, shared by every agent, that acts on a real observation.
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         from ray.tune.registry import register_env
 
-        register_env(train.ENV_NAME, train.make_env)
+        register_env(train_rllib.ENV_NAME, train_rllib.make_env)
         algo = Algorithm.from_checkpoint(summary["checkpoint"])
-        module = algo.get_module(train.SHARED)
-        assert set(algo.config.policies) == {train.SHARED}
-        env = train.make_env({"config": "state", "max_cycles": 8})
+        module = algo.get_module(train_rllib.SHARED)
+        assert set(algo.config.policies) == {train_rllib.SHARED}
+        env = train_rllib.make_env({"config": "state", "max_cycles": 8})
         obs, _ = env.reset(seed=1)
         import torch
 

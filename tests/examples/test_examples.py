@@ -1,6 +1,5 @@
 """Smoke runs of the training and evaluation examples with tiny settings."""
 
-import importlib.util
 import json
 import os
 import shutil
@@ -20,17 +19,16 @@ from uav_struct_env.errors import ConfigError, UsageError  # noqa: E402
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
-def load(name):
-    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+@pytest.fixture(scope="module")
+def example(load_script):
+    """``example(name)``: ``examples/<name>.py`` as a fresh module."""
+    return lambda name: load_script(EXAMPLES / f"{name}.py")
 
 
 @pytest.fixture(scope="module")
-def trained(tmp_path_factory):
+def trained(example, tmp_path_factory):
     out = tmp_path_factory.mktemp("ppo")
-    train = load("train_viewpoint_ppo")
+    train = example("train_viewpoint_ppo")
     summary = train.main(
         out=str(out),
         total_timesteps=256,
@@ -98,9 +96,9 @@ def _record_resets(monkeypatch) -> list[tuple[int, bytes]]:
     return log
 
 
-def test_evaluate_compares_all_policies_on_the_same_seeds(trained, tmp_path, monkeypatch):
+def test_evaluate_compares_all_policies_on_the_same_seeds(example, trained, tmp_path, monkeypatch):
     out, _ = trained
-    evaluate = load("evaluate_policy")
+    evaluate = example("evaluate_policy")
     resets = _record_resets(monkeypatch)
     summary = evaluate.main(
         model=str(out),
@@ -123,10 +121,10 @@ def test_evaluate_compares_all_policies_on_the_same_seeds(trained, tmp_path, mon
     assert json.loads((tmp_path / "eval.json").read_text())["seeds"] == [10_000, 10_001]
 
 
-def test_evaluate_builds_the_env_each_run_recorded(trained, tmp_path):
+def test_evaluate_builds_the_env_each_run_recorded(example, trained, tmp_path):
     """A run is evaluated in the configuration it recorded, not in what its name means today."""
     out, _ = trained
-    evaluate = load("evaluate_policy")
+    evaluate = example("evaluate_policy")
     old = tmp_path / "trained_with_paper"
     shutil.copytree(out, old)
     record = json.loads((old / "train.json").read_text())
@@ -175,12 +173,12 @@ def test_train_config_round_trips_through_json():
         TrainConfig.from_dict({"name": "state", "env": {}})
 
 
-def test_several_training_runs_are_evaluated_and_pooled_with_their_spread(trained, tmp_path):
+def test_several_training_runs_are_evaluated_and_pooled_with_their_spread(example, trained, tmp_path):
     out, _ = trained
     runs = [tmp_path / "seed_a", tmp_path / "seed_b"]
     for run in runs:  # the same weights twice: the spread across runs must be zero
         shutil.copytree(out, run)
-    evaluate = load("evaluate_policy")
+    evaluate = example("evaluate_policy")
     summary = evaluate.main(model=[str(r) for r in runs], policies=("ppo", "hold"), episodes=1,
                             max_cycles=3)
     res = summary["results"]
@@ -197,16 +195,16 @@ def test_several_training_runs_are_evaluated_and_pooled_with_their_spread(traine
         evaluate.main(model=[str(runs[0]), str(runs[0])], policies=("ppo",), episodes=1, max_cycles=2)
 
 
-def test_bad_options_are_named():
+def test_bad_options_are_named(example):
     with pytest.raises(ValueError, match="unknown options \\['episods'\\]"):
-        load("evaluate_policy").main(episods=3)
+        example("evaluate_policy").main(episods=3)
     with pytest.raises(ValueError, match="needs model="):
-        load("evaluate_policy").main(policies=("ppo",))
+        example("evaluate_policy").main(policies=("ppo",))
     with pytest.raises(ValueError, match="unknown options \\['lr'\\]"):
-        load("train_viewpoint_ppo").main(lr=1e-3)
+        example("train_viewpoint_ppo").main(lr=1e-3)
 
 
-def test_evaluate_reads_the_model_folder_without_unpickling(trained, tmp_path):
+def test_evaluate_reads_the_model_folder_without_unpickling(example, trained, tmp_path):
     import pickle
 
     import numpy as np
@@ -227,7 +225,7 @@ def test_evaluate_reads_the_model_folder_without_unpickling(trained, tmp_path):
     legacy.mkdir()
     for name in ("model.zip", "vecnormalize.pkl"):
         shutil.copy(out / name, legacy / name)
-    evaluate = load("evaluate_policy")
+    evaluate = example("evaluate_policy")
     with pytest.raises(ValueError, match="has vecnormalize.pkl but no normalization.npz.*--trust-pickle"):
         evaluate.main(model=str(legacy), policies=("ppo",), episodes=1, max_cycles=2)
     summary = evaluate.main(model=str(legacy), policies=("ppo",), episodes=1, max_cycles=2,
@@ -277,18 +275,18 @@ def test_example_mistakes_are_one_line_and_status_2(tmp_path):
     assert list(tmp_path.iterdir()) == [tmp_path / "file"]
 
 
-def test_evaluate_writes_nothing_unless_asked():
-    evaluate = load("evaluate_policy")
+def test_evaluate_writes_nothing_unless_asked(example):
+    evaluate = example("evaluate_policy")
     assert evaluate.DEFAULTS["plot"] is None and evaluate.DEFAULTS["json_out"] is None
 
 
-def test_checkpoints_evaluate_into_a_learning_curve_with_a_band_over_runs(trained, tmp_path):
+def test_checkpoints_evaluate_into_a_learning_curve_with_a_band_over_runs(example, trained, tmp_path):
     out, _ = trained
     second = tmp_path / "seed4"
-    load("train_viewpoint_ppo").main(out=str(second), total_timesteps=128, n_envs=1, num_cpus=0,
+    example("train_viewpoint_ppo").main(out=str(second), total_timesteps=128, n_envs=1, num_cpus=0,
                                      n_steps=64, batch_size=64, n_epochs=1, max_cycles=8,
                                      checkpoint_every=128, progress_bar=False, seed=4)
-    evaluate = load("evaluate_policy")
+    evaluate = example("evaluate_policy")
     summary = evaluate.main(checkpoints=(str(out), str(second)), episodes=1, max_cycles=4,
                             plot=str(tmp_path / "curve.png"), json_out=str(tmp_path / "curve.json"))
     curves = summary["learning_curve"]
@@ -306,12 +304,12 @@ def test_checkpoints_evaluate_into_a_learning_curve_with_a_band_over_runs(traine
         evaluate.main(checkpoints=(str(tmp_path),), episodes=1)
 
 
-def test_every_env_copy_gets_its_own_seed_however_they_share_processes():
+def test_every_env_copy_gets_its_own_seed_however_they_share_processes(example):
     # Copy k must play the episodes of a single env seeded seed + k: SuperSuit alone seeds the
     # copies of process i with seed + i + j, so with two copies in one process seeds repeat.
     from uav_struct_env.wrappers import make_train_env
 
-    train = load("train_viewpoint_ppo")
+    train = example("train_viewpoint_ppo")
     single = make_train_env("state")
     expected = []
     for k in range(3):

@@ -1,4 +1,3 @@
-import importlib.util
 import pathlib
 
 import numpy as np
@@ -37,14 +36,9 @@ def test_landmark_context_layout():
     assert g["in_frame"].tolist() == [True, True, False]
 
 
-def test_benchmark_smoke(capsys):
+def test_benchmark_smoke(capsys, load_script):
     pytest.importorskip("uav_struct_env.site")
-    spec = importlib.util.spec_from_file_location(
-        "bench_loc", ROOT / "benchmarks" / "localizer.py"
-    )
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    out = mod.main(images=4, aruco_images=1, seed=0)
+    out = load_script(ROOT / "benchmarks" / "localizer.py").main(images=4, aruco_images=1, seed=0)
     assert "column_tops/miss10+fp1/robust" in out["structural"]
     assert "Cramér-Rao" in capsys.readouterr().out
 

@@ -1,6 +1,5 @@
 """Issue 4, item 7, on the benchmark protocol at full size (slow: run with ``pytest -m slow``)."""
 
-import importlib.util
 import pathlib
 
 import pytest
@@ -10,14 +9,10 @@ DESIGN_CRB_POSITION = {"slab_corners": 0.14, "opening_corners": 0.55, "column_to
 
 
 @pytest.fixture(scope="module")
-def results():
+def results(load_script):
     pytest.importorskip("uav_struct_env.site")
-    spec = importlib.util.spec_from_file_location(
-        "bench_loc", ROOT / "benchmarks" / "localizer.py"
-    )
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod.main(images=200, aruco_images=0, seed=0)["structural"]
+    bench = load_script(ROOT / "benchmarks" / "localizer.py")
+    return bench.main(images=200, aruco_images=0, seed=0)["structural"]
 
 
 @pytest.mark.slow
