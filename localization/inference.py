@@ -45,11 +45,6 @@ class OnnxNet:
         )
         self._input = self._session.get_inputs()[0].name
 
-    @property
-    def input_shape(self) -> list:
-        """The input's shape as the model declares it (dynamic axes by name, e.g. ``"n"``)."""
-        return list(self._session.get_inputs()[0].shape)
-
     def __call__(self, x: ArrayLike) -> NDArray[np.float32]:
         """The first output for input ``x`` (cast to contiguous float32)."""
         return self._session.run(None, {self._input: np.ascontiguousarray(x, dtype=np.float32)})[0]

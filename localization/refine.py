@@ -15,19 +15,12 @@ Patch convention: a patch is the ``PATCH x PATCH`` (odd) block of pixels centred
 candidate's nearest pixel ``a = round(uv)`` (pixel centres at integer coordinates, as everywhere
 in this package; borders replicated), so patch cell ``(HALF, HALF)`` is pixel ``a`` and the
 refined position is ``a + (du, dv)``.
-
-A *context* refiner also sees the ``CONTEXT x CONTEXT`` block around the same pixel averaged in
-``CONTEXT_POOL x CONTEXT_POOL`` cells down to ``PATCH x PATCH`` (three more input channels; cell
-``(HALF, HALF)`` averages the pixels ``a - 1 .. a + 1``): the slab edges that lead to a corner
-stay in view when a scaffold post or a worker covers the corner's own neighbourhood. Which kind a
-model is follows from its input's channel count (3 or 6; :func:`network_input`).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -35,24 +28,11 @@ from localization.checks import check_number
 from localization.geometry import as_points
 from localization.inference import OnnxNet
 
-__all__ = [
-    "CONTEXT",
-    "CONTEXT_POOL",
-    "DEFAULT_REFINER",
-    "HALF",
-    "PATCH",
-    "POSITIVE_RADIUS",
-    "PatchRefiner",
-    "extract_patches",
-    "network_input",
-]
+__all__ = ["DEFAULT_REFINER", "HALF", "PATCH", "POSITIVE_RADIUS", "PatchRefiner", "extract_patches"]
 
 #: Side of a refinement patch (odd, so that the candidate pixel is its centre), px.
 PATCH = 33
 HALF = PATCH // 2
-#: A context refiner's context: ``CONTEXT`` px square, averaged in ``CONTEXT_POOL`` px cells.
-CONTEXT_POOL = 3
-CONTEXT = CONTEXT_POOL * PATCH
 #: A patch is a positive for a type when a landmark of that type lies this close to its centre.
 POSITIVE_RADIUS = 10.0
 #: The committed refiner (see ``localization/models/MODEL_CARD.md``).
@@ -88,42 +68,12 @@ def extract_patches(
     return out, anchors
 
 
-def network_input(blocks: NDArray[np.uint8], context: bool) -> NDArray[np.float32]:
-    """The refiner's input ``(N, C', PATCH, PATCH)`` float32 from blocks centred on the anchors.
-
-    Args:
-        blocks: ``(N, S, S, C)`` pixels (:func:`extract_patches` with ``size`` S): ``S = PATCH``
-            without context, ``S = CONTEXT`` with it.
-        context: whether the model is a context refiner. Then the output is the centre
-            ``PATCH x PATCH`` pixels (channels ``0 .. C-1``) and the whole block averaged in
-            ``CONTEXT_POOL x CONTEXT_POOL`` cells (channels ``C .. 2C-1``).
-
-    Raises:
-        ValueError: the blocks' size is not the one ``context`` needs.
-    """
-    b = np.asarray(blocks)
-    size = CONTEXT if context else PATCH
-    if b.ndim != 4 or b.shape[1:3] != (size, size):
-        raise ValueError(f"blocks must have shape (N, {size}, {size}, C) for "
-                         f"context={context}, got {b.shape}")
-    if not context:
-        return np.ascontiguousarray(b.transpose(0, 3, 1, 2), dtype=np.float32)
-    lo = (CONTEXT - PATCH) // 2
-    out = np.empty((len(b), PATCH, PATCH, 2 * b.shape[3]), np.float32)
-    out[..., :b.shape[3]] = b[:, lo:lo + PATCH, lo:lo + PATCH]
-    for k, block in enumerate(b):  # OpenCV's area resampling: the cells' means (integer factor)
-        out[k, :, :, b.shape[3]:] = cv2.resize(block.astype(np.float32), (PATCH, PATCH),
-                                                interpolation=cv2.INTER_AREA).reshape(PATCH, PATCH, -1)
-    return np.ascontiguousarray(out.transpose(0, 3, 1, 2))
-
-
 class PatchRefiner:
     """Refine and re-score keypoint candidates on full-resolution patches (module docstring).
 
     Args:
         model: path of the refiner's ONNX model (default :data:`DEFAULT_REFINER`). Input
-            ``(N, 3, PATCH, PATCH)`` float RGB 0-255, or ``(N, 6, PATCH, PATCH)`` for a context
-            refiner (:func:`network_input`); output ``(N, 3 * 3)``: per landmark type
+            ``(N, 3, PATCH, PATCH)`` float RGB 0-255; output ``(N, 3 * 3)``: per landmark type
             (channel order of :data:`localization.learned.LANDMARK_TYPES`) the probability of a
             landmark within :data:`POSITIVE_RADIUS` px, then its offset ``(du, dv)`` in px.
         iterations: most refinement passes; each re-centres the patch on the previous estimate.
@@ -132,8 +82,7 @@ class PatchRefiner:
         threads: ONNX Runtime threads (:class:`localization.inference.OnnxNet`).
 
     Raises:
-        FileNotFoundError: the model file does not exist. ValueError: ``iterations < 1``, or
-            the model's input is not 3 or 6 channels of ``PATCH x PATCH``.
+        FileNotFoundError: the model file does not exist. ValueError: ``iterations < 1``.
     """
 
     def __init__(self, model: str | Path | None = None, iterations: int = 2,
@@ -145,19 +94,13 @@ class PatchRefiner:
         self.iterations = check_number("iterations", iterations, 1, integer=True, type_error=ValueError)
         self.recentre_px = check_number("recentre_px", recentre_px, 0.0, type_error=ValueError)
         self._net = OnnxNet(path, threads)
-        shape = list(self._net.input_shape)
-        if len(shape) != 4 or shape[1] not in (3, 6) or shape[2:] != [PATCH, PATCH]:
-            raise ValueError(f"{path}: a refiner takes (N, 3 or 6, {PATCH}, {PATCH}) patches, "
-                             f"this model takes {shape}")
-        #: Whether the model is a context refiner (module docstring).
-        self.context = shape[1] == 6
 
     def predict(self, image: NDArray[np.uint8], uv: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:
         """One pass: ``(anchors (N, 2), probabilities (N, 3), offsets (N, 3, 2))``."""
-        blocks, anchors = extract_patches(image, uv, CONTEXT if self.context else PATCH)
+        patches, anchors = extract_patches(image, uv)
         if len(anchors) == 0:
             return anchors, np.zeros((0, 3)), np.zeros((0, 3, 2))
-        out = self._net(network_input(blocks, self.context)).astype(np.float64).reshape(len(anchors), 9)
+        out = self._net(patches.transpose(0, 3, 1, 2)).astype(np.float64).reshape(len(anchors), 9)
         return anchors, out[:, :3], out[:, 3:].reshape(-1, 3, 2)
 
     def refine(
@@ -187,4 +130,4 @@ class PatchRefiner:
 
     def __repr__(self) -> str:
         return (f"PatchRefiner(model={self.model_path.name!r}, iterations={self.iterations}, "
-                f"recentre_px={self.recentre_px}, context={self.context})")
+                f"recentre_px={self.recentre_px})")

@@ -6,15 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from localization.refine import (
-    CONTEXT,
-    DEFAULT_REFINER,
-    HALF,
-    PATCH,
-    PatchRefiner,
-    extract_patches,
-    network_input,
-)
+from localization.refine import DEFAULT_REFINER, HALF, PATCH, PatchRefiner, extract_patches
 
 
 def test_patch_is_centred_on_the_nearest_pixel():
@@ -33,24 +25,6 @@ def test_patch_border_replicates():
     assert np.array_equal(p[2, 2:], img[9, 0:3, 0])  # centre row, right half inside
     assert np.array_equal(p[:, 0], p[:, 2])  # columns left of the image repeat column 0
     assert np.array_equal(p[4], p[2])  # rows below the image repeat the last row
-
-
-def test_network_input_with_and_without_context():
-    rng = np.random.default_rng(0)
-    img = rng.integers(0, 256, (240, 260, 3), dtype=np.uint8)
-    plain = network_input(extract_patches(img, [[130.0, 120.0]])[0], context=False)
-    assert plain.shape == (1, 3, PATCH, PATCH) and plain.dtype == np.float32
-    assert np.array_equal(plain[0, :, HALF, HALF], img[120, 130])
-    blocks, _ = extract_patches(img, [[130.0, 120.0]], CONTEXT)
-    x = network_input(blocks, context=True)
-    assert x.shape == (1, 6, PATCH, PATCH)
-    assert np.array_equal(x[0, :3], plain[0])  # the first three channels are the plain patch
-    # the centre context cell averages the 3 x 3 pixels around the anchor; the cell to its
-    # right the next three columns
-    assert np.allclose(x[0, 3:, HALF, HALF], img[119:122, 129:132].reshape(-1, 3).mean(axis=0), atol=1e-4)
-    assert np.allclose(x[0, 3:, HALF, HALF + 1], img[119:122, 132:135].reshape(-1, 3).mean(axis=0), atol=1e-4)
-    with pytest.raises(ValueError, match=r"\(N, 99, 99, C\) for context=True, got \(1, 33, 33, 3\)"):
-        network_input(extract_patches(img, [[130.0, 120.0]])[0], context=True)
 
 
 def test_patch_errors():

@@ -8,20 +8,16 @@ lies within :data:`~localization.refine.POSITIVE_RADIUS` px of the patch centre 
 Two steps, both seeded:
 
 1. :func:`mine` reads a **full-resolution** landmark dataset (``python -m uav_struct_env.datasets
-   OUT --scale 1.0``) and stores, per image, square windows (:func:`window_size`: larger than
-   the network's block, so that training can shift it) around three kinds of anchors: every
-   ground-truth keypoint, every candidate of the keypoint network (threshold 0.2, no
-   refinement: the distribution the refiner sees at inference, with its false positives) and
-   strong image corners far from every landmark (hard negatives). With every window: the
-   offset of the nearest landmark of each type.
+   OUT --scale 1.0``) and stores, per image, ``WINDOW x WINDOW`` windows (larger than a patch, so
+   that training can shift the patch) around three kinds of anchors: every ground-truth keypoint,
+   every candidate of the keypoint network (threshold 0.2, no refinement: the distribution the
+   refiner sees at inference, with its false positives) and strong image corners far from every
+   landmark (hard negatives). With every window: the offset of the nearest landmark of each type.
 2. :func:`train` crops patches from the windows at random shifts (up to :data:`MAX_SHIFT` px
    around ground-truth anchors, fewer around candidates and negatives), flips them horizontally
    and applies photometric augmentation; loss = binary cross-entropy of the three scores + L1 of
    the offset of every type present within the positive radius. Checkpoints are chosen by the F1
    at 3 px of the whole detector (keypoint network + this refiner) on a validation dataset.
-
-With ``--context`` the refiner is a *context* refiner (:mod:`localization.refine`): windows of
-``CONTEXT + 2 * MAX_SHIFT`` px are mined, and a second convolution stem reads the context block.
 
 Example (the committed refiner, see ``localization/models/MODEL_CARD.md``)::
 
@@ -45,7 +41,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from localization.learned import DEFAULT_MODEL, LANDMARK_TYPES, LearnedDetector, match_detections
-from localization.refine import CONTEXT, PATCH, POSITIVE_RADIUS, extract_patches, network_input
+from localization.refine import HALF, PATCH, POSITIVE_RADIUS, extract_patches
 from uav_struct_env.datasets.landmarks import load_labels
 from uav_struct_env.outputs import atomic_path, atomic_write_json, prepare_output_dir
 from uav_struct_env.training.train_detector import LandmarkCrops, conv_bn_relu, export_checked
@@ -57,63 +53,37 @@ from uav_struct_env.training.train_loop import (
 )
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_input_file, refuse
 
-__all__ = ["MAX_SHIFT", "PatchNet", "PatchSamples", "export_refiner", "main", "mine", "train",
-           "window_size"]
+__all__ = ["MAX_SHIFT", "PatchNet", "PatchSamples", "export_refiner", "main", "mine", "train"]
 
 N_TYPES = len(LANDMARK_TYPES)
 #: Largest shift (px, per axis) of a training patch from its ground-truth anchor.
 MAX_SHIFT = 10
+WINDOW = PATCH + 2 * MAX_SHIFT
 _ANCHOR_TRUTH, _ANCHOR_CANDIDATE, _ANCHOR_NEGATIVE = 0, 1, 2
-
-
-def window_size(context: bool) -> int:
-    """Side of a mined window, px: the network's block (``PATCH`` or ``CONTEXT``) + shifts."""
-    return (CONTEXT if context else PATCH) + 2 * MAX_SHIFT
-
-
-def _stem(c: int) -> nn.Sequential:
-    """Convolutions ``(N, 3, PATCH, PATCH)`` -> ``(N, 4c, PATCH // 8, PATCH // 8)``."""
-    return nn.Sequential(
-        conv_bn_relu(3, c), conv_bn_relu(c, c), nn.MaxPool2d(2),  # 33 -> 16
-        conv_bn_relu(c, 2 * c), conv_bn_relu(2 * c, 2 * c), nn.MaxPool2d(2),  # -> 8
-        conv_bn_relu(2 * c, 3 * c), conv_bn_relu(3 * c, 3 * c), nn.MaxPool2d(2),  # -> 4
-        conv_bn_relu(3 * c, 4 * c),
-    )
 
 
 class PatchNet(nn.Module):
     """The refiner network: ``(N, 3, PATCH, PATCH)`` RGB 0..255 -> ``(N, 9)``.
 
-    With ``context`` the input is ``(N, 6, PATCH, PATCH)`` (:func:`localization.refine.
-    network_input`): the context channels go through a second stem of half the width (the
-    context is coarse; a full-width one made a training step 2.5x as long as without context,
-    half 1.6x), and the head reads both. Output: three sigmoid scores (one per landmark type),
-    then ``(du, dv)`` per type in px.
+    Output: three sigmoid scores (one per landmark type), then ``(du, dv)`` per type in px.
     """
 
-    def __init__(self, width: int = 16, context: bool = False) -> None:
+    def __init__(self, width: int = 16) -> None:
         super().__init__()
         c = width
-        self.context = bool(context)
-        self.features = _stem(c)
-        cc = max(c // 2, 1) if self.context else 0
-        self.context_features = _stem(cc) if self.context else None
+        self.features = nn.Sequential(
+            conv_bn_relu(3, c), conv_bn_relu(c, c), nn.MaxPool2d(2),  # 33 -> 16
+            conv_bn_relu(c, 2 * c), conv_bn_relu(2 * c, 2 * c), nn.MaxPool2d(2),  # -> 8
+            conv_bn_relu(2 * c, 3 * c), conv_bn_relu(3 * c, 3 * c), nn.MaxPool2d(2),  # -> 4
+            conv_bn_relu(3 * c, 4 * c),
+        )
         side = PATCH // 8
-        self.head = nn.Sequential(nn.Flatten(), nn.Linear(4 * (c + cc) * side * side, 128),
+        self.head = nn.Sequential(nn.Flatten(), nn.Linear(4 * c * side * side, 128),
                                   nn.ReLU(inplace=True), nn.Linear(128, 3 * N_TYPES))
-
-    @property
-    def in_channels(self) -> int:
-        """Input channels: 3, or 6 for a context refiner."""
-        return 6 if self.context else 3
 
     def logits(self, x: torch.Tensor) -> torch.Tensor:
         """Raw outputs: score logits (N, 3) and offsets (N, 6)."""
-        x = x * (1.0 / 127.5) - 1.0
-        f = self.features(x[:, :3])
-        if self.context_features is not None:
-            f = torch.cat([f, self.context_features(x[:, 3:])], dim=1)
-        return self.head(f)
+        return self.head(self.features(x * (1.0 / 127.5) - 1.0))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Scores (sigmoid) and offsets, as the exported graph returns them."""
@@ -122,10 +92,10 @@ class PatchNet(nn.Module):
 
 
 # ------------------------------------------------------------------------------------ mining
-def _nearest_offsets(anchors: np.ndarray, kps: np.ndarray, window: int) -> np.ndarray:
+def _nearest_offsets(anchors: np.ndarray, kps: np.ndarray) -> np.ndarray:
     """Offsets ``(N, 3, 2)`` from each anchor to the nearest keypoint of each type.
 
-    NaN where no keypoint of that type lies within the ``window`` px square window.
+    NaN where no keypoint of that type lies within the window.
     """
     out = np.full((len(anchors), N_TYPES, 2), np.nan, np.float32)
     for t in range(N_TYPES):
@@ -135,30 +105,27 @@ def _nearest_offsets(anchors: np.ndarray, kps: np.ndarray, window: int) -> np.nd
         d = gt[None, :, :] - anchors[:, None, :]
         n = np.argmin(np.hypot(d[..., 0], d[..., 1]), axis=1)
         near = d[np.arange(len(anchors)), n]
-        inside = np.all(np.abs(near) <= window // 2, axis=1)
+        inside = np.all(np.abs(near) <= WINDOW // 2, axis=1)
         out[inside, t] = near[inside]
     return out
 
 
 def mine(data: str | Sequence[str], out: str, model: str | None = None, negatives: int = 12,
-         seed: int = 0, progress: bool = True, context: bool = False) -> Path:
+         seed: int = 0, progress: bool = True) -> Path:
     """Windows around ground truth, keypoint-network candidates and hard negatives -> NPZ.
 
     Args:
         data: one or several full-resolution landmark datasets (``scale`` 1.0).
-        out: path of the ``.npz`` written (``windows`` uint8 (N, S, S, 3) with ``S =
-            window_size(context)``, ``offsets`` float32 (N, 3, 2), ``kind`` int8 (N,),
-            ``image`` int32 (N,)).
+        out: path of the ``.npz`` written (``windows`` uint8 (N, WINDOW, WINDOW, 3), ``offsets``
+            float32 (N, 3, 2), ``kind`` int8 (N,), ``image`` int32 (N,)).
         model: keypoint-network ONNX (default: the committed one).
         negatives: hard negatives per image (strong corners > 2 x the positive radius from
             every landmark).
         seed: seed of the negative sampling.
         progress: show a progress bar.
-        context: mine windows for a context refiner (:func:`window_size`).
     """
     from tqdm import tqdm
 
-    window = window_size(context)
     images = []
     for path in [data] if isinstance(data, (str, Path)) else data:
         labels = load_labels(path)
@@ -185,9 +152,9 @@ def mine(data: str | Sequence[str], out: str, model: str | None = None, negative
         for pts, kind in groups:
             if len(pts) == 0:
                 continue
-            windows, anchors = extract_patches(img, pts, window)
+            windows, anchors = extract_patches(img, pts, WINDOW)
             parts["windows"].append(windows)
-            parts["offsets"].append(_nearest_offsets(anchors.astype(np.float64), kps, window))
+            parts["offsets"].append(_nearest_offsets(anchors.astype(np.float64), kps))
             parts["kind"].append(np.full(len(anchors), kind, np.int8))
             parts["image"].append(np.full(len(anchors), k, np.int32))
     arrays = {name: np.concatenate(v) for name, v in parts.items()}
@@ -200,18 +167,9 @@ def mine(data: str | Sequence[str], out: str, model: str | None = None, negative
 
 # ------------------------------------------------------------------------------------ data
 class PatchSamples(torch.utils.data.Dataset):
-    """Augmented training inputs cut from mined windows (see the module docstring).
-
-    The windows' size says whether they are for a context refiner (:func:`window_size`).
-    """
+    """Augmented training patches cut from mined windows (see the module docstring)."""
 
     def __init__(self, arrays: dict, seed: int, augment: bool = True) -> None:
-        side = arrays["windows"].shape[1]
-        if side not in (window_size(False), window_size(True)):
-            raise ValueError(f"mined windows must be {window_size(False)} or {window_size(True)} "
-                             f"px square, got {arrays['windows'].shape[1:3]}")
-        #: Whether the windows are for a context refiner.
-        self.context = side == window_size(True)
         self.windows = arrays["windows"]
         self.offsets = arrays["offsets"]
         self.kind = arrays["kind"]
@@ -236,18 +194,17 @@ class PatchSamples(torch.utils.data.Dataset):
         rng = np.random.default_rng([self.seed, index, self.calls])
         self.calls += 1
         su, sv = self._shift(int(self.kind[index]), rng) if self.augment else (0, 0)
-        c = self.windows.shape[1] // 2
-        h = (CONTEXT if self.context else PATCH) // 2
-        block = self.windows[index, c + sv - h:c + sv + h + 1, c + su - h:c + su + h + 1]
+        c = WINDOW // 2
+        patch = self.windows[index, c + sv - HALF:c + sv + HALF + 1, c + su - HALF:c + su + HALF + 1]
         off = self.offsets[index] - np.array([su, sv], np.float32)
         if self.augment and rng.random() < 0.5:
-            block = block[:, ::-1]
+            patch = patch[:, ::-1]
             off = off * np.array([-1.0, 1.0], np.float32)
         if self.augment:
-            block = LandmarkCrops.photometric(np.ascontiguousarray(block), rng)
+            patch = LandmarkCrops.photometric(np.ascontiguousarray(patch), rng)
         present = np.isfinite(off[:, 0]) & (np.hypot(off[:, 0], off[:, 1]) <= POSITIVE_RADIUS)
         off = np.where(present[:, None], off, 0.0).astype(np.float32)
-        x = torch.from_numpy(network_input(block[None], self.context)[0])
+        x = torch.from_numpy(np.ascontiguousarray(patch.transpose(2, 0, 1))).float()
         return x, torch.from_numpy(present.astype(np.float32)), torch.from_numpy(off)
 
 
@@ -262,7 +219,7 @@ def loss_fn(out: torch.Tensor, present: torch.Tensor, off: torch.Tensor):
 
 def export_refiner(model: PatchNet, path: str | Path) -> Path:
     """Export the refiner with a dynamic batch axis (checked in ONNX Runtime)."""
-    x = torch.rand(5, model.in_channels, PATCH, PATCH) * 255
+    x = torch.rand(5, 3, PATCH, PATCH) * 255
     return export_checked(model, x, path, "patches", "scores_offsets",
                           {"patches": {0: "n"}, "scores_offsets": {0: "n"}})
 
@@ -297,11 +254,9 @@ def evaluate(refiner: str | Path, labels: dict, match_px: float = 3.0,
 def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
           max_steps: int | None = None, batch: int = 128, lr: float = 2e-3, width: int = 16,
           seed: int = 0, threads: int = 2, eval_every: int = 500, workers: int = 1,
-          detector_model: str | None = None, context: bool | None = None, log=print) -> dict:
+          detector_model: str | None = None, log=print) -> dict:
     """Train from scratch on mined windows; returns the summary.
 
-    The windows' size decides whether a context refiner is trained; ``context`` (if not None)
-    is what the caller expects (ValueError when the windows were mined for the other kind).
     Writes ``out/{last,best}.pt``, ``out/log.jsonl``, ``out/refiner.onnx`` and
     ``out/summary.json``. Stops after ``minutes`` of wall time or ``max_steps`` steps.
     Validation runs the refiner behind ``detector_model`` (None: the committed keypoint network).
@@ -312,13 +267,10 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
     ds = PatchSamples(dict(np.load(windows)), seed)
-    if context is not None and ds.context != context:
-        raise ValueError(f"{windows}: windows mined for a {'context' if ds.context else 'plain'} "
-                         f"refiner, but context={context} was asked for; mine them again")
     val_labels = load_labels(val) if val else None
     # Channels-last (NHWC) convolutions: a training step at batch 128 takes 77 instead of 120 ms
     # on this project's 2-core CPU, so the same wall-time budget trains ~1.2-1.5x more steps.
-    model = PatchNet(width, context=ds.context).to(memory_format=torch.channels_last)
+    model = PatchNet(width).to(memory_format=torch.channels_last)
 
     def step_loss(batch):
         x, present, off = batch
@@ -337,7 +289,7 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
     onnx_path = export_refiner(model, out_dir / "refiner.onnx")
     (out_dir / "candidate.onnx").unlink(missing_ok=True)
     summary.update(params=sum(p.numel() for p in model.parameters()), train_windows=len(ds),
-                   onnx=str(onnx_path), seed=seed, batch=batch, width=width, context=ds.context,
+                   onnx=str(onnx_path), seed=seed, batch=batch, width=width,
                    detector_model=str(Path(detector_model or DEFAULT_MODEL).resolve()))
     atomic_write_json(out_dir / "summary.json", summary, indent=2)
     return summary
@@ -357,9 +309,6 @@ def main(argv: list[str] | None = None) -> dict:
                     help="keypoint network whose candidates are mined and behind which the "
                          "refiner is validated (default: the committed one); give the new "
                          "one when retraining both networks")
-    ap.add_argument("--context", action="store_true",
-                    help="a context refiner: also sees a CONTEXT px region around each patch "
-                         "(localization.refine), with windows mined for it")
     add_training_arguments(ap, minutes=15.0, batch=128, lr=2e-3)
     a = ap.parse_args(argv)
     try:  # every input before any work or any file
@@ -371,9 +320,9 @@ def main(argv: list[str] | None = None) -> dict:
     prepare_output_dir(a.out, overwrite=a.overwrite)
     windows = Path(a.windows or Path(a.out) / "windows.npz")
     if not windows.exists():
-        mine(a.data, str(windows), model=a.detector_model, seed=a.seed, context=a.context)
+        mine(a.data, str(windows), model=a.detector_model, seed=a.seed)
     summary = train(str(windows), a.out, a.val, a.minutes, a.max_steps, a.batch, a.lr, a.width,
-                    a.seed, a.threads, a.eval_every, a.workers, a.detector_model, a.context)
+                    a.seed, a.threads, a.eval_every, a.workers, a.detector_model)
     print(json.dumps(summary, indent=2))
     return summary
 
