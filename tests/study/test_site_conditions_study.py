@@ -23,7 +23,7 @@ def _per_image(tmp_path: Path, rows: list[tuple]) -> Path:
     return path
 
 
-def test_f1_ceiling_counts_the_landmarks_of_views_no_pnp_can_pose_as_misses(bench, tmp_path):
+def test_exact_f1_counts_the_landmarks_of_views_no_pnp_can_pose_as_misses(bench, tmp_path):
     path = _per_image(tmp_path, [
         ("slab_corners", True, 5, 5, 5, 5),
         ("slab_corners", False, 3, 3, 0, 0),  # three visible: no pose, whatever the detector
@@ -31,8 +31,8 @@ def test_f1_ceiling_counts_the_landmarks_of_views_no_pnp_can_pose_as_misses(benc
         ("column_tops", True, 12, 12, 12, 12),
     ])
     r = 9 / 12
-    assert bench.f1_ceiling(path, "slab_corners") == pytest.approx(2 * r / (1 + r))
-    assert bench.f1_ceiling(path, "column_tops") == 1.0
+    assert bench.exact_f1(path, "slab_corners") == pytest.approx(2 * r / (1 + r))
+    assert bench.exact_f1(path, "column_tops") == 1.0
     # the posable views: 2 of them, both posed; F1 over them pools 8 correct of 9 assigned, 8 true
     posed, views, f1 = bench.posable_views(path, "slab_corners")
     assert (posed, views) == (2, 2) and f1 == pytest.approx(2 * (8 / 9) * 1.0 / (8 / 9 + 1.0))
