@@ -37,6 +37,7 @@ from uav_struct_env.sim.client import RenderClient, p, resolve_renderer  # p: py
 from uav_struct_env.sim.raycast import RayScene, raycast_visibility
 from uav_struct_env.sim.scene import LoadedScene, load_elements
 from uav_struct_env.sim.visibility import landmark_visibility
+from uav_struct_env.site.activity import BOX_CORNER_SIGNS
 from uav_struct_env.site.mesh import site_elements
 from uav_struct_env.site.model import Site
 
@@ -46,8 +47,6 @@ __all__ = ["DEFAULT_LIGHT", "SKY_RGB", "RenderResult", "SiteWorld", "random_ligh
 SKY_RGB = (186, 204, 224)
 #: Depth-buffer value from which a pixel counts as background (TinyRenderer clears to 1 - 1e-7).
 _BACKGROUND_DEPTH = 1.0 - 1e-6
-#: (8, 3) signs of a box's corners about its centre (x slowest), as ``np.meshgrid(..., "ij")``.
-_BOX_SIGNS = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T
 #: Sun from the south-east, high; TinyRenderer's lighting coefficients (EGL uses the direction).
 DEFAULT_LIGHT = {
     "lightDirection": (0.45, -0.35, 1.0),
@@ -283,7 +282,7 @@ class SiteWorld:
         corners = self._box_corners
         if self._extra_bodies:
             _, poses, halves = self._added_boxes()
-            local = _BOX_SIGNS[None] * halves[:, None, :]  # (B, 8, 3)
+            local = BOX_CORNER_SIGNS[None] * halves[:, None, :]  # (B, 8, 3)
             extra = np.einsum("bij,bkj->bki", poses[:, :3, :3], local) + poses[:, None, :3, 3]
             # Added bodies wholly outside the view (site activity beside or under the camera)
             # must not pull the near plane in: cull them against the image's side planes.

@@ -55,6 +55,7 @@ from uav_struct_env.site.model import Site
 
 __all__ = [
     "ACTIVITY_PRESETS",
+    "BOX_CORNER_SIGNS",
     "EQUIPMENT_KINDS",
     "MAX_EQUIPMENT_HEIGHT",
     "WORKER_HALF_EXTENTS",
@@ -94,6 +95,11 @@ _CANDIDATES = 24
 _WAYPOINTS = 8
 
 _HI_VIS = ((1.0, 0.45, 0.05, 1.0), (0.85, 0.95, 0.1, 1.0), (0.95, 0.3, 0.1, 1.0))
+
+#: (8, 3) signs of a box's corners about its centre (x slowest, as ``np.meshgrid(..., "ij")``).
+BOX_CORNER_SIGNS = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T
+BOX_CORNER_SIGNS.flags.writeable = False
+
 _STEEL = (0.62, 0.63, 0.66, 1.0)
 _YELLOW = (0.95, 0.72, 0.08, 1.0)
 _DARK = (0.15, 0.15, 0.16, 1.0)
@@ -200,8 +206,7 @@ class Box:
     @property
     def corners(self) -> NDArray[np.float64]:
         """(8, 3) corners in the project frame."""
-        signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, -1).T
-        local = signs * self.half_extents
+        local = BOX_CORNER_SIGNS * self.half_extents
         return local @ self.world_from_box[:3, :3].T + self.world_from_box[:3, 3]
 
     @property
