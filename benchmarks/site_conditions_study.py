@@ -45,22 +45,27 @@ METHODS = ("slab_corners", "opening_corners", "column_tops", "all")
 SUMMARY_METHODS = ("slab_corners", "opening_corners", "column_tops")
 
 
-def posable_views(per_image: Path, method: str, at_least: int = 4) -> tuple[int, int, float]:
-    """(posed, views, association F1) over the views of ``method`` with >= ``at_least`` visible
-    landmarks (F1 pooled over those views, as the study pools it over all)."""
+def read_per_image(per_image: Path) -> list[dict]:
+    """The rows of a study's ``per_image.csv`` (strings, as ``csv.DictReader`` gives them)."""
     with per_image.open() as f:
-        rows = [r for r in csv.DictReader(f) if r["method"] == method and int(r["n_visible"]) >= at_least]
+        return list(csv.DictReader(f))
+
+
+def posable_views(rows: list[dict], method: str, at_least: int = 4) -> tuple[int, int, float]:
+    """(posed, views, association F1) over the views of ``method`` with >= ``at_least`` visible
+    landmarks (F1 pooled over those views, as the study pools it over all); ``rows`` from
+    :func:`read_per_image`."""
+    rows = [r for r in rows if r["method"] == method and int(r["n_visible"]) >= at_least]
     scores = pooled_scores(sum(int(r["n_correct"]) for r in rows), sum(int(r["n_assigned"]) for r in rows),
                            sum(int(r["n_true_detections"]) for r in rows))
     return sum(r["success"] == "True" for r in rows), len(rows), scores.f1
 
 
-def exact_f1(per_image: Path, method: str, at_least: int = 4) -> float:
+def exact_f1(rows: list[dict], method: str, at_least: int = 4) -> float:
     """The pooled association F1 of an exact pipeline at these views (module docstring):
     ``2 r / (1 + r)`` with ``r`` the share of the visible landmarks that lie in views with at
-    least ``at_least`` of them."""
-    with per_image.open() as f:
-        visible = [int(r["n_visible"]) for r in csv.DictReader(f) if r["method"] == method]
+    least ``at_least`` of them; ``rows`` from :func:`read_per_image`."""
+    visible = [int(r["n_visible"]) for r in rows if r["method"] == method]
     total = sum(visible)
     r = sum(v for v in visible if v >= at_least) / total if total else float("nan")
     return 2 * r / (1 + r)
@@ -81,8 +86,9 @@ def run_all(workers: int, keep: Path | None, detector_model: str | None,
                                  workers=workers, methods=METHODS, detector_model=detector_model,
                                  refiner_model=refiner_model)
             results = run_study(config, out, progress=False, figures=keep is not None, overwrite=True)
-            posed = {m: posable_views(out / "per_image.csv", m) for m in METHODS}
-            exact = {m: exact_f1(out / "per_image.csv", m) for m in METHODS}
+            rows = read_per_image(out / "per_image.csv")
+            posed = {m: posable_views(rows, m) for m in METHODS}
+            exact = {m: exact_f1(rows, m) for m in METHODS}
             runs.append({"activity": activity, "imaging": imaging, "results": results, "posed": posed,
                          "exact_f1": exact})
     return runs

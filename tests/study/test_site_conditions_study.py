@@ -24,15 +24,15 @@ def _per_image(tmp_path: Path, rows: list[tuple]) -> Path:
 
 
 def test_exact_f1_counts_the_landmarks_of_views_no_pnp_can_pose_as_misses(bench, tmp_path):
-    path = _per_image(tmp_path, [
+    rows = bench.read_per_image(_per_image(tmp_path, [
         ("slab_corners", True, 5, 5, 5, 5),
         ("slab_corners", False, 3, 3, 0, 0),  # three visible: no pose, whatever the detector
         ("slab_corners", True, 4, 3, 4, 3),
         ("column_tops", True, 12, 12, 12, 12),
-    ])
+    ]))
     r = 9 / 12
-    assert bench.exact_f1(path, "slab_corners") == pytest.approx(2 * r / (1 + r))
-    assert bench.exact_f1(path, "column_tops") == 1.0
+    assert bench.exact_f1(rows, "slab_corners") == pytest.approx(2 * r / (1 + r))
+    assert bench.exact_f1(rows, "column_tops") == 1.0
     # the posable views: 2 of them, both posed; F1 over them pools 8 correct of 9 assigned, 8 true
-    posed, views, f1 = bench.posable_views(path, "slab_corners")
+    posed, views, f1 = bench.posable_views(rows, "slab_corners")
     assert (posed, views) == (2, 2) and f1 == pytest.approx(2 * (8 / 9) * 1.0 / (8 / 9 + 1.0))
