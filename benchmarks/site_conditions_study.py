@@ -17,8 +17,9 @@ which no PnP can pose, counts its true detections as misses; the second F1 leave
 "exact F1" is the pooled F1 of an exact pipeline at the same views: every visible landmark of a
 view with at least four detected and correctly assigned, nothing assigned in the other views
 (recall = their share of the visible landmarks, precision 1). A real pipeline exceeds it only by
-posing a view with three visible landmarks through a fourth, wrong detection (its three correct
-pairs then count), which gives a wrong pose.
+posing a view with three visible landmarks through a detection of a fourth that the ground truth
+calls hidden (an occluder covers its point; the detector infers it a few pixels off): the three
+visible pairs then count, and the pose is as far off as that displaced point makes it.
 ``--detector-model`` / ``--refiner-model`` evaluate other weights than the committed ones;
 ``--keep DIR`` keeps every run's outputs.
 

@@ -15,8 +15,10 @@ Two methods:
     1. *Hypotheses.* An onboard attitude sensor knows the camera's tilt far better than its yaw
        and position; with the prior's tilt, two correspondences fix the pose in closed form
        (:mod:`localization.upright`). Four spread-out detections of the dense part of the image
-       give six anchor pairs; every ordered pair of candidate landmarks whose prior image is
-       within a factor 3 in length and 45 degrees in direction of an anchor pair's gives a pose;
+       give six anchor pairs (with detection scores, the four likeliest detections give up to six
+       more: a dense cluster of clutter would otherwise hold every anchor); every ordered pair of
+       candidate landmarks whose prior image is within a factor 3 in length and 45 degrees in
+       direction of an anchor pair's gives a pose;
        poses beyond the prior's Mahalanobis gate are dropped, and the rest are ranked by the
        detections they explain within the coarse gate (then by the capped squared distances).
        The best distinct ones each give a gated assignment. When the best refined hypothesis
@@ -728,6 +730,7 @@ def associate_robust(
         upright = full(_upright_hypotheses(
             det[good], landmarks_xyz, idx, proj, K, prior, sig, max_prior_mahalanobis_sq, coarse_gate_px,
             need, 5 * max_hypotheses, 2 * max(max_hypotheses, 1),
+            None if P.log_odds is None else P.log_odds[good],
         ))
         # the best half first: when they explain the detections the rest would only cost time;
         # else the other half joins the layout vote's batch
@@ -791,17 +794,29 @@ def _chi2_quantiles(quantile: float, max_dof: int) -> NDArray[np.float64]:
     return np.concatenate([[np.inf], chi2.ppf(quantile, np.arange(1, max(max_dof, 1) + 1))])
 
 
-def _anchor_pairs(det: NDArray, k: int = 4) -> NDArray[np.int64]:
-    """(P, 2) every pair among ``k`` spread-out detections of the dense part of the image.
+def _anchor_pairs(det: NDArray, k: int = 4, log_odds: NDArray | None = None) -> NDArray[np.int64]:
+    """(P, 2) anchor pairs: among ``k`` spread-out detections, then among the ``k`` likeliest.
 
+    The pairs among ``k`` spread-out detections of the dense part of the image come first; with
+    ``log_odds`` (N,), every further pair among the ``k`` likeliest detections follows.
     Far-apart anchors condition the two-point pose best, but the extremes of a detection set are
     often clutter (uniform over the image, while landmarks gather on the building): the anchors
     are taken, farthest-point first, among the detections whose median distance to the others
     is at most the median of that (and any detection when there are at most ``k``). Every pair
     of ``k`` anchors leaves a pair of true detections unless ``k - 1`` of them are clutter.
-    Compiled: :func:`localization.compiled_scores.anchor_pairs`.
+    Clutter is not always uniform: a stack of formwork or pallets gives a dozen corner-like
+    detections in one place, which is then the dense part, and every anchor is clutter (four
+    slab corners found within 1 px, a prior 100 px off, no hypothesis). The detector's scores
+    know better: its ``k`` likeliest detections anchor too. Compiled (the spread-out part):
+    :func:`localization.compiled_scores.anchor_pairs`.
     """
-    return anchor_pairs(np.ascontiguousarray(det, dtype=np.float64), int(k))
+    pairs = anchor_pairs(np.ascontiguousarray(det, dtype=np.float64), int(k))
+    if log_odds is None or det.shape[0] <= k:  # with at most k detections every pair is there
+        return pairs
+    top = np.sort(np.argsort(-np.asarray(log_odds), kind="stable")[:k])
+    have = {(min(i, j), max(i, j)) for i, j in pairs.tolist()}
+    extra = [p for p in itertools.combinations(top.tolist(), 2) if p not in have]
+    return np.concatenate([pairs, np.array(extra, dtype=np.int64).reshape(-1, 2)]) if extra else pairs
 
 
 def _upright_hypotheses(
@@ -817,10 +832,12 @@ def _upright_hypotheses(
     min_pairs: int,
     keep: int,
     n_distinct: int,
+    log_odds: NDArray | None = None,
 ) -> list[tuple[NDArray, NDArray]]:
     """Coarse assignments from upright two-point poses (:mod:`localization.upright`).
 
-    For each pair of spread-out detections (:func:`_anchor_pairs`) and each ordered pair of
+    For each anchor pair of detections (:func:`_anchor_pairs`; ``log_odds`` (N,), the detections'
+    score log-odds or None) and each ordered pair of
     candidate landmarks ``idx``, the pose with the prior's tilt that puts the two landmarks on
     the two detections; poses farther from the prior than ``max_prior_sq`` (yaw and position
     terms) are dropped. Each pose is scored like a rival (:func:`localization.ambiguity.
@@ -830,7 +847,7 @@ def _upright_hypotheses(
     ``min_pairs`` pairs or more are returned: ``[(assignment of det rows into landmarks, start
     cam_from_world), ...]``, best first.
     """
-    pairs = _anchor_pairs(det)
+    pairs = _anchor_pairs(det, log_odds=log_odds)
     m = idx.size
     if pairs.shape[0] == 0 or m < 2:
         return []

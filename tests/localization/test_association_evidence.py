@@ -11,11 +11,13 @@ from localization.associate import associate_robust
 from localization.geometry import look_at, project
 from localization.synthetic import PAPER_IMAGE_SIZE, PAPER_K, paper_prior
 
-CASE = Path(__file__).parents[1] / "data" / "association_busy_slab.json"
+DATA = Path(__file__).parents[1] / "data"
+CASE = DATA / "association_busy_slab.json"
+CLUSTER = DATA / "association_busy_cluster.json"
 
 
-def _case():
-    c = json.loads(CASE.read_text())
+def _case(path=CASE):
+    c = json.loads(path.read_text())
     return {k: np.asarray(v) if isinstance(v, list) else v for k, v in c.items()}
 
 
@@ -33,6 +35,25 @@ def test_a_scaffold_post_beside_a_corner_does_not_take_its_place(with_scores):
     assert a.failure_reason is None
     ids = np.where(a.assignment >= 0, c["landmark_ids"][np.maximum(a.assignment, 0)], -1)
     np.testing.assert_array_equal(ids, c["true_ids"])  # the four corners right, clutter left out
+    assert np.linalg.norm(a.cam_from_world[:3, 3] - c["cam_from_world"][:3, 3]) < 0.1
+
+
+def test_the_likeliest_detections_anchor_hypotheses_when_clutter_is_the_dense_part():
+    """A render of the busy site (tests/data/association_busy_cluster.json): four slab corners
+    detected within 0.7 px (scores 0.72-1.00), fourteen detections of one stack of clutter
+    200-300 px to their left (scores <= 0.48), the prior's corners 95 px off. The spread-out
+    anchors come from the dense part of the image -- the clutter -- so no two-point hypothesis
+    held two corners and the association found none; with scores the four likeliest detections
+    anchor too."""
+    c = _case(CLUSTER)
+    args = (c["detections_uv"], c["landmarks_xyz"], c["K"], c["prior_cam_from_world"],
+            tuple(c["image_size"]), float(c["margin_px"]))
+    plain = associate_robust(*args)
+    assert plain.failure_reason is not None  # without scores nothing tells the corners apart
+    a = associate_robust(*args, detection_scores=c["scores"])
+    assert a.failure_reason is None
+    ids = np.where(a.assignment >= 0, c["landmark_ids"][np.maximum(a.assignment, 0)], -1)
+    np.testing.assert_array_equal(ids, c["true_ids"])
     assert np.linalg.norm(a.cam_from_world[:3, 3] - c["cam_from_world"][:3, 3]) < 0.1
 
 

@@ -159,3 +159,19 @@ def test_anchor_pairs_avoid_outlying_clutter(rng):
     assert np.all(pairs < 10)
     assert _anchor_pairs(det[:1]).shape == (0, 2)
     assert sorted(tuple(sorted(p)) for p in _anchor_pairs(det[:3]).tolist()) == [(0, 1), (0, 2), (1, 2)]
+
+
+def test_anchor_pairs_add_the_likeliest_detections(rng):
+    """With scores, the pairs among the four likeliest detections join the spread-out ones
+    (each pair once); without, or with at most four detections, nothing changes."""
+    det = np.vstack([rng.uniform(150, 250, size=(14, 2)), [[430, 407], [811, 413], [773, 273], [507, 270]]])
+    log_odds = np.concatenate([np.full(14, -1.0), [4.0, 4.0, 3.0, 1.0]])
+    plain = _anchor_pairs(det)
+    assert np.all(plain < 14)  # the dense part is the clutter
+    pairs = _anchor_pairs(det, log_odds=log_odds)
+    np.testing.assert_array_equal(pairs[: len(plain)], plain)
+    assert sorted(tuple(sorted(p)) for p in pairs[len(plain):].tolist()) == [
+        (14, 15), (14, 16), (14, 17), (15, 16), (15, 17), (16, 17)]
+    both = _anchor_pairs(det[10:], log_odds=log_odds[10:])  # anchors shared with the top four
+    assert len({tuple(sorted(p)) for p in both.tolist()}) == len(both)
+    np.testing.assert_array_equal(_anchor_pairs(det[:4], log_odds=log_odds[:4]), _anchor_pairs(det[:4]))
