@@ -11,13 +11,17 @@ takes cases 0-999, the slow run all 10,000.
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
 
-from localization import FailureCode, Localizer, pose_nees
+from localization import Detections, FailureCode, Localizer, pose_nees
 from localization.fuzz import FuzzCase, draw_case
 from localization.geometry import camera_center, look_at, make_transform, project
+from localization.synthetic import PAPER_IMAGE_SIZE, PAPER_K, paper_prior
 
 SLICE = 1_000
 FULL = 10_000
@@ -130,3 +134,52 @@ def test_the_same_grid_with_a_prior_good_to_half_a_metre_is_placed():
     est = loc.localize(uv[vis], prior)
     assert est.success, est.failure_reason
     assert np.linalg.norm(est.position - camera_center(T)) < 0.05
+
+
+def _case(name: str) -> dict:
+    c = json.loads((Path(__file__).parents[1] / "data" / name).read_text())
+    return {k: np.asarray(v) if isinstance(v, list) else v for k, v in c.items()}
+
+
+def test_a_minimal_fit_of_wrong_detections_that_explains_half_its_prediction_fails():
+    """A render of the duplex IFC building (tests/data/association_duplex_minimal_fit.json):
+    eight slab corners in view, eight detections, none of them a corner. Four of them fit a pose
+    near the prior, and the association used to report it, 6.48 m off; that pose projects all
+    eight corners into the image and explains four."""
+    c = _case("association_duplex_minimal_fit.json")
+    assert np.all(c["true_ids"] == -1)
+    loc = Localizer(c["landmarks_xyz"], c["K"], image_size=tuple(c["image_size"]),
+                    margin_px=float(c["margin_px"]))
+    est = loc.localize(Detections(c["detections_uv"], c["scores"]), c["prior_cam_from_world"])
+    assert not est.success
+    assert est.failure_code is FailureCode.NO_CONSISTENT_ASSOCIATION
+    assert "pairs only 4 detections (the minimum) and leaves 4 of the 8 landmarks" in est.failure_reason
+
+
+def _two_openings():
+    """A 3 x 2.5 m opening and a 1.5 x 1.2 m one beside it in one slab, seen from 20 m, and their
+    projections with 0.5 px noise (openings of one shape would make four corners ambiguous)."""
+    X = np.array([[0, 0, 6], [3, 0, 6], [3, 2.5, 6], [0, 2.5, 6],
+                  [6, 3, 6], [7.5, 3, 6], [7.5, 4.2, 6], [6, 4.2, 6]], dtype=float)
+    T = look_at([4.5, -16.0, 18.0], [4.5, 1.5, 6.0])
+    uv, depth = project(PAPER_K, T, X)
+    assert np.all(depth > 0) and np.all((uv >= 0) & (uv < PAPER_IMAGE_SIZE)), "all eight in view"
+    return X, T, uv + np.random.default_rng(0).normal(0.0, 0.5, uv.shape)
+
+
+def test_a_minimal_fit_is_refused_only_when_half_its_prediction_goes_unmatched():
+    """Four right detections of one opening while the other opening's four corners project into
+    the image unmatched: refused (the image cannot tell it from a coincidence). One more corner
+    detected, or the other opening not in the model, and the same four give a pose."""
+    X, T, uv = _two_openings()
+    prior = paper_prior(T, 3)
+    loc = Localizer(X, PAPER_K, image_size=PAPER_IMAGE_SIZE)
+    half = loc.localize(uv[:4], prior)
+    assert half.failure_code is FailureCode.NO_CONSISTENT_ASSOCIATION
+    assert "leaves 4 of the 8" in half.failure_reason
+    five = loc.localize(uv[:5], prior)
+    assert five.success and five.assignment.tolist() == [0, 1, 2, 3, 4]
+    six = Localizer(X[:6], PAPER_K, image_size=PAPER_IMAGE_SIZE).localize(uv[:4], prior)
+    assert six.success and six.assignment.tolist() == [0, 1, 2, 3]  # two of six unmatched
+    for est in (five, six):
+        assert np.linalg.norm(est.position - camera_center(T)) < 0.5
