@@ -9,6 +9,9 @@ the environment.
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -29,6 +32,19 @@ _FALLBACK["all"] = np.vstack(
     [_FALLBACK[k] for k in ("slab_corners", "opening_corners", "column_tops")]
 )
 CENTER = np.array([4.0, 5.5, 3.375])
+DATA = Path(__file__).parents[1] / "data"
+
+
+@pytest.fixture(scope="session")
+def association_case():
+    """``association_case(name)``: a recorded association problem ``tests/data/<name>`` (its lists
+    as arrays)."""
+
+    def load(name: str) -> dict:
+        c = json.loads((DATA / name).read_text())
+        return {k: np.asarray(v) if isinstance(v, list) else v for k, v in c.items()}
+
+    return load
 
 
 def building_landmarks() -> dict[str, tuple[np.ndarray, np.ndarray]]:

@@ -1,8 +1,5 @@
 """Robust association: one-pair swaps of the winner, and detection scores as evidence."""
 
-import json
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -11,23 +8,17 @@ from localization.associate import associate_robust
 from localization.geometry import look_at, project
 from localization.synthetic import PAPER_IMAGE_SIZE, PAPER_K, paper_prior
 
-DATA = Path(__file__).parents[1] / "data"
-CASE = DATA / "association_busy_slab.json"
-CLUSTER = DATA / "association_busy_cluster.json"
-
-
-def _case(path=CASE):
-    c = json.loads(path.read_text())
-    return {k: np.asarray(v) if isinstance(v, list) else v for k, v in c.items()}
+CASE = "association_busy_slab.json"
+CLUSTER = "association_busy_cluster.json"
 
 
 @pytest.mark.parametrize("with_scores", [False, True])
-def test_a_scaffold_post_beside_a_corner_does_not_take_its_place(with_scores):
+def test_a_scaffold_post_beside_a_corner_does_not_take_its_place(with_scores, association_case):
     """A render of the busy site (tests/data/association_busy_slab.json): four slab corners
     visible, all four detected, and a scaffold post 20 px from one of them. The pose fitted to
     the post (chi-square 23.8 on 2 dof, within the fit test) used to win because no hypothesis
     reached the corner; a swap of that one pair finds the exact fit (chi-square 0.24)."""
-    c = _case()
+    c = association_case(CASE)
     a = associate_robust(
         c["detections_uv"], c["landmarks_xyz"], c["K"], c["prior_cam_from_world"], tuple(c["image_size"]),
         float(c["margin_px"]), detection_scores=c["scores"] if with_scores else None,
@@ -38,14 +29,14 @@ def test_a_scaffold_post_beside_a_corner_does_not_take_its_place(with_scores):
     assert np.linalg.norm(a.cam_from_world[:3, 3] - c["cam_from_world"][:3, 3]) < 0.1
 
 
-def test_the_likeliest_detections_anchor_hypotheses_when_clutter_is_the_dense_part():
+def test_the_likeliest_detections_anchor_hypotheses_when_clutter_is_the_dense_part(association_case):
     """A render of the busy site (tests/data/association_busy_cluster.json): four slab corners
     detected within 0.7 px (scores 0.72-1.00), fourteen detections of one stack of clutter
     200-300 px to their left (scores <= 0.48), the prior's corners 95 px off. The spread-out
     anchors come from the dense part of the image -- the clutter -- so no two-point hypothesis
     held two corners and the association found none; with scores the four likeliest detections
     anchor too."""
-    c = _case(CLUSTER)
+    c = association_case(CLUSTER)
     args = (c["detections_uv"], c["landmarks_xyz"], c["K"], c["prior_cam_from_world"],
             tuple(c["image_size"]), float(c["margin_px"]))
     plain = associate_robust(*args)

@@ -11,9 +11,6 @@ takes cases 0-999, the slow run all 10,000.
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import cv2
 import numpy as np
 import pytest
@@ -136,17 +133,12 @@ def test_the_same_grid_with_a_prior_good_to_half_a_metre_is_placed():
     assert np.linalg.norm(est.position - camera_center(T)) < 0.05
 
 
-def _case(name: str) -> dict:
-    c = json.loads((Path(__file__).parents[1] / "data" / name).read_text())
-    return {k: np.asarray(v) if isinstance(v, list) else v for k, v in c.items()}
-
-
-def test_a_minimal_fit_of_wrong_detections_that_explains_half_its_prediction_fails():
+def test_a_minimal_fit_of_wrong_detections_that_explains_half_its_prediction_fails(association_case):
     """A render of the duplex IFC building (tests/data/association_duplex_minimal_fit.json):
     eight slab corners in view, eight detections, none of them a corner. Four of them fit a pose
     near the prior, and the association used to report it, 6.48 m off; that pose projects all
     eight corners into the image and explains four."""
-    c = _case("association_duplex_minimal_fit.json")
+    c = association_case("association_duplex_minimal_fit.json")
     assert np.all(c["true_ids"] == -1)
     loc = Localizer(c["landmarks_xyz"], c["K"], image_size=tuple(c["image_size"]),
                     margin_px=float(c["margin_px"]))
