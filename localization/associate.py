@@ -56,6 +56,10 @@ Two methods:
        tries the winner with one pair's detection swapped for an unassigned detection near that
        landmark's projection (a wrong pair the pose absorbed hides the right detection outside
        the inlier gate).
+    5. *Minimal fits.* A winner with no more pairs than the minimum that leaves at least as many
+       landmarks unmatched as it pairs, of those its pose projects into the image, fails as
+       ``no_consistent_association``: four pairs leave the fit test two degrees of freedom, and
+       among enough wrong detections some four fit some pose near the prior.
 
     Gating means a detection (clutter) or a landmark (miss, occlusion) may stay unassigned.
 """
