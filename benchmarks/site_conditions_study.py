@@ -10,8 +10,10 @@ activity (``none``, ``light``, ``busy``) and imaging:
   sensor noise, JPEG).
 
 and prints two Markdown tables: every figure (detection, association F1, poses, poses of the views
-with at least four visible landmarks and the association F1 pooled over those views alone, median /
-P90, Cramér-Rao bound, median over bound) and a summary with the three landmark types per row.
+with at least four visible landmarks, how many of those got no pose with fewer than four of their
+landmarks detected within the match radius -- left short by the detector, not the association --
+and the association F1 pooled over those views alone, median / P90, Cramér-Rao bound, median over
+bound) and a summary with the three landmark types per row.
 The study's association F1 pools every view, so a view with fewer than four visible landmarks,
 which no PnP can pose, counts its true detections as misses; the second F1 leaves such views out.
 "exact F1" is the pooled F1 of an exact pipeline at the same views: every visible landmark of a
@@ -62,6 +64,14 @@ def posable_views(rows: list[dict], method: str, at_least: int = 4) -> tuple[int
     return sum(r["success"] == "True" for r in rows), len(rows), scores.f1
 
 
+def unposed_short(rows: list[dict], method: str, at_least: int = 4) -> int:
+    """How many views of ``method`` with >= ``at_least`` visible landmarks got no pose and have
+    fewer than ``at_least`` detections within the match radius of a visible landmark: the
+    detector, not the association, left them short; ``rows`` from :func:`read_per_image`."""
+    return sum(1 for r in rows if r["method"] == method and int(r["n_visible"]) >= at_least
+               and r["success"] != "True" and int(r["n_true_detections"]) < at_least)
+
+
 def exact_f1(rows: list[dict], method: str, at_least: int = 4) -> float:
     """The pooled association F1 of an exact pipeline at these views (module docstring):
     ``2 r / (1 + r)`` with ``r`` the share of the visible landmarks that lie in views with at
@@ -89,9 +99,10 @@ def run_all(workers: int, keep: Path | None, detector_model: str | None,
             results = run_study(config, out, progress=False, figures=keep is not None, overwrite=True)
             rows = read_per_image(out / "per_image.csv")
             posed = {m: posable_views(rows, m) for m in METHODS}
+            short = {m: unposed_short(rows, m) for m in METHODS}
             exact = {m: exact_f1(rows, m) for m in METHODS}
             runs.append({"activity": activity, "imaging": imaging, "results": results, "posed": posed,
-                         "exact_f1": exact})
+                         "short": short, "exact_f1": exact})
     return runs
 
 
@@ -107,9 +118,9 @@ def full_block(runs: list[dict]) -> str:
     """Every figure, a Markdown table."""
     lines = [
         "| activity | imaging | landmarks | detection (%) | assoc. F1 (%) | exact F1 (%) | poses | "
-        "views with >= 4 visible: posed | their assoc. F1 (%) | median / P90 (m) | bound median (m) | "
-        "median / bound |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "views with >= 4 visible: posed | not posed, < 4 found | their assoc. F1 (%) | median / P90 (m) | "
+        "bound median (m) | median / bound |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for run in runs:
         for m in METHODS:
@@ -118,7 +129,7 @@ def full_block(runs: list[dict]) -> str:
             lines.append(
                 f"| {run['activity']} | {run['imaging']} | {r['label']} | {100 * r['detection_rate']:.1f} | "
                 f"{100 * r['association_f1']:.1f} | {100 * run['exact_f1'][m]:.1f} | "
-                f"{r['successful']}/{r['total']} | {posed}/{views} | "
+                f"{r['successful']}/{r['total']} | {posed}/{views} | {run['short'][m]} | "
                 f"{100 * f1:.1f} | "
                 f"{_pair(r['translation_error_m'])} | {r['cramer_rao_translation_m']['median']:.3f} | "
                 f"{_ratio(r['median_error_over_bound'])} |"

@@ -795,8 +795,8 @@ def _minimal_fit_reason(P: _Problem, a: NDArray, T: NDArray) -> str | None:
     two degrees of freedom) that leaves at least as many landmarks unmatched as it pairs, of
     those it projects inside the image, explains at most half of its own prediction. Wrong
     detections form such fits: among enough of them, some four fit some pose near the prior
-    (the duplex IFC building's eight slab corners, which the default weights barely detect:
-    13 poses of 40 were 2-6.5 m off with four pairs each and four more corners predicted and
+    (the duplex IFC building's eight slab corners, which the default weights barely detect: 12
+    of their 13 wrong poses, 2-6.5 m off, had four pairs and four more corners predicted and
     unmatched). A right pose of that kind needs half of the landmarks it should see hidden or
     undetected; it fails too, for ``NO_CONSISTENT_ASSOCIATION`` is the honest answer when the
     image cannot tell the two apart.

@@ -36,3 +36,15 @@ def test_exact_f1_counts_the_landmarks_of_views_no_pnp_can_pose_as_misses(bench,
     # the posable views: 2 of them, both posed; F1 over them pools 8 correct of 9 assigned, 8 true
     posed, views, f1 = bench.posable_views(rows, "slab_corners")
     assert (posed, views) == (2, 2) and f1 == pytest.approx(2 * (8 / 9) * 1.0 / (8 / 9 + 1.0))
+
+
+def test_unposed_short_counts_posable_views_the_detector_left_short(bench, tmp_path):
+    rows = bench.read_per_image(_per_image(tmp_path, [
+        ("opening_corners", False, 4, 3, 0, 0),  # four visible, three found: the detector's
+        ("opening_corners", False, 4, 4, 0, 0),  # four found and no pose: the association's
+        ("opening_corners", False, 3, 2, 0, 0),  # not posable at all
+        ("opening_corners", True, 4, 3, 4, 3),  # posed although short
+    ]))
+    assert bench.unposed_short(rows, "opening_corners") == 1
+    assert bench.posable_views(rows, "opening_corners")[:2] == (1, 3)
+    assert bench.unposed_short(rows, "slab_corners") == 0
