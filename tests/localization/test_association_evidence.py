@@ -31,7 +31,7 @@ def test_a_scaffold_post_beside_a_corner_does_not_take_its_place(with_scores, as
 
 def test_the_likeliest_detections_anchor_hypotheses_when_clutter_is_the_dense_part(association_case):
     """A render of the busy site (tests/data/association_busy_cluster.json): four slab corners
-    detected within 0.7 px (scores 0.72-1.00), fourteen detections of one stack of clutter
+    detected within 0.7 px (scores 0.72-1.00), thirteen detections of one stack of clutter
     200-300 px to their left (scores <= 0.48), the prior's corners 95 px off. The spread-out
     anchors come from the dense part of the image -- the clutter -- so no two-point hypothesis
     held two corners and the association found none; with scores the four likeliest detections
