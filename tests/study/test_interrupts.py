@@ -136,5 +136,5 @@ def test_overwrite_replaces_the_earlier_study_and_removes_its_stale_files(tmp_pa
     assert proc.returncode == 0, err[-2000:]
     names = sorted(p.name for p in out.iterdir())
     # --no-figures: the earlier figure is not left beside the new results; the user's file stays
-    assert names == ["notes.txt", "per_image.csv", "results.json", "table1.md", "table2.md"]
+    assert names == ["detections.csv", "notes.txt", "per_image.csv", "results.json", "table1.md", "table2.md"]
     assert b"earlier" not in (out / "results.json").read_bytes()

@@ -215,3 +215,22 @@ def test_study_through_the_mavic_camera_localizes_every_uav():
     assert len(rows) == 8 and all(r.success for r in rows), [r.failure_reason for r in rows]
     slab = [r.translation_error_m for r in rows if r.method == "slab_corners"]
     assert max(slab) < 0.5, slab
+
+
+def test_quick_study_detections_csv_sums_to_the_per_image_counts(quick_study):
+    """detections.csv has one row per detection, and its rows add up to per_image.csv's counts."""
+    out, stdout = quick_study
+    assert "detections.csv" in stdout
+    with (out / "per_image.csv").open() as fh:
+        images = [r for r in csv.DictReader(fh) if r["method"] in
+                  {m.key for m in METHODS if m.structural}]
+    with (out / "detections.csv").open() as fh:
+        dets = list(csv.DictReader(fh))
+    assert images and dets
+    for img in images:
+        mine = [d for d in dets if (d["method"], d["uav"], d["viewpoint"]) ==
+                (img["method"], img["uav"], img["viewpoint"])]
+        assert len(mine) == int(img["n_detections"])
+        assert sum(int(d["true_id"]) >= 0 for d in mine) == int(img["n_true_detections"])
+        assert sum(int(d["assigned_id"]) >= 0 for d in mine) == int(img["n_assigned"])
+        assert sum(d["assigned_id"] == d["true_id"] != "-1" for d in mine) == int(img["n_correct"])

@@ -21,6 +21,7 @@ from localization.geometry import camera_center, invert, project
 from localization.metrics import pose_errors
 from uav_struct_env.processes import run_chunks
 from uav_struct_env.stack import FrameLocalization, StackSpec, build_stack
+from uav_struct_env.study.detections import DetectionRow, detection_rows
 from uav_struct_env.study.protocol import METHODS, Method, Scene, StudyConfig
 from uav_struct_env.study.tracking import ViewpointTracking, track_viewpoint
 
@@ -165,16 +166,18 @@ def stack_spec(config: StudyConfig, method: Method) -> StackSpec:
 
 def run_unit(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoint: int = 0):
     """Render ``scene`` at ``viewpoint`` and evaluate its methods: ``(results, overlays)``."""
-    results, overlays, _ = run_unit_tracked(config, scene, viewpoint, overlay_viewpoint)
+    results, overlays, _, _ = run_unit_tracked(config, scene, viewpoint, overlay_viewpoint)
     return results, overlays
 
 
 def run_unit_tracked(config: StudyConfig, scene: Scene, viewpoint: int, overlay_viewpoint: int = 0):
     """:func:`run_unit` and, with ``config.track_workers``, the viewpoint's worker tracking.
 
-    Returns ``(results, overlays, tracking)``; ``tracking`` is a list with one
+    Returns ``(results, overlays, tracking, detections)``; ``tracking`` is a list with one
     :class:`~uav_struct_env.study.tracking.ViewpointTracking` for a scene with structural
-    methods when workers are tracked, else empty.
+    methods when workers are tracked, else empty; ``detections`` one
+    :class:`~uav_struct_env.study.detections.DetectionRow` per detection of every structural
+    localization.
     """
     env = _env_for(config, scene)
     obs, infos = env.reset(seed=config.seed * 1000 + viewpoint, options={"viewpoint": viewpoint})
@@ -182,6 +185,7 @@ def run_unit_tracked(config: StudyConfig, scene: Scene, viewpoint: int, overlay_
     methods = [m for m in config.selected_methods if m.scene == scene]
     results: list[ImageResult] = []
     overlays: list[Overlay] = []
+    detections: list[DetectionRow] = []
     estimates: dict[str, dict] = {}
     prior_sigmas = None
     for uav, agent in enumerate(env.possible_agents):
@@ -213,6 +217,9 @@ def run_unit_tracked(config: StudyConfig, scene: Scene, viewpoint: int, overlay_
                 estimates.setdefault(method.key, {})[agent] = est
                 prior_sigmas = stack.localizer.prior_sigmas
                 counts = _structural_counts(frame)
+                det = frame.detections
+                detections += detection_rows(method.key, uav, viewpoint, det.uv, det.scores, det.true_ids,
+                                             est.assignment, model_ids, truth)
                 if viewpoint == overlay_viewpoint and uav == 0:
                     overlays.append(
                         _overlay(method, uav, viewpoint, image, K, prior, est, frame.detections,
@@ -231,7 +238,7 @@ def run_unit_tracked(config: StudyConfig, scene: Scene, viewpoint: int, overlay_
             rng=np.random.default_rng([config.seed, 0x7A4C, index, viewpoint]), prior_sigmas=prior_sigmas,
             pixel_sigma=config.worker_pixel_sigma, upright=config.upright_workers,
         ))
-    return results, overlays, tracking
+    return results, overlays, tracking, detections
 
 
 def _row(method, uav, viewpoint, est, gt, prior, truth, K, **counts) -> ImageResult:
@@ -397,7 +404,7 @@ class StudyInterrupted(KeyboardInterrupt):
 
 def iter_study(
     config: StudyConfig,
-) -> Iterator[tuple[list[ImageResult], list[Overlay], list[ViewpointTracking]]]:
+) -> Iterator[tuple[list[ImageResult], list[Overlay], list[ViewpointTracking], list[DetectionRow]]]:
     """Yield the results of every (scene, viewpoint) unit as it completes (:func:`run_unit_tracked`).
 
     With ``workers > 1`` the units run in spawned processes (:func:`uav_struct_env.processes.
@@ -424,24 +431,29 @@ def run_units(
     config: StudyConfig, progress: Callable[[int, int], None] | None = None
 ) -> tuple[list[ImageResult], list[Overlay]]:
     """Run the whole study; ``progress(done, total)`` is called after each unit."""
-    results, overlays, _ = run_units_tracked(config, progress)
+    results, overlays, _, _ = run_units_tracked(config, progress)
     return results, overlays
 
 
 def run_units_tracked(
     config: StudyConfig, progress: Callable[[int, int], None] | None = None
-) -> tuple[list[ImageResult], list[Overlay], list[ViewpointTracking]]:
-    """:func:`run_units` and the worker tracking of every viewpoint (empty unless tracked)."""
+) -> tuple[list[ImageResult], list[Overlay], list[ViewpointTracking], list[DetectionRow]]:
+    """:func:`run_units`, the viewpoints' worker tracking and the structural detections' records.
+
+    The tracking is empty unless workers are tracked.
+    """
     total = len(_units(config))
     results: list[ImageResult] = []
     overlays: list[Overlay] = []
     tracking: list[ViewpointTracking] = []
+    detections: list[DetectionRow] = []
     done = 0
     try:
-        for res, ovs, trk in iter_study(config):
+        for res, ovs, trk, dets in iter_study(config):
             results += res
             overlays += ovs
             tracking += trk
+            detections += dets
             done += 1
             if progress is not None:
                 progress(done, total)
@@ -451,4 +463,5 @@ def run_units_tracked(
     results = _with_bounds(config, results)
     results.sort(key=lambda r: (order[r.method], r.uav, r.viewpoint))
     tracking.sort(key=lambda t: (t.stage, t.viewpoint))
-    return results, overlays, tracking
+    detections.sort(key=lambda d: (order[d.method], d.uav, d.viewpoint, d.detection))
+    return results, overlays, tracking, detections

@@ -18,6 +18,7 @@ from uav_struct_env.site import make_site
 from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.site.as_built import TOLERANCE_MODELS
 from uav_struct_env.study.cells import json_ready
+from uav_struct_env.study.detections import write_detections_csv
 from uav_struct_env.study.figures import (
     plot_error_cdfs,
     plot_fig2,
@@ -44,7 +45,8 @@ QUICK_VIEWPOINTS = 2
 
 
 #: What the study writes; ``results.json`` (written last) says that a set is complete.
-STUDY_FILES = ("results.json", "table1.md", "table2.md", "per_image.csv", "fig2_associations.png",
+STUDY_FILES = ("results.json", "table1.md", "table2.md", "per_image.csv", "detections.csv",
+               "fig2_associations.png",
                "error_cdf.png", "viewpoint_map.png", "worker_tracking.md", "worker_tracking_cdf.png")
 
 
@@ -58,7 +60,8 @@ def run_study(
 ) -> dict:
     """Run the study into ``out`` and return the ``results.json`` document.
 
-    Writes ``results.json``, ``table1.md``, ``table2.md``, ``per_image.csv``, with
+    Writes ``results.json``, ``table1.md``, ``table2.md``, ``per_image.csv``, ``detections.csv``
+    (one row per detection of the structural methods: :mod:`uav_struct_env.study.detections`), with
     ``config.track_workers`` ``worker_tracking.md`` (and ``worker_tracking`` in the JSON), and
     (with ``figures``) ``fig2_associations.png``, ``error_cdf.png`` and ``viewpoint_map.png`` (and
     ``worker_tracking_cdf.png`` when tracking workers), all at once when the study has finished
@@ -84,7 +87,7 @@ def run_study(
             bar.update(done - bar.n)
 
         try:
-            rows, overlays, tracking = run_units_tracked(config, progress=tick)
+            rows, overlays, tracking, detections = run_units_tracked(config, progress=tick)
         finally:
             bar.close()
         elapsed = time.perf_counter() - t0
@@ -99,6 +102,7 @@ def run_study(
         (stage / "table1.md").write_text(table1_markdown(results))
         (stage / "table2.md").write_text(table2_markdown(results))
         write_csv(stage / "per_image.csv", rows)
+        write_detections_csv(stage / "detections.csv", detections)
         if figures:
             settings = settings_line(results)
             plot_fig2(overlays, stage / "fig2_associations.png", settings)
@@ -301,6 +305,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if config.track_workers:
         print("Worker tracking — 3D worker error by camera poses:\n")
         print((out / "worker_tracking.md").read_text().split("\n\n", 1)[1])
-    written = "results.json, table1.md, table2.md, per_image.csv" + ("" if args.no_figures else ", figures")
+    written = "results.json, table1.md, table2.md, per_image.csv, detections.csv"
+    written += "" if args.no_figures else ", figures"
     print(f"Wrote {out.resolve()}/ ({written}) in {results['config']['elapsed_s']} s")
     return 0
