@@ -1,4 +1,4 @@
-"""What every study output shares at its edges: the JSON boundary and the table cells.
+"""What every study output shares at its edges: the JSON and CSV boundaries and the table cells.
 
 A module of its own (importing nothing of the study) so that the report, the sweep, the temporal
 study and worker tracking (which :mod:`~uav_struct_env.study.protocol` imports) all use it.
@@ -6,8 +6,14 @@ study and worker tracking (which :mod:`~uav_struct_env.study.protocol` imports) 
 
 from __future__ import annotations
 
+import csv
+import dataclasses
 import math
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
+
+from uav_struct_env.outputs import atomic_path
 
 
 def json_ready(obj: Any) -> Any:
@@ -29,3 +35,13 @@ def cell(x: float | None, digits: int = 3) -> str:
 def pct_cell(x: float | None) -> str:
     """A table cell: the fraction ``x`` in percent to 2 decimals, an em dash for None."""
     return "—" if x is None else f"{100 * x:.2f}"
+
+
+def write_records_csv(path: Path, record_type: type, rows: Sequence[Any]) -> None:
+    """Dataclass records of ``record_type`` as CSV, one row each, its fields as the columns."""
+    fields = [f.name for f in dataclasses.fields(record_type)]
+    with atomic_path(path) as tmp, tmp.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=fields)
+        writer.writeheader()
+        for r in rows:
+            writer.writerow(dataclasses.asdict(r))

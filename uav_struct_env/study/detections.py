@@ -12,15 +12,13 @@ the assigned one and ``nearest_visible`` is false).
 
 from __future__ import annotations
 
-import csv
-import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from uav_struct_env.outputs import atomic_path
+from uav_struct_env.study.cells import write_records_csv
 
 __all__ = ["DetectionRow", "detection_rows", "write_detections_csv"]
 
@@ -95,9 +93,4 @@ def detection_rows(
 
 def write_detections_csv(path: Path, rows: Sequence[DetectionRow]) -> None:
     """Every detection row, in the order given."""
-    fields = [f.name for f in dataclasses.fields(DetectionRow)]
-    with atomic_path(path) as tmp, tmp.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=fields)
-        writer.writeheader()
-        for r in rows:
-            writer.writerow(dataclasses.asdict(r))
+    write_records_csv(path, DetectionRow, rows)

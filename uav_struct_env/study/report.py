@@ -10,7 +10,6 @@ are grouped by their :class:`~localization.FailureCode`, with a count and an exa
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 from collections.abc import Sequence
@@ -24,9 +23,9 @@ from localization.metrics import (
     recall_at,
     summarize_errors,
 )
-from uav_struct_env.outputs import atomic_path, atomic_write_json
+from uav_struct_env.outputs import atomic_write_json
 from uav_struct_env.provenance import software
-from uav_struct_env.study.cells import cell, json_ready, pct_cell
+from uav_struct_env.study.cells import cell, json_ready, pct_cell, write_records_csv
 from uav_struct_env.study.protocol import METHODS, Method, StudyConfig
 from uav_struct_env.study.run import ImageResult, bound_source
 
@@ -144,12 +143,7 @@ def write_results_json(path: Path, results: dict) -> None:
 
 def write_csv(path: Path, rows: Sequence[ImageResult]) -> None:
     """Every per-image result, one row each."""
-    fields = [f.name for f in dataclasses.fields(ImageResult)]
-    with atomic_path(path) as tmp, tmp.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=fields)
-        writer.writeheader()
-        for r in rows:
-            writer.writerow(dataclasses.asdict(r))
+    write_records_csv(path, ImageResult, rows)
 
 
 #: The paper's protocol (StudyConfig's defaults): viewpoints per UAV and UAVs; fewer is ``--quick``.
