@@ -34,7 +34,7 @@ class DetectionRow:
     u: float  # pixels of the delivered image (before undistortion)
     v: float
     score: float  # the detector's probability that it is a landmark; NaN without scores
-    assigned_id: int  # the landmark the association named; -1 unassigned or failed
+    assigned_id: int  # the landmark the estimate names (as n_assigned counts); -1 none
     true_id: int  # the visible landmark within the match radius; -1 none
     nearest_id: int  # the landmark whose true projection is nearest, visible or not
     nearest_px: float  # distance to that projection
