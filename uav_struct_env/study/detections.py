@@ -75,20 +75,24 @@ def detection_rows(
     true = np.full(n, -1) if true_ids is None else np.asarray(true_ids).reshape(-1)
     a = np.asarray(assignment).reshape(-1)
     named = np.where(a >= 0, np.asarray(model_ids).reshape(-1)[np.maximum(a, 0)], -1)
-    rows = []
-    for i in range(n):
-        d = np.hypot(*(uv_true - uv[i]).T) if ids.size else np.empty(0)
-        ok = np.isfinite(d)
-        j = int(np.argmin(np.where(ok, d, np.inf))) if ok.any() else -1
-        rows.append(DetectionRow(
+    # (N, M) distances to every true projection; a projection that is not finite is never nearest
+    diff = uv[:, None, :] - uv_true[None, :, :]
+    d = np.hypot(diff[..., 0], diff[..., 1])
+    d = np.where(np.isfinite(d), d, np.inf)
+    j = np.argmin(d, axis=1) if ids.size else np.zeros(n, dtype=int)
+    near = d[np.arange(n), j] if ids.size else np.full(n, np.inf)
+    found = np.isfinite(near)
+    return [
+        DetectionRow(
             method=method, uav=uav, viewpoint=viewpoint, detection=i,
             u=float(uv[i, 0]), v=float(uv[i, 1]), score=float(score[i]),
             assigned_id=int(named[i]), true_id=int(true[i]),
-            nearest_id=int(ids[j]) if j >= 0 else -1,
-            nearest_px=float(d[j]) if j >= 0 else float("nan"),
-            nearest_visible=bool(visible[j]) if j >= 0 else False,
-        ))
-    return rows
+            nearest_id=int(ids[j[i]]) if found[i] else -1,
+            nearest_px=float(near[i]) if found[i] else float("nan"),
+            nearest_visible=bool(visible[j[i]]) if found[i] else False,
+        )
+        for i in range(n)
+    ]
 
 
 def write_detections_csv(path: Path, rows: Sequence[DetectionRow]) -> None:
