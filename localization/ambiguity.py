@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from localization.compiled_scores import translation_scores
+from localization.compiled_frame import rival_translations
 from localization.geometry import camera_center
 from localization.pnp import pose_covariance
 
@@ -83,29 +83,18 @@ def translation_hypotheses(
     anchors = assignment[np.flatnonzero(pairs)[: max(int(good.sum()) - need + 1, 1)]]
     if anchors.size == 0:
         return []
-    t = np.round((landmarks_xyz[None, :, :] - landmarks_xyz[anchors][:, None, :]).reshape(-1, 3), 3)
-    # the distinct translations in lexicographic order (np.unique(axis=0), without its overhead)
-    t = t[np.lexsort((t[:, 2], t[:, 1], t[:, 0]))]
-    t = t[np.concatenate([[True], np.any(t[1:] != t[:-1], axis=1)])]
-    t = t[np.linalg.norm(t, axis=1) > 1e-3]
-    centre = camera_center(cam_from_world)
-    prior_sq = np.sum(
-        ((centre + t - camera_center(prior_cam_from_world)) / prior_position_sigma_m) ** 2, axis=1
+    f64 = np.float64
+    t, uv, depth, centre = rival_translations(  # compiled: the translations, gated, scored, ranked
+        np.ascontiguousarray(det[good], dtype=f64), np.ascontiguousarray(landmarks_xyz, dtype=f64),
+        np.ascontiguousarray(K, dtype=f64), np.ascontiguousarray(cam_from_world, dtype=f64),
+        np.ascontiguousarray(anchors, dtype=np.int64), camera_center(prior_cam_from_world),
+        np.ascontiguousarray(prior_position_sigma_m, dtype=f64),
+        np.inf if max_prior_position_sq is None else float(max_prior_position_sq), float(gate_px) ** 2,
+        int(need), int(limit),
     )
-    if max_prior_position_sq is not None:
-        t, prior_sq = t[prior_sq <= max_prior_position_sq], prior_sq[prior_sq <= max_prior_position_sq]
-    if t.shape[0] == 0:
-        return []
     R = cam_from_world[:3, :3]
-    # the landmarks seen from the camera moved by each t, scored against the detections (compiled)
-    uv, depth, explained, misfit = translation_scores(
-        np.ascontiguousarray(det[good], dtype=np.float64), (landmarks_xyz - centre) @ R.T, t @ R.T,
-        np.ascontiguousarray(K, dtype=np.float64), float(gate_px) ** 2,
-    )
-    order = np.lexsort((prior_sq, misfit))
-    order = order[explained[order] >= need][:limit]
     out = []
-    for k in order:
+    for k in range(t.shape[0]):
         front = np.flatnonzero(depth[k] > 1e-6)
         moved_pose = cam_from_world.copy()
         moved_pose[:3, 3] = -R @ (centre + t[k])

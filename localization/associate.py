@@ -84,6 +84,7 @@ from localization.batch import (
     to_transforms,
 )
 from localization.compiled import refine_reassign, shift_votes
+from localization.compiled_frame import candidates, upright_starts
 from localization.compiled_scores import anchor_pairs, check_many, missed_many
 from localization.failure import FailureCode
 from localization.geometry import camera_center, project
@@ -155,13 +156,12 @@ def candidate_landmarks(
 
     "Near" means within ``margin_px`` of the image rectangle ``[-0.5, W - 0.5] x [-0.5, H - 0.5]``.
     """
-    uv, depth = project(K, cam_from_world, landmarks_xyz)
     w, h = image_size
-    ok = (depth > 1e-6) & np.isfinite(uv).all(axis=1)
-    ok &= (uv[:, 0] >= -0.5 - margin_px) & (uv[:, 0] <= w - 0.5 + margin_px)
-    ok &= (uv[:, 1] >= -0.5 - margin_px) & (uv[:, 1] <= h - 0.5 + margin_px)
-    idx = np.flatnonzero(ok)
-    return idx, uv[idx]
+    f64 = np.float64
+    return candidates(  # compiled: :func:`localization.geometry.project` and the bounds, one loop
+        np.ascontiguousarray(K, dtype=f64), np.ascontiguousarray(cam_from_world, dtype=f64),
+        np.ascontiguousarray(landmarks_xyz, dtype=f64), int(w), int(h), float(margin_px),
+    )
 
 
 def assign(
@@ -902,26 +902,11 @@ def _upright_hypotheses(
     )
     if prior_sq.size == 0:
         return []
-    order = np.lexsort((prior_sq, misfit, -explained))
-    order = order[explained[order] >= min_pairs][:keep]
-    out: list[tuple[NDArray, NDArray]] = []
-    seen: set[bytes] = set()
-    # assignments block by block, until `n_distinct` of them differ (a pose that repeats an earlier
-    # one's assignment, or pairs fewer than `min_pairs`, would be dropped by the caller anyway)
-    first = n_distinct + n_distinct // 2
-    for block in (order[:first], order[first:]):
-        if block.size == 0:
-            break
-        local = assign_many(det, uv[block], gate_px)
-        a = np.where(local >= 0, idx[np.maximum(local, 0)], -1)
-        T = to_transforms(R[block], t[block])
-        n_pairs = (a >= 0).sum(axis=1).tolist()
-        for q in range(block.size):
-            key = a[q].tobytes()
-            if key in seen or n_pairs[q] < min_pairs:
-                continue
-            seen.add(key)
-            out.append((a[q], T[q]))
-            if len(out) == n_distinct:
-                return out
-    return out
+    # the best poses' gated assignments, until `n_distinct` of them differ (a pose that repeats an
+    # earlier one's assignment, or pairs fewer than `min_pairs`, would be dropped by the caller)
+    a, chosen = upright_starts(
+        np.ascontiguousarray(det, dtype=f64), np.ascontiguousarray(idx, dtype=np.int64), uv, prior_sq,
+        explained, misfit, float(gate_px), int(min_pairs), int(keep), int(n_distinct),
+    )
+    T = to_transforms(R[chosen], t[chosen])
+    return [(a[q], T[q]) for q in range(chosen.size)]
