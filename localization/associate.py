@@ -84,7 +84,7 @@ from localization.batch import (
     to_transforms,
 )
 from localization.compiled import refine_reassign, shift_votes
-from localization.compiled_frame import candidates, upright_starts
+from localization.compiled_frame import assignment_costs, assignment_rows, candidates, upright_starts
 from localization.compiled_scores import anchor_pairs, check_many, missed_many
 from localization.failure import FailureCode
 from localization.geometry import camera_center, project
@@ -106,7 +106,6 @@ __all__ = [
     "candidate_landmarks",
 ]
 
-_BIG = 1e12
 #: Prior-centre perturbations (units of the position sigmas): the 3 x 3 x 3 grid {-1, 0, 1}^3,
 #: nearest first. (The paper's protocol puts the prior error exactly on a grid corner; the
 #: benchmark also reports Gaussian prior errors to show the search does not rely on that.)
@@ -180,23 +179,19 @@ def assign(
         (N,) index into ``model_uv`` per detection, -1 when unassigned.
     """
     n, m = det_uv.shape[0], model_uv.shape[0]
-    out = np.full(n, -1, dtype=np.int64)
     if n == 0 or m == 0:
-        return out
-    d2 = np.sum((det_uv[:, None, :] - model_uv[None, :, :]) ** 2, axis=2)
-    d2 = np.where(np.isfinite(d2), d2, _BIG)
-    if gate_px is None:
-        rows, cols = linear_sum_assignment(d2)
-        out[rows] = cols
-        return out
-    g2 = float(gate_px) ** 2
-    # Total cost = sum of assigned d2 + g2 per unassigned detection = n g2 + sum (d2 - g2) over
-    # the pairs: so minimize sum min(d2 - g2, 0); pairs beyond the gate cost 0 and are dropped.
-    cost = np.minimum(d2 - g2, 0.0)
+        return np.full(n, -1, dtype=np.int64)
+    # Gated, the total cost = sum of assigned d2 + g2 per unassigned detection = n g2 + sum
+    # (d2 - g2) over the pairs: so minimize sum min(d2 - g2, 0); pairs beyond the gate cost 0 and
+    # are dropped. Compiled: the costs and the reading of the assignment.
+    gated = gate_px is not None
+    f64 = np.float64
+    cost = assignment_costs(
+        np.ascontiguousarray(det_uv, dtype=f64), np.ascontiguousarray(model_uv, dtype=f64),
+        float(gate_px) ** 2 if gated else 0.0, gated,
+    )
     rows, cols = linear_sum_assignment(cost)
-    real = cost[rows, cols] < 0.0
-    out[rows[real]] = cols[real]
-    return out
+    return assignment_rows(cost, rows, cols, gated)
 
 
 def associate_paper(
@@ -827,6 +822,14 @@ def _log_odds(scores: NDArray | None) -> NDArray | None:
 
 
 @functools.lru_cache(maxsize=64)
+def _inverse(K_bytes: bytes) -> NDArray[np.float64]:
+    """``np.linalg.inv`` of the (3, 3) intrinsics whose float64 bytes are ``K_bytes``, cached."""
+    out = np.linalg.inv(np.frombuffer(K_bytes, dtype=np.float64).reshape(3, 3))
+    out.flags.writeable = False
+    return out
+
+
+@functools.lru_cache(maxsize=64)
 def _chi2_quantiles(quantile: float, max_dof: int) -> NDArray[np.float64]:
     """Chi-square ``quantile`` for 0 .. ``max_dof`` degrees of freedom (inf at 0), cached."""
     return np.concatenate([[np.inf], chi2.ppf(quantile, np.arange(1, max(max_dof, 1) + 1))])
@@ -890,7 +893,9 @@ def _upright_hypotheses(
     if pairs.shape[0] == 0 or m < 2:
         return []
     i1, i2 = pairs[:, 0].copy(), pairs[:, 1].copy()
-    rays = np.column_stack([det, np.ones(det.shape[0])]) @ np.linalg.inv(K).T @ prior[:3, :3]
+    h = np.ones((det.shape[0], 3))  # homogeneous pixels
+    h[:, :2] = det
+    rays = h @ _inverse(np.ascontiguousarray(K, dtype=np.float64).tobytes()).T @ prior[:3, :3]
     f64 = np.float64
     R, t, uv, prior_sq, explained, misfit = score_upright_poses(
         np.ascontiguousarray(det, dtype=f64), np.ascontiguousarray(rays), i1, i2,

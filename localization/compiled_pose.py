@@ -30,6 +30,54 @@ TRANSFORM_OK, TRANSFORM_NOT_FINITE, TRANSFORM_LAST_ROW, TRANSFORM_NOT_ROTATION =
 
 
 @njit(cache=True, nogil=True)
+def center(T: NDArray) -> NDArray:
+    """Camera centre ``-R^T t`` (3,) of a ``cam_from_world`` ``T`` (4, 4) (``geometry.camera_center``)."""
+    out = np.empty(3)
+    for c in range(3):
+        s = 0.0
+        for k in range(3):
+            s += -T[k, c] * T[k, 3]
+        out[c] = s
+    return out
+
+
+@njit(cache=True, nogil=True)
+def inverse(T: NDArray) -> NDArray:
+    """The exact inverse ``[R^T, -R^T t]`` (4, 4) of a rigid transform ``T`` (``geometry.invert``)."""
+    out = np.zeros((4, 4))
+    for r in range(3):
+        s = 0.0
+        for k in range(3):
+            out[r, k] = T[k, r]
+            s += -T[k, r] * T[k, 3]
+        out[r, 3] = s
+    out[3, 3] = 1.0
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def residuals(K: NDArray, T: NDArray, X: NDArray, uv: NDArray) -> tuple[NDArray, NDArray]:
+    """``(projected - observed (N, 2), depth (N,))`` of points ``X`` (N, 3) seen at pixels ``uv``.
+
+    ``pnp.reprojection_residuals``: each point in the camera frame as ``R (X - C)``, projected
+    through ``K``; a point at depth 0 gives inf / NaN, as numpy's division does.
+    """
+    C = center(T)
+    n = X.shape[0]
+    res = np.empty((n, 2))
+    depth = np.empty(n)
+    for j in range(n):
+        a0, a1, a2 = X[j, 0] - C[0], X[j, 1] - C[1], X[j, 2] - C[2]
+        x = a0 * T[0, 0] + a1 * T[0, 1] + a2 * T[0, 2]
+        y = a0 * T[1, 0] + a1 * T[1, 1] + a2 * T[1, 2]
+        z = a0 * T[2, 0] + a1 * T[2, 1] + a2 * T[2, 2]
+        res[j, 0] = K[0, 0] * x / z + K[0, 1] * y / z + K[0, 2] - uv[j, 0]
+        res[j, 1] = K[1, 1] * y / z + K[1, 2] - uv[j, 1]
+        depth[j] = z
+    return res, depth
+
+
+@njit(cache=True, nogil=True)
 def transform_fault(T: NDArray) -> int:
     """What is wrong with a float64 (4, 4) ``T`` as a rigid transform: one of the ``TRANSFORM_*`` codes.
 

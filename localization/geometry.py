@@ -21,6 +21,8 @@ from localization.compiled_pose import (
     TRANSFORM_LAST_ROW,
     TRANSFORM_NOT_FINITE,
     TRANSFORM_NOT_ROTATION,
+    center,
+    inverse,
     transform_fault,
 )
 
@@ -125,12 +127,7 @@ def make_transform(rotation: ArrayLike, translation: ArrayLike) -> NDArray[np.fl
 
 def invert(b_from_a: ArrayLike) -> NDArray[np.float64]:
     """Invert a rigid transform exactly (``R.T``, ``-R.T t``), returning ``a_from_b``."""
-    T = np.asarray(b_from_a, dtype=np.float64)
-    R = T[:3, :3]
-    out = np.eye(4)
-    out[:3, :3] = R.T
-    out[:3, 3] = -R.T @ T[:3, 3]
-    return out
+    return inverse(np.asarray(b_from_a, dtype=np.float64))  # compiled
 
 
 def transform_points(b_from_a: ArrayLike, points_a: ArrayLike) -> NDArray[np.float64]:
@@ -142,8 +139,7 @@ def transform_points(b_from_a: ArrayLike, points_a: ArrayLike) -> NDArray[np.flo
 
 def camera_center(cam_from_world: ArrayLike) -> NDArray[np.float64]:
     """Camera centre in the world frame, ``C = -R.T t``, shape (3,)."""
-    T = np.asarray(cam_from_world, dtype=np.float64)
-    return -T[:3, :3].T @ T[:3, 3]
+    return center(np.asarray(cam_from_world, dtype=np.float64))  # compiled
 
 
 def project(

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.batch import refine_many, to_transforms
-from localization.compiled_pose import covariance, prior_distance_sq
+from localization.compiled_pose import covariance, prior_distance_sq, residuals
 from localization.failure import FailureCode
 from localization.geometry import (
     as_points,
@@ -154,11 +154,12 @@ def reprojection_residuals(
     K: ArrayLike, cam_from_world: ArrayLike, points_xyz: ArrayLike, uv: ArrayLike
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(residuals (N, 2) = projected - observed, depth (N,))`` of correspondences."""
-    T = np.asarray(cam_from_world, dtype=np.float64)
-    R_wc = T[:3, :3].T
-    C = camera_center(T)
-    proj, p = _project(np.asarray(K, float), R_wc, C, np.asarray(points_xyz, float).reshape(-1, 3))
-    return proj - np.asarray(uv, float).reshape(-1, 2), p[:, 2]
+    f64 = np.float64
+    return residuals(  # compiled: :func:`_project`'s arithmetic, one loop
+        np.ascontiguousarray(K, dtype=f64), np.ascontiguousarray(cam_from_world, dtype=f64),
+        np.ascontiguousarray(np.asarray(points_xyz, dtype=f64).reshape(-1, 3)),
+        np.ascontiguousarray(np.asarray(uv, dtype=f64).reshape(-1, 2)),
+    )
 
 
 def pose_jacobian(
