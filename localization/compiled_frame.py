@@ -2,11 +2,12 @@
 
 With the refinement rounds (:mod:`localization.compiled`) and the bookkeeping
 (:mod:`localization.compiled_scores`) compiled, a ``state`` training step's association still
-spent about 0.45 of its 0.95 ms in the numpy code between the kernels, most of it in three
-places that each run once or twice per image on 4-20 points: projecting the landmarks to find
-the candidates near the image, ranking the upright two-point poses and turning the best into
-distinct gated assignments, and building, ranking and gating the layout's self-translations of
-the rival search. Here each is one compiled function with the algorithm it replaces:
+spent about 0.4 of its 0.94 ms per image in the numpy code between the kernels (timed around
+each call), most of it in places that run once or twice per image on 4-20 points: projecting
+the landmarks to find the candidates near the image, ranking the upright two-point poses and
+turning the best into distinct gated assignments, building, ranking and gating the layout's
+self-translations of the rival search, and the cost matrix of the exact assignment. Here each is
+one compiled function with the algorithm it replaces:
 
 - :func:`candidates` -- ``associate.candidate_landmarks`` (and the projection of
   ``geometry.project``);
@@ -18,10 +19,12 @@ the rival search. Here each is one compiled function with the algorithm it repla
   ``associate.assign`` and the assignment read from scipy's ``linear_sum_assignment`` (which
   stays: it is 1 us of the 14 us the numpy code took).
 
-They replace numpy code with the same arithmetic up to the order of floating-point sums (before
-the commit that added this module): on the 4,000 localizations of the localizer benchmark's
-images and the wrapped ``state`` configuration's seeded runs, every success, assignment, failure
-reason and hypothesis count is the same. Compiled and cached like :mod:`localization.compiled`.
+They replace numpy code with the same arithmetic (before the commit that added this module):
+on the 4,000 localizations of the localizer benchmark's cases every success, assignment, failure
+reason and hypothesis count is the same and every pose bit-identical, and so are the wrapped
+``state`` configuration's observations, rewards and infos over seeded runs;
+tests/localization/test_compiled_frame.py compares each kernel with the numpy code. Compiled and
+cached like :mod:`localization.compiled`.
 """
 
 from __future__ import annotations

@@ -125,9 +125,21 @@ def make_transform(rotation: ArrayLike, translation: ArrayLike) -> NDArray[np.fl
     return out
 
 
+def _rigid_rows(name: str, T: ArrayLike) -> NDArray[np.float64]:
+    """``T`` as a float64 matrix with the rows ``[R | t]`` a rigid transform starts with.
+
+    The compiled :func:`invert` and :func:`camera_center` read ``T[:3, :4]`` unchecked; this
+    raises ``ValueError`` (naming ``name`` and the shape) for anything smaller or not 2-D.
+    """
+    out = np.asarray(T, dtype=np.float64)
+    if out.ndim != 2 or out.shape[0] < 3 or out.shape[1] < 4:
+        raise ValueError(f"{name} must be a (4, 4) rigid transform, got shape {out.shape}")
+    return out
+
+
 def invert(b_from_a: ArrayLike) -> NDArray[np.float64]:
     """Invert a rigid transform exactly (``R.T``, ``-R.T t``), returning ``a_from_b``."""
-    return inverse(np.asarray(b_from_a, dtype=np.float64))  # compiled
+    return inverse(_rigid_rows("b_from_a", b_from_a))  # compiled
 
 
 def transform_points(b_from_a: ArrayLike, points_a: ArrayLike) -> NDArray[np.float64]:
@@ -139,7 +151,7 @@ def transform_points(b_from_a: ArrayLike, points_a: ArrayLike) -> NDArray[np.flo
 
 def camera_center(cam_from_world: ArrayLike) -> NDArray[np.float64]:
     """Camera centre in the world frame, ``C = -R.T t``, shape (3,)."""
-    return center(np.asarray(cam_from_world, dtype=np.float64))  # compiled
+    return center(_rigid_rows("cam_from_world", cam_from_world))  # compiled
 
 
 def project(

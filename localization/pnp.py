@@ -155,11 +155,15 @@ def reprojection_residuals(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(residuals (N, 2) = projected - observed, depth (N,))`` of correspondences."""
     f64 = np.float64
-    return residuals(  # compiled: :func:`_project`'s arithmetic, one loop
-        np.ascontiguousarray(K, dtype=f64), np.ascontiguousarray(cam_from_world, dtype=f64),
-        np.ascontiguousarray(np.asarray(points_xyz, dtype=f64).reshape(-1, 3)),
-        np.ascontiguousarray(np.asarray(uv, dtype=f64).reshape(-1, 2)),
-    )
+    K, T = np.ascontiguousarray(K, dtype=f64), np.ascontiguousarray(cam_from_world, dtype=f64)
+    X = np.ascontiguousarray(np.asarray(points_xyz, dtype=f64).reshape(-1, 3))
+    u = np.ascontiguousarray(np.asarray(uv, dtype=f64).reshape(-1, 2))
+    if K.shape != (3, 3) or T.shape != (4, 4) or X.shape[0] != u.shape[0]:
+        raise ValueError(
+            f"reprojection_residuals needs a 3x3 K, a 4x4 pose and as many points as pixels; got K "
+            f"{K.shape}, pose {T.shape}, {X.shape[0]} points and {u.shape[0]} pixels"
+        )
+    return residuals(K, T, X, u)  # compiled: :func:`_project`'s arithmetic, one loop
 
 
 def pose_jacobian(

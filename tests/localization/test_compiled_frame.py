@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.optimize import linear_sum_assignment
 
 from localization.associate import assign, candidate_landmarks
@@ -168,3 +169,15 @@ def test_centre_inverse_and_residuals_are_the_numpy_formulas(rng):
     # a point at the camera centre: depth 0, the residual inf or NaN as numpy's division gives
     res, depth = reprojection_residuals(PAPER_K, T, camera_center(T)[None], np.zeros((1, 2)))
     assert depth[0] == 0.0 and not np.isfinite(res).all()
+
+
+def test_the_compiled_helpers_refuse_shapes_they_would_read_out_of_bounds():
+    for bad in (np.eye(3), np.zeros(4), np.zeros((2, 4, 4))):
+        with pytest.raises(ValueError, match=r"cam_from_world must be a \(4, 4\) rigid transform, got shape"):
+            camera_center(bad)
+        with pytest.raises(ValueError, match=r"b_from_a must be a \(4, 4\) rigid transform"):
+            invert(bad)
+    with pytest.raises(ValueError, match="3 points and 2 pixels"):
+        reprojection_residuals(PAPER_K, np.eye(4), np.zeros((3, 3)), np.zeros((2, 2)))
+    with pytest.raises(ValueError, match=r"K \(2, 2\)"):
+        reprojection_residuals(np.eye(2), np.eye(4), np.zeros((3, 3)), np.zeros((3, 2)))
