@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["assign_rounds", "lm_many", "refine_reassign", "shift_votes"]
+__all__ = ["assign_rounds", "lm_many", "pair_sq", "refine_reassign", "shift_votes"]
 
 #: A point at or in front of this depth (m) counts as behind the camera.
 MIN_DEPTH = 1e-6
@@ -273,6 +273,18 @@ def lm_many(
 
 
 @njit(cache=True, nogil=True)
+def pair_sq(det: NDArray, proj: NDArray) -> NDArray:
+    """(N, M) squared pixel distances of detections ``det`` (N, 2) to projections ``proj`` (M, 2)."""
+    d2 = np.empty((det.shape[0], proj.shape[0]))
+    for i in range(det.shape[0]):
+        for j in range(proj.shape[0]):
+            du = det[i, 0] - proj[j, 0]
+            dv = det[i, 1] - proj[j, 1]
+            d2[i, j] = du * du + dv * dv
+    return d2
+
+
+@njit(cache=True, nogil=True)
 def _assign_one(det: NDArray, proj: NDArray, gate_sq: float, rounds: int, out: NDArray) -> None:
     """Greedy mutual-nearest-neighbour assignment of ``det`` (N, 2) to ``proj`` (M, 2).
 
@@ -282,13 +294,11 @@ def _assign_one(det: NDArray, proj: NDArray, gate_sq: float, rounds: int, out: N
     out[:] = -1
     if n == 0 or m == 0:
         return
-    d2 = np.empty((n, m))
+    d2 = pair_sq(det, proj)
     for i in range(n):
         for j in range(m):
-            du = det[i, 0] - proj[j, 0]
-            dv = det[i, 1] - proj[j, 1]
-            v = du * du + dv * dv
-            d2[i, j] = v if v <= gate_sq else np.inf  # NaN too
+            if not d2[i, j] <= gate_sq:  # NaN too
+                d2[i, j] = np.inf
     jn = np.empty(n, dtype=np.int64)
     inn = np.empty(m, dtype=np.int64)
     ok = np.empty(n, dtype=np.bool_)

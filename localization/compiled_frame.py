@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from localization.compiled import MIN_DEPTH, _assign_one
+from localization.compiled import MIN_DEPTH, _assign_one, pair_sq
 from localization.compiled_scores import translation_scores
 
 __all__ = ["assignment_costs", "assignment_rows", "candidates", "rival_translations", "upright_starts"]
@@ -230,15 +230,10 @@ def assignment_costs(det: NDArray, model: NDArray, gate_sq: float, gated: bool) 
     The squared distance (``_BIG`` where not finite); ``gated``: that minus ``gate_sq``, capped
     at 0 (``associate.assign`` says why).
     """
-    n, m = det.shape[0], model.shape[0]
-    cost = np.empty((n, m))
-    for i in range(n):
-        for j in range(m):
-            du = det[i, 0] - model[j, 0]
-            dv = det[i, 1] - model[j, 1]
-            d2 = du * du + dv * dv
-            if not np.isfinite(d2):
-                d2 = _BIG
+    cost = pair_sq(det, model)
+    for i in range(cost.shape[0]):
+        for j in range(cost.shape[1]):
+            d2 = cost[i, j] if np.isfinite(cost[i, j]) else _BIG
             cost[i, j] = min(d2 - gate_sq, 0.0) if gated else d2
     return cost
 
