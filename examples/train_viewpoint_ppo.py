@@ -3,8 +3,10 @@
 The env is a documented training config of :data:`uav_struct_env.wrappers.TRAIN_CONFIGS`
 (``state`` by default: state-only observations, anchor-quality ``error`` reward, 30-step episodes,
 random starts 15-35 m out with up to +-60 deg of heading error). SuperSuit turns the four agents
-into four slots of one vector env (``pettingzoo_env_to_vec_env_v1``) and stacks ``n_envs`` copies,
-``num_cpus`` subprocesses (``concat_vec_envs_v1``); observations and rewards are normalized
+into four slots of one vector env (``pettingzoo_env_to_vec_env_v1``) and stacks ``n_envs`` copies
+in ``num_cpus`` subprocesses (``concat_vec_envs_v1``; by default 8 copies in 2 processes, 32 agent
+slots: on 2 cores, several copies per process carry more agent-steps per exchange with the
+trainer than one copy per process, docs/benchmarks.md); observations and rewards are normalized
 (``VecNormalize``, saved beside the model: ``normalization.npz`` holds the observation statistics
 as plain arrays, which ``evaluate_policy.py`` reads without unpickling anything; SB3's own
 ``vecnormalize.pkl`` is kept for resuming training with ``VecNormalize.load``).
@@ -37,10 +39,10 @@ DEFAULTS: dict[str, Any] = {
     "config": "state",
     "total_timesteps": 400_000,
     "minutes": None,
-    "n_envs": 4,
-    "num_cpus": 4,
+    "n_envs": 8,
+    "num_cpus": 2,
     "n_steps": 128,
-    "batch_size": 256,
+    "batch_size": 512,
     "n_epochs": 10,
     "learning_rate": 3e-4,
     "gamma": 0.95,
