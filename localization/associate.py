@@ -87,7 +87,7 @@ from localization.compiled import refine_reassign, shift_votes
 from localization.compiled_frame import assignment_costs, assignment_rows, candidates, upright_starts
 from localization.compiled_scores import anchor_pairs, check_many, missed_many
 from localization.failure import FailureCode
-from localization.geometry import camera_center, project
+from localization.geometry import camera_center, inverse_intrinsics, project
 from localization.pnp import (
     PriorSigmas,
     is_coplanar,
@@ -313,7 +313,7 @@ def _layout_hypotheses(
     mse = np.sum(resid**2, axis=(1, 2)) / cnt
     # the start pose: turn the moved prior so the matched projections' centroid moves by the shift
     c = np.sum(np.where(ok[..., None], matched, 0.0), axis=1) / cnt[:, None]
-    Kinv = np.linalg.inv(K)
+    Kinv = inverse_intrinsics(K)
     b1 = np.column_stack([c, np.ones(c.shape[0])]) @ Kinv.T
     b2 = np.column_stack([c + shift, np.ones(c.shape[0])]) @ Kinv.T
     dR = rotation_between(b1, b2)
@@ -822,14 +822,6 @@ def _log_odds(scores: NDArray | None) -> NDArray | None:
 
 
 @functools.lru_cache(maxsize=64)
-def _inverse(K_bytes: bytes) -> NDArray[np.float64]:
-    """``np.linalg.inv`` of the (3, 3) intrinsics whose float64 bytes are ``K_bytes``, cached."""
-    out = np.linalg.inv(np.frombuffer(K_bytes, dtype=np.float64).reshape(3, 3))
-    out.flags.writeable = False
-    return out
-
-
-@functools.lru_cache(maxsize=64)
 def _chi2_quantiles(quantile: float, max_dof: int) -> NDArray[np.float64]:
     """Chi-square ``quantile`` for 0 .. ``max_dof`` degrees of freedom (inf at 0), cached."""
     return np.concatenate([[np.inf], chi2.ppf(quantile, np.arange(1, max(max_dof, 1) + 1))])
@@ -895,7 +887,7 @@ def _upright_hypotheses(
     i1, i2 = pairs[:, 0].copy(), pairs[:, 1].copy()
     h = np.ones((det.shape[0], 3))  # homogeneous pixels
     h[:, :2] = det
-    rays = h @ _inverse(np.ascontiguousarray(K, dtype=np.float64).tobytes()).T @ prior[:3, :3]
+    rays = h @ inverse_intrinsics(K).T @ prior[:3, :3]
     f64 = np.float64
     R, t, uv, prior_sq, explained, misfit = score_upright_poses(
         np.ascontiguousarray(det, dtype=f64), np.ascontiguousarray(rays), i1, i2,

@@ -12,6 +12,7 @@ Conventions (documented once, here, and tested against renders in ``tests/sim``)
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -31,6 +32,7 @@ __all__ = [
     "camera_center",
     "check_intrinsics",
     "check_transform",
+    "inverse_intrinsics",
     "invert",
     "look_at",
     "make_transform",
@@ -88,6 +90,25 @@ def check_transform(name: str, transform: ArrayLike) -> NDArray[np.float64]:
     if fault == TRANSFORM_NOT_ROTATION:
         raise ValueError(f"{name} rotation block must be a proper rotation, got {arr[:3, :3].tolist()}")
     return arr
+
+
+def inverse_intrinsics(K: ArrayLike) -> NDArray[np.float64]:
+    """``K^-1`` of a (3, 3) intrinsic matrix, read-only and cached by its float64 values.
+
+    Every ray through a pixel needs it (``K^-1 [u, v, 1]``) and a camera's ``K`` rarely changes,
+    so the inverse is computed once per distinct matrix (an LRU cache of 64).
+    """
+    arr = np.ascontiguousarray(K, dtype=np.float64)
+    if arr.shape != (3, 3):
+        raise ValueError(f"K must have shape (3, 3), got {arr.shape}")
+    return _inverse_of(arr.tobytes())
+
+
+@functools.lru_cache(maxsize=64)
+def _inverse_of(K_bytes: bytes) -> NDArray[np.float64]:
+    out = np.linalg.inv(np.frombuffer(K_bytes, dtype=np.float64).reshape(3, 3))
+    out.flags.writeable = False
+    return out
 
 
 def check_intrinsics(name: str, K: ArrayLike) -> NDArray[np.float64]:

@@ -181,3 +181,17 @@ def test_the_compiled_helpers_refuse_shapes_they_would_read_out_of_bounds():
         reprojection_residuals(PAPER_K, np.eye(4), np.zeros((3, 3)), np.zeros((2, 2)))
     with pytest.raises(ValueError, match=r"K \(2, 2\)"):
         reprojection_residuals(np.eye(2), np.eye(4), np.zeros((3, 3)), np.zeros((3, 2)))
+
+
+def test_inverse_intrinsics_is_the_inverse_cached_read_only_and_refuses_other_shapes():
+    from localization.geometry import inverse_intrinsics
+    from localization.synthetic import PAPER_K
+
+    inv = inverse_intrinsics(PAPER_K)
+    np.testing.assert_allclose(inv @ PAPER_K, np.eye(3), atol=1e-15)
+    assert inverse_intrinsics(PAPER_K.copy()) is inv  # one inverse per distinct matrix
+    assert not inv.flags.writeable
+    other = PAPER_K * np.array([[2.0], [2.0], [1.0]])
+    np.testing.assert_allclose(inverse_intrinsics(other) @ other, np.eye(3), atol=1e-15)
+    with pytest.raises(ValueError, match=r"K must have shape \(3, 3\), got \(4, 4\)"):
+        inverse_intrinsics(np.eye(4))

@@ -20,7 +20,6 @@ rasterization precision: at grazing angles and silhouette edges (measured in
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -28,7 +27,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_number
-from localization.geometry import as_points, check_transform
+from localization.geometry import as_points, check_transform, inverse_intrinsics
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.visibility import window_visibility
 
@@ -235,7 +234,7 @@ def raycast_visibility(
         raise TypeError(f"camera must be a uav_struct_env.sim.camera.Camera, got {type(camera).__name__}")
     check_number("radius (pixels)", radius, 0, integer=True, type_error=ValueError)
     R, t = np.ascontiguousarray(T[:3, :3]), T[:3, 3]
-    K_inv = _inverse_K(camera)
+    K_inv = inverse_intrinsics(camera.K)
 
     def ray_depths(rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.float64]:
         rays = _pixel_rays(rows.ravel(), cols.ravel(), K_inv, R)
@@ -245,14 +244,6 @@ def raycast_visibility(
     # The depth is exact (no buffer quantization): the tolerance of a 24-bit buffer.
     return window_visibility(xyz, ids_arr, T, camera, ray_depths, radius=radius, abs_tol=abs_tol,
                              rel_tol=rel_tol, depth_bits=24)
-
-
-@functools.lru_cache(maxsize=16)
-def _inverse_K(camera: Camera) -> NDArray[np.float64]:
-    """``K^-1`` of a camera (a frozen dataclass), cached: every ray-cast visibility test needs it."""
-    out = np.linalg.inv(camera.K)
-    out.flags.writeable = False
-    return out
 
 
 @njit(cache=True, nogil=True)
