@@ -8,6 +8,15 @@ ends the episode and the next one starts). One agent-step is one agent's observa
     .venv/bin/python benchmarks/wrapper_throughput.py --config state --mode robust  # association
     .venv/bin/python benchmarks/wrapper_throughput.py --config state --render-images  # as before
                                                  # ray-cast visibility: frames rendered and dropped
+    .venv/bin/python benchmarks/wrapper_throughput.py --config state --model runs/ppo_state
+
+What an agent-step costs depends on what the cameras see: ``hold`` keeps the random starts'
+views (about two in three see the layout), ``random`` flies away from it (few landmarks, cheap),
+and a trained policy faces the building and approaches it (every column top in view: the costly
+case, and the one a long training run spends its time in). ``--model`` (a folder of
+``examples/train_viewpoint_ppo.py``) first records the policy's deterministic actions on the
+wrapped env, episode by episode, then replays them on the bare and the wrapped env from the same
+seeds, so both see the same flights and the policy's own inference is not timed.
 
 Other processes sharing the machine's 2 cores lower the figure; ``uptime``'s load is printed.
 """
@@ -22,28 +31,63 @@ import warnings
 import numpy as np
 
 
-def measure(env, steps: int, policy: str, seed: int) -> tuple[float, int, float]:
-    """(agent-steps per second, agent-steps, CPU seconds) over at least ``steps`` agent-steps."""
+def measure(env, steps: int, policy: str | list, seed: int) -> tuple[float, int, float]:
+    """(agent-steps per second, agent-steps, CPU seconds) over at least ``steps`` agent-steps.
+
+    ``policy``: ``"hold"``, ``"random"``, or recorded episodes (:func:`record`), replayed in turn.
+    """
     rng = np.random.default_rng(seed)
     obs, _ = env.reset(seed=seed)
     n = 0
     t0, c0 = time.perf_counter(), time.process_time()
-    episode = 0
+    episode, t = 0, 0
     while n < steps:
-        if not env.agents:
-            episode += 1
-            env.reset(seed=seed + episode)
-        acts = {
-            a: (rng.uniform(-1, 1, 5) if policy == "random" else np.zeros(5)).astype(np.float32)
-            for a in env.agents
-        }
+        if not env.agents or (isinstance(policy, list) and t == len(policy[episode % len(policy)])):
+            episode, t = episode + 1, 0
+            env.reset(seed=seed + episode % len(policy) if isinstance(policy, list) else seed + episode)
+        if isinstance(policy, list):
+            acts = {a: policy[episode % len(policy)][t][a] for a in env.agents}
+        else:
+            acts = {
+                a: (rng.uniform(-1, 1, 5) if policy == "random" else np.zeros(5)).astype(np.float32)
+                for a in env.agents
+            }
         obs, *_ = env.step(acts)
-        n += len(obs)
+        n, t = n + len(obs), t + 1
     return n / (time.perf_counter() - t0), n, time.process_time() - c0
 
 
+def record(env, model: str, episodes: int, seed: int) -> list[list[dict[str, np.ndarray]]]:
+    """The deterministic actions of the trained policy in ``model`` on ``episodes`` episodes of the
+    wrapped ``env`` (seeds ``seed``, ``seed + 1``, ...): per episode, per step, per agent."""
+    from pathlib import Path
+
+    from uav_struct_env.errors import UsageError
+    from uav_struct_env.training.policy_files import NORMALIZATION_FILE, load_normalization, load_ppo
+
+    folder = Path(model)
+    agent = env.possible_agents[0]
+    try:
+        ppo = load_ppo(folder / "model.zip", env.observation_space(agent), env.action_space(agent))
+        norm = load_normalization(folder / NORMALIZATION_FILE)
+    except (ValueError, OSError) as err:
+        raise UsageError(f"--model {model!r}: {err}") from None
+    out = []
+    for e in range(episodes):
+        obs, _ = env.reset(seed=seed + e)
+        actions = []
+        while env.agents:
+            batch = norm({k: np.stack([obs[a][k] for a in env.agents]) for k in obs[env.agents[0]]})
+            act, _ = ppo.predict(batch, deterministic=True)
+            actions.append({a: act[i].astype(np.float32) for i, a in enumerate(env.agents)})
+            obs, *_ = env.step(actions[-1])
+        out.append(actions)
+    return out
+
+
 def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: int = 0,
-         render_images: bool = False, mode: str | None = None) -> dict:
+         render_images: bool = False, mode: str | None = None, model: str | None = None,
+         episodes: int = 20) -> dict:
     warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
     from uav_struct_env.wrappers import make_train_env
     from uav_struct_env.wrappers.configs import TRAIN_CONFIGS
@@ -53,14 +97,15 @@ def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: in
         train = train.replace(wrapper={"mode": mode})
     wrapped = make_train_env(train, **({"observe_image": True} if render_images else {}))
     bare = wrapped.env
-    measure(wrapped, 40, policy, seed)  # build the world, warm caches
-    bare_rate, _, bare_cpu = measure(bare, steps, policy, seed)
-    rate, n, cpu = measure(wrapped, steps, policy, seed)
+    actions = record(wrapped, model, episodes, seed) if model is not None else policy
+    measure(wrapped, 40, actions, seed)  # build the world, warm caches
+    bare_rate, _, bare_cpu = measure(bare, steps, actions, seed)
+    rate, n, cpu = measure(wrapped, steps, actions, seed)
     wrapped.close()
     out = {
         "config": config,
         "mode": train.wrapper["mode"],
-        "policy": policy,
+        "policy": f"trained ({model}, {episodes} episodes replayed)" if model is not None else policy,
         "observe_image": wrapped.unwrapped.config.observe_image,
         "agent_steps": n,
         "env_agent_steps_per_s": bare_rate,
@@ -86,4 +131,10 @@ if __name__ == "__main__":
                    help="render every frame even if the config drops it (the depth-tested truth)")
     p.add_argument("--mode", default=None, choices=("paper", "robust"),
                    help="association mode (default: the config's)")
-    main(**vars(p.parse_args()))
+    p.add_argument("--model", default=None,
+                   help="a trained policy's folder (train_viewpoint_ppo.py --out): its actions, replayed")
+    p.add_argument("--episodes", type=int, default=20, help="episodes recorded with --model")
+    args = p.parse_args()
+    if args.episodes < 1:
+        p.error(f"--episodes must be at least 1, got {args.episodes}")
+    main(**vars(args))

@@ -325,3 +325,29 @@ def test_every_env_copy_gets_its_own_seed_however_they_share_processes(example):
             vec.close()
         for k in range(3):
             np.testing.assert_array_equal(gnss[k], expected[k], err_msg=f"copy {k}, num_cpus={num_cpus}")
+
+
+def test_the_throughput_benchmark_replays_a_trained_policy_the_same_on_bare_and_wrapped_env(
+        trained, load_script):
+    bench = load_script(Path(__file__).resolve().parents[2] / "benchmarks" / "wrapper_throughput.py")
+    from uav_struct_env.wrappers import make_train_env
+
+    out, _ = trained
+    wrapped = make_train_env("state", max_cycles=6)
+    episodes = bench.record(wrapped, str(out), 2, seed=5)
+    assert [len(e) for e in episodes] == [6, 6]
+    again = bench.record(wrapped, str(out), 1, seed=5)[0]  # deterministic policy, seeded episodes
+    assert again[3]["uav_2"].tolist() == episodes[0][3]["uav_2"].tolist()
+    # the same flights on the bare env (no wrapper): the replayed actions, not the observations
+    ends = []
+    for env in (wrapped, wrapped.env):
+        env.reset(seed=5)
+        for acts in episodes[0]:
+            *_, infos = env.step(acts)
+        ends.append(np.stack([infos[a]["world_from_cam"] for a in sorted(infos)]))
+    np.testing.assert_array_equal(ends[0], ends[1])
+    rate, n, cpu = bench.measure(wrapped, 4 * 6 + 1, episodes, seed=5)  # into the second episode
+    assert n == 4 * 7 and rate > 0 and cpu > 0
+    with pytest.raises(UsageError, match=r"--model '.*nowhere'"):
+        bench.record(wrapped, str(out / "nowhere"), 1, seed=5)
+    wrapped.close()
