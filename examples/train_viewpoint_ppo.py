@@ -59,15 +59,18 @@ def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles:
     """SuperSuit vector env over ``n_envs`` copies of the wrapped env (4 agent slots each).
 
     Copy ``k`` is seeded ``seed + k``, every copy its own seed however the copies are spread over
-    the ``num_cpus`` subprocesses (:func:`_seed_copies`).
+    the ``num_cpus`` subprocesses (:func:`_seed_copies`). Infos carry ``localization`` of each
+    step only (:class:`~uav_struct_env.wrappers.StepInfos`): what the progress reads at an
+    episode's end is then its final step's, not the next episode's reset, which SuperSuit merges
+    over it; and the exchange with the subprocesses carries no landmark truth.
     """
     import supersuit as ss
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from uav_struct_env.wrappers import make_train_env
+    from uav_struct_env.wrappers import StepInfos, make_train_env
 
     overrides = {} if max_cycles is None else {"max_cycles": max_cycles}
-    env = make_train_env(config, **overrides)
+    env = StepInfos(make_train_env(config, **overrides), keys=("localization",))
     vec = ss.pettingzoo_env_to_vec_env_v1(env)
     vec = ss.concat_vec_envs_v1(vec, n_envs, num_cpus=num_cpus, base_class="stable_baselines3")
     _seed_copies(vec.venv, seed, n_envs)  # SB3's PPO(seed=...) would call vec.seed(), which SuperSuit lacks

@@ -9,6 +9,7 @@ wenv = make_train_env("state")                             # a documented traini
 :class:`DropKeys` (drop the image); :class:`FlattenObservation` turns the Dict into one vector;
 :class:`WorkerTracking` tracks the site's workers from all cameras (info and a reward option);
 :class:`TensorInfo` keeps only numeric, fixed-shape info entries (TorchRL);
+:class:`StepInfos` keeps the named entries of step infos only (SuperSuit's vector envs);
 the stack itself is :mod:`uav_struct_env.stack`.
 """
 
@@ -37,6 +38,7 @@ from uav_struct_env.wrappers.rewards import (
     UncertaintyReward,
     make_reward,
 )
+from uav_struct_env.wrappers.step_infos import StepInfos
 from uav_struct_env.wrappers.tensor_info import TensorInfo
 from uav_struct_env.wrappers.tracking import TRACKING_INFO_KEYS, TrackingReward, WorkerTracking
 
@@ -57,6 +59,7 @@ __all__ = [
     "LocalizePoses",
     "Reward",
     "RewardWrapper",
+    "StepInfos",
     "TensorInfo",
     "TrackingReward",
     "TrainConfig",
