@@ -113,8 +113,9 @@ def test_the_command_writes_one_table_and_refuses_study_only_options(tmp_path, c
     assert results["config"]["association"] == "paper" and results["config"]["backend"] == "process pool"
     table = (out / "table.md").read_text()
     assert "| Column tops | 1 |" in table and table in capsys.readouterr().out
-    header = (out / "per_image.csv").read_text().splitlines()[0]
+    header, first = (out / "per_image.csv").read_text().splitlines()[:2]
     assert header.startswith("site,seed,method,uav,viewpoint")
+    assert first.startswith("random:2,3,")  # each row names the run it came from
     assert main(["--sites", "paper", "--site", "paper", "--out", str(tmp_path / "x")]) == 2
     assert "--site is not a sweep option" in capsys.readouterr().err
     assert main(["--sites", "random:9-1", "--out", str(tmp_path / "y")]) == 2

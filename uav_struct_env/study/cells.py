@@ -37,11 +37,22 @@ def pct_cell(x: float | None) -> str:
     return "—" if x is None else f"{100 * x:.2f}"
 
 
-def write_records_csv(path: Path, record_type: type, rows: Sequence[Any]) -> None:
-    """Dataclass records of ``record_type`` as CSV, one row each, its fields as the columns."""
-    fields = [f.name for f in dataclasses.fields(record_type)]
+def write_records_csv(
+    path: Path,
+    record_type: type,
+    rows: Sequence[Any],
+    lead: tuple[Sequence[str], Sequence[Sequence[Any]]] = ((), ()),
+) -> None:
+    """Dataclass records of ``record_type`` as CSV, one row each, its fields as the columns.
+
+    ``lead``: ``(names, values)``, columns written before the record's, ``values[i]`` for row
+    ``i`` (the sweep's ``site`` and ``seed`` of the run each row came from).
+    """
+    names, values = lead
+    fields = [*names, *(f.name for f in dataclasses.fields(record_type))]
     with atomic_path(path) as tmp, tmp.open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=fields)
         writer.writeheader()
-        for r in rows:
-            writer.writerow(dataclasses.asdict(r))
+        for i, r in enumerate(rows):
+            writer.writerow({**(dict(zip(names, values[i], strict=True)) if names else {}),
+                             **dataclasses.asdict(r)})

@@ -33,10 +33,10 @@ from tqdm import tqdm
 
 from localization.metrics import median_p90
 from uav_struct_env.errors import ConfigError
-from uav_struct_env.outputs import StagedOutput, atomic_path, atomic_write_text
+from uav_struct_env.outputs import StagedOutput, atomic_write_text
 from uav_struct_env.processes import run_chunks
 from uav_struct_env.provenance import software
-from uav_struct_env.study.cells import cell, json_ready
+from uav_struct_env.study.cells import cell, json_ready, write_records_csv
 from uav_struct_env.study.protocol import METHODS, StudyConfig
 from uav_struct_env.study.report import summarize, write_results_json
 from uav_struct_env.study.run import ImageResult, bound_source, run_units
@@ -321,15 +321,9 @@ def table_markdown(results: dict) -> str:
 
 def write_rows_csv(path: Path, runs: Sequence[SweepRun]) -> None:
     """Every per-image row of every run, with its ``site`` and ``seed`` first."""
-    import csv
-
-    fields = ["site", "seed"] + [f.name for f in dataclasses.fields(ImageResult)]
-    with atomic_path(path) as tmp, tmp.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=fields)
-        writer.writeheader()
-        for run in runs:
-            for r in run.rows:
-                writer.writerow({"site": run.site, "seed": run.seed, **dataclasses.asdict(r)})
+    rows = [r for run in runs for r in run.rows]
+    which = [(run.site, run.seed) for run in runs for _ in run.rows]
+    write_records_csv(path, ImageResult, rows, lead=(("site", "seed"), which))
 
 
 def sweep(
