@@ -52,17 +52,21 @@ DEFAULTS: dict[str, Any] = {
     "checkpoint_every": 50_000,
     "seed": 0,
     "progress_bar": True,
+    "bootstrap_time_limit": False,
 }
 
 
-def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles: int | None = None):
+def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles: int | None = None,
+                 bootstrap_time_limit: bool = False):
     """SuperSuit vector env over ``n_envs`` copies of the wrapped env (4 agent slots each).
 
     Copy ``k`` is seeded ``seed + k``, every copy its own seed however the copies are spread over
     the ``num_cpus`` subprocesses (:func:`_seed_copies`). Infos carry ``localization`` of each
     step only (:class:`~uav_struct_env.wrappers.StepInfos`): what the progress reads at an
     episode's end is then its final step's, not the next episode's reset, which SuperSuit merges
-    over it; and the exchange with the subprocesses carries no landmark truth.
+    over it; and the exchange with the subprocesses carries no landmark truth. With
+    ``bootstrap_time_limit`` the infos also say where an episode ended at its time limit, so SB3
+    bootstraps the value there instead of treating the limit as a terminal state.
     """
     import supersuit as ss
     from stable_baselines3.common.vec_env import VecMonitor
@@ -70,7 +74,8 @@ def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles:
     from uav_struct_env.wrappers import StepInfos, make_train_env
 
     overrides = {} if max_cycles is None else {"max_cycles": max_cycles}
-    env = StepInfos(make_train_env(config, **overrides), keys=("localization",))
+    env = StepInfos(make_train_env(config, **overrides), keys=("localization",),
+                    time_limit=bootstrap_time_limit)
     vec = ss.pettingzoo_env_to_vec_env_v1(env)
     vec = ss.concat_vec_envs_v1(vec, n_envs, num_cpus=num_cpus, base_class="stable_baselines3")
     _seed_copies(vec.venv, seed, n_envs)  # SB3's PPO(seed=...) would call vec.seed(), which SuperSuit lacks
@@ -210,6 +215,8 @@ def check_options(opt: dict[str, Any]) -> None:
     check_option("gamma", opt["gamma"], 0, 1)
     check_option("ent_coef", opt["ent_coef"], 0)
     check_option("log_std_init", opt["log_std_init"])
+    if not isinstance(opt["bootstrap_time_limit"], bool):
+        raise ConfigError(f"bootstrap_time_limit must be True or False, got {opt['bootstrap_time_limit']!r}")
     for k, width in enumerate(opt["net_arch"]):
         check_option(f"net_arch[{k}]", width, 1, integer=True)
     check_output_dir(opt["out"], overwrite=opt["overwrite"])
@@ -237,7 +244,8 @@ def main(**kwargs: Any) -> dict[str, Any]:
     warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
     torch.set_num_threads(1)
     vec = make_vec_env(
-        opt["config"], opt["n_envs"], opt["num_cpus"], opt["seed"], opt["max_cycles"]
+        opt["config"], opt["n_envs"], opt["num_cpus"], opt["seed"], opt["max_cycles"],
+        opt["bootstrap_time_limit"],
     )
     vec = VecNormalize(vec, norm_obs=True, norm_reward=True, gamma=opt["gamma"])
     policy = "MultiInputPolicy"
@@ -331,6 +339,9 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--max-cycles", type=int, default=None, help="override the episode length")
     p.add_argument("--seed", type=int, default=DEFAULTS["seed"])
     p.add_argument("--no-progress-bar", dest="progress_bar", action="store_false")
+    p.add_argument("--bootstrap-time-limit", action="store_true",
+                   help="bootstrap the value where an episode ends at its time limit (SB3's "
+                        "TimeLimit.truncated; off: the limit counts as a terminal state)")
     args = vars(p.parse_args(argv))
     args["net_arch"] = tuple(args["net_arch"])
     return args

@@ -202,6 +202,23 @@ def test_bad_options_are_named(example):
         example("evaluate_policy").main(policies=("ppo",))
     with pytest.raises(ValueError, match="unknown options \\['lr'\\]"):
         example("train_viewpoint_ppo").main(lr=1e-3)
+    with pytest.raises(ConfigError, match="bootstrap_time_limit must be True or False, got 1"):
+        example("train_viewpoint_ppo").main(bootstrap_time_limit=1)
+
+
+def test_the_trainer_marks_time_limits_for_bootstrapping_only_when_asked(example):
+    train = example("train_viewpoint_ppo")
+    for bootstrap in (False, True):
+        vec = train.make_vec_env("state", n_envs=1, num_cpus=0, seed=0, max_cycles=2,
+                                 bootstrap_time_limit=bootstrap)
+        vec.reset()
+        try:
+            for _ in range(2):
+                _, _, dones, infos = vec.step(np.zeros((vec.num_envs, 5), np.float32))
+        finally:
+            vec.close()
+        assert dones.all()
+        assert [i.get("TimeLimit.truncated") for i in infos] == [True if bootstrap else None] * 4
 
 
 def test_evaluate_reads_the_model_folder_without_unpickling(example, trained, tmp_path):

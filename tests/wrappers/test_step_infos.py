@@ -57,3 +57,22 @@ def test_bad_keys_and_missing_entries_are_refused():
     env.reset(seed=0)
     with pytest.raises(ConfigError, match=r"info of 'uav_0' has no \['no_such_entry'\]; its keys are \["):
         env.step({a: np.zeros(5, np.float32) for a in env.agents})
+
+
+def test_time_limit_marks_truncations_and_not_crashes():
+    env = StepInfos(make_train_env("state", max_cycles=3), time_limit=True)
+    env.reset(seed=0)
+    marks = []
+    while env.agents:
+        *_, infos = env.step({a: np.zeros(5, np.float32) for a in env.agents})
+        marks.append(sorted({i["TimeLimit.truncated"] for i in infos.values()}))
+    assert marks == [[False], [False], [True]]  # hovering: the episode ends at its limit
+    # a crash terminates every agent (on_crash="all"): not a time limit, nothing to bootstrap
+    env = StepInfos(make_train_env("state"), time_limit=True)
+    env.reset(seed=0)
+    down = np.array([0, 0, -1, 0, 0], np.float32)  # full descent, below the geofence's floor
+    while env.agents:
+        _, _, term, _, infos = env.step({a: down for a in env.agents})
+    assert all(term.values()) and not any(i["TimeLimit.truncated"] for i in infos.values())
+    with pytest.raises(ConfigError, match="time_limit must be True or False, got 'yes'"):
+        StepInfos(make_train_env("state"), time_limit="yes")

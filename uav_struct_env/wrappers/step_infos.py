@@ -11,6 +11,11 @@ objects to copy.
 ``StepInfos(env, keys=("localization",))`` returns, at every step, each agent's info reduced to
 the entries ``keys`` and, at reset, empty infos: a trainer that reads ``info["localization"]`` at
 ``done`` reads the final step's, and the vector env carries a tenth of the bytes.
+
+``time_limit=True`` adds ``info["TimeLimit.truncated"]``: True where the agent's episode was
+truncated (the time limit) and not terminated (a crash). Stable-Baselines3 bootstraps the value
+of such a final state (``reward + gamma * V(terminal_observation)``) only when this entry says
+so, and SuperSuit does not set it: without it every time limit counts as the end of the world.
 """
 
 from __future__ import annotations
@@ -31,11 +36,16 @@ class StepInfos(ParallelWrapper):
         ConfigError: ``keys`` is empty or not strings; at a step, an agent's info lacks a key.
     """
 
-    def __init__(self, env: Any, keys: Sequence[str] = ("localization",)) -> None:
+    def __init__(
+        self, env: Any, keys: Sequence[str] = ("localization",), *, time_limit: bool = False
+    ) -> None:
         super().__init__(env)
         if isinstance(keys, str) or not keys or not all(isinstance(k, str) for k in keys):
             raise ConfigError(f"keys must be a non-empty sequence of info key names, got {keys!r}")
+        if not isinstance(time_limit, bool):
+            raise ConfigError(f"time_limit must be True or False, got {time_limit!r}")
         self.keys = tuple(keys)
+        self.time_limit = time_limit
 
     def reset(self, seed: int | None = None, options: dict | None = None):
         """Reset; every agent's info empty."""
@@ -51,4 +61,6 @@ class StepInfos(ParallelWrapper):
             if missing:
                 raise ConfigError(f"info of {agent!r} has no {missing}; its keys are {sorted(info)}")
             out[agent] = {k: info[k] for k in self.keys}
+            if self.time_limit:
+                out[agent]["TimeLimit.truncated"] = bool(truncations[agent] and not terminations[agent])
         return obs, rewards, terminations, truncations, out
