@@ -33,7 +33,8 @@ class StepInfos(ParallelWrapper):
     """Step infos reduced to the entries ``keys``; reset infos empty (see the module docstring).
 
     Raises:
-        ConfigError: ``keys`` is empty or not strings; at a step, an agent's info lacks a key.
+        ConfigError: ``keys`` is empty or not strings, or ``time_limit`` not a bool; at a step,
+            an agent's info lacks a key.
     """
 
     def __init__(
