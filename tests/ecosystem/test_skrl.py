@@ -65,6 +65,9 @@ def test_skrl_mappo_trains_one_shared_policy_with_a_state_critic(tmp_path):
         action_spaces=env.action_spaces,
         device=env.device,
         cfg={"rollouts": 16, "learning_epochs": 2, "mini_batches": 2, "discount_factor": 0.95,
+             # bootstrap V(final observation) where an episode ends at its time limit (skrl's
+             # default, False, runs the advantage on into the next episode's first value)
+             "time_limit_bootstrap": True,
              # skrl writes TensorBoard logs and checkpoints to ./runs unless told otherwise
              "experiment": {"directory": str(tmp_path), "write_interval": 0, "checkpoint_interval": 0},
              # skrl 2.1.1 refuses its own empty-dict defaults as "keys do not match possible agents"
@@ -80,6 +83,13 @@ def test_skrl_mappo_trains_one_shared_policy_with_a_state_critic(tmp_path):
     assert any(not torch.equal(a, b) for a, b in zip(before, policy.parameters(), strict=True))
     for a in agents:
         assert mappo.policies[a] is policy and mappo.values[a] is value
+        assert mappo.cfg.time_limit_bootstrap[a] is True
+        # skrl reads the env's time limit as a truncation, never as a termination: the last
+        # rollout (16 steps of 8-step episodes) ends two episodes per agent at steps 8 and 16
+        truncated = memories[a].get_tensor_by_name("truncated").reshape(-1).cpu().numpy()
+        terminated = memories[a].get_tensor_by_name("terminated").reshape(-1).cpu().numpy()
+        assert np.flatnonzero(truncated).tolist() == [7, 15]
+        assert not terminated.any()
     # the state the critic reads is the env's state(): 4 x (position, quaternion, alive)
     state = env.state()[agents[0]]
     assert state.shape[-1] == 32

@@ -87,6 +87,8 @@ def test_torchrl_collects_with_a_shared_policy_and_takes_ppo_steps():
         assert data["next", "state"].shape == (24, 32)
         # an episode ends every 6 steps (max_cycles), for all four agents at once
         assert data["next", "uav", "truncated"].squeeze(-1).all(-1).sum() == 4
+        # ... truncated, not terminated: TorchRL's GAE bootstraps V(next) there
+        assert not data["next", "uav", "terminated"].any()
         with torch.no_grad():
             loss.value_estimator(data, params=loss.critic_network_params,
                                  target_params=loss.target_critic_network_params)
