@@ -108,7 +108,11 @@ class _Progress:
     After every rollout: the mean training episode return (raw rewards, the stochastic policy
     while it explores) and, over the last 100 agent-episodes, the final-step localization
     success rate and median translation error; on the progress bar, in TensorBoard
-    (``uav/...``) and as one JSON line per rollout in ``progress.jsonl``. The deterministic
+    (``uav/...``) and as one JSON line per rollout in ``progress.jsonl``, with where the wall
+    clock went: ``rollout_s`` (this rollout: stepping the envs, the policy's actions, the
+    checkpoints) and ``update_s`` (the gradient update between the previous rollout and this
+    one, with SB3's logging; None for the first); ``train.json``'s ``collect_s`` and
+    ``update_total_s`` are their sums (a last update after the last rollout is not in them). The deterministic
     evaluation of saved checkpoints is ``evaluate_policy.py --checkpoints`` (docs/training.md
     explains why the two returns differ).
     """
@@ -122,6 +126,8 @@ class _Progress:
         class Progress(BaseCallback):
             def _on_training_start(self) -> None:
                 self.t0 = time.perf_counter()
+                self.collect_s, self.update_total_s = 0.0, 0.0
+                self.rollout_t0, self.update_t0, self.update_s = self.t0, None, None
                 self.finals: deque = deque(maxlen=100)
                 log_path.unlink(missing_ok=True)  # a new file, never through a planted link
                 self.bar = None
@@ -141,18 +147,30 @@ class _Progress:
                     return False
                 return True
 
+            def _on_rollout_start(self) -> None:
+                self.rollout_t0 = time.perf_counter()
+                if self.update_t0 is not None:  # the update since the last rollout ended
+                    self.update_s = self.rollout_t0 - self.update_t0
+                    self.update_total_s += self.update_s
+
             def _on_rollout_end(self) -> None:
+                now = time.perf_counter()
+                rollout_s = now - self.rollout_t0
+                self.collect_s += rollout_s
+                self.update_t0 = now
                 returns = [e["r"] for e in self.model.ep_info_buffer]
                 ok = [e for s, e in self.finals if s]
                 row = {
                     "agent_steps": int(self.num_timesteps),
-                    "wall_clock_s": round(time.perf_counter() - self.t0, 2),
+                    "wall_clock_s": round(now - self.t0, 2),
+                    "rollout_s": round(rollout_s, 3),
+                    "update_s": None if self.update_s is None else round(self.update_s, 3),
                     "episode_return_mean": float(np.mean(returns)) if returns else None,
                     "final_success_rate": len(ok) / len(self.finals) if self.finals else None,
                     "final_translation_median_m": float(np.median(ok)) if ok else None,
                 }
                 for key, value in row.items():
-                    if key != "agent_steps" and value is not None:
+                    if key not in ("agent_steps", "rollout_s", "update_s") and value is not None:
                         self.logger.record(f"uav/{key}", value)
                 with open(log_path, "a") as log:
                     log.write(json.dumps(row) + "\n")
@@ -264,12 +282,10 @@ def main(**kwargs: Any) -> dict[str, Any]:
         verbose=0,
     )
     n = vec.num_envs
+    progress = _Progress(opt["total_timesteps"], opt["minutes"], opt["progress_bar"],
+                         out / "progress.jsonl")
     callbacks = CallbackList(
-        [
-            _Checkpoints(opt["checkpoint_every"], real_folder(out / "checkpoints"), vec),
-            _Progress(opt["total_timesteps"], opt["minutes"], opt["progress_bar"],
-                      out / "progress.jsonl"),
-        ]
+        [_Checkpoints(opt["checkpoint_every"], real_folder(out / "checkpoints"), vec), progress]
     )
     made_by = software()  # the code as training starts (the checkout may change while it runs)
     t0 = time.perf_counter()
@@ -286,6 +302,10 @@ def main(**kwargs: Any) -> dict[str, Any]:
         "agent_steps": int(model.num_timesteps),
         "wall_clock_s": wall,
         "agent_steps_per_s": model.num_timesteps / wall if wall > 0 else float("nan"),
+        # where the wall clock went: collecting rollouts (the env processes stepping, the policy
+        # acting) and the gradient updates between them (the env processes idle)
+        "collect_s": progress.collect_s,
+        "update_total_s": progress.update_total_s,
         "n_agent_slots": n,
         # what --config named when this run trained (env overrides and wrapper options), and the
         # code that trained it: a later change of the named config does not change this record

@@ -34,7 +34,7 @@ def trained(example, tmp_path_factory):
         total_timesteps=256,
         n_envs=1,
         num_cpus=0,
-        n_steps=64,
+        n_steps=32,
         batch_size=64,
         n_epochs=1,
         max_cycles=8,
@@ -64,8 +64,14 @@ def test_train_writes_model_normalization_logs_and_checkpoints(trained):
     for d in steps:  # model folders the evaluator reads without unpickling
         assert {f.name for f in (out / "checkpoints" / d).iterdir()} == {"model.zip", "normalization.npz"}
     rows = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]
-    assert [r["agent_steps"] for r in rows] == [256]  # one rollout of 64 steps x 4 agent slots
+    assert [r["agent_steps"] for r in rows] == [128, 256]  # two rollouts of 32 steps x 4 slots
     assert rows[-1]["agent_steps"] >= 256 and rows[-1]["episode_return_mean"] is not None
+    # where the wall clock went: each rollout, and the update between the two
+    assert rows[0]["update_s"] is None and rows[1]["update_s"] > 0
+    assert all(r["rollout_s"] > 0 for r in rows)
+    assert record["collect_s"] == pytest.approx(sum(r["rollout_s"] for r in rows), abs=2e-3)
+    assert record["update_total_s"] == pytest.approx(rows[1]["update_s"], abs=1e-3)
+    assert record["collect_s"] + record["update_total_s"] <= record["wall_clock_s"]
     assert 0.0 <= rows[-1]["final_success_rate"] <= 1.0
     assert any((out / "tb").rglob("events.out.tfevents*"))
 
