@@ -6,7 +6,10 @@ random starts 15-35 m out with up to +-60 deg of heading error). SuperSuit turns
 into four slots of one vector env (``pettingzoo_env_to_vec_env_v1``) and stacks ``n_envs`` copies
 in ``num_cpus`` subprocesses (``concat_vec_envs_v1``; by default 8 copies in 2 processes, 32 agent
 slots: on 2 cores, several copies per process carry more agent-steps per exchange with the
-trainer than one copy per process, docs/benchmarks.md); observations and rewards are normalized
+trainer than one copy per process, docs/benchmarks.md); an episode that ends at its time limit is
+marked ``TimeLimit.truncated`` (:class:`~uav_struct_env.wrappers.StepInfos`), so SB3 bootstraps
+the value there instead of training the limit as a terminal state (``--no-bootstrap-time-limit``:
+as before 2026-11-27; docs/training.md); observations and rewards are normalized
 (``VecNormalize``, saved beside the model: ``normalization.npz`` holds the observation statistics
 as plain arrays, which ``evaluate_policy.py`` reads without unpickling anything; SB3's own
 ``vecnormalize.pkl`` is kept for resuming training with ``VecNormalize.load``).
@@ -24,6 +27,7 @@ final-step localization, also on the progress bar and in TensorBoard), ``checkpo
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 import time
@@ -52,12 +56,12 @@ DEFAULTS: dict[str, Any] = {
     "checkpoint_every": 50_000,
     "seed": 0,
     "progress_bar": True,
-    "bootstrap_time_limit": False,
+    "bootstrap_time_limit": True,
 }
 
 
 def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles: int | None = None,
-                 bootstrap_time_limit: bool = False):
+                 bootstrap_time_limit: bool = True):
     """SuperSuit vector env over ``n_envs`` copies of the wrapped env (4 agent slots each).
 
     Copy ``k`` is seeded ``seed + k``, every copy its own seed however the copies are spread over
@@ -359,9 +363,11 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--max-cycles", type=int, default=None, help="override the episode length")
     p.add_argument("--seed", type=int, default=DEFAULTS["seed"])
     p.add_argument("--no-progress-bar", dest="progress_bar", action="store_false")
-    p.add_argument("--bootstrap-time-limit", action="store_true",
+    p.add_argument("--bootstrap-time-limit", action=argparse.BooleanOptionalAction,
+                   default=DEFAULTS["bootstrap_time_limit"],
                    help="bootstrap the value where an episode ends at its time limit (SB3's "
-                        "TimeLimit.truncated; off: the limit counts as a terminal state)")
+                        "TimeLimit.truncated; on by default); --no-bootstrap-time-limit: the limit "
+                        "counts as a terminal state, as before 2026-11-27")
     args = vars(p.parse_args(argv))
     args["net_arch"] = tuple(args["net_arch"])
     return args

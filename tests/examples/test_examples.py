@@ -212,8 +212,11 @@ def test_bad_options_are_named(example):
         example("train_viewpoint_ppo").main(bootstrap_time_limit=1)
 
 
-def test_the_trainer_marks_time_limits_for_bootstrapping_only_when_asked(example):
+def test_the_trainer_marks_time_limits_for_bootstrapping_unless_told_not_to(example):
     train = example("train_viewpoint_ppo")
+    assert train.DEFAULTS["bootstrap_time_limit"] is True
+    assert train._parse([])["bootstrap_time_limit"] is True
+    assert train._parse(["--no-bootstrap-time-limit"])["bootstrap_time_limit"] is False
     for bootstrap in (False, True):
         vec = train.make_vec_env("state", n_envs=1, num_cpus=0, seed=0, max_cycles=2,
                                  bootstrap_time_limit=bootstrap)
