@@ -209,7 +209,7 @@ def plot(results: dict[str, dict], path: str | Path) -> None:
     import matplotlib.pyplot as plt
 
     names = list(results)
-    fig, axes = plt.subplots(1, 2, figsize=(8, 3), dpi=90)
+    fig, axes = plt.subplots(1, 2, figsize=(9.5, 3), dpi=90)
     rates = [results[n]["final_step"]["success_rate"] for n in names]
     axes[0].bar(names, rates, color="0.5")
     spread = results.get("ppo", {}).get("across_runs")
@@ -229,7 +229,7 @@ def plot(results: dict[str, dict], path: str | Path) -> None:
     axes[1].set_xlabel("final-step translation error [m]")
     axes[1].set_ylabel("fraction of agent-episodes")
     axes[1].set_ylim(0, 1)
-    axes[1].legend(fontsize=8)
+    axes[1].legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))  # beside the curves
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     save_figure(fig, path)
