@@ -29,6 +29,10 @@ mean, standard deviation, minimum and maximum over runs of each final-step figur
     .venv/bin/python examples/evaluate_policy.py --model runs/ppo_state --episodes 20 \
         --plot runs/ppo_state/evaluation.png --json-out runs/ppo_state/evaluation.json
 
+Another building than the one trained on (the paper's): ``--site random --site-seed N`` draws a
+parametric building (``site="random"`` of the env, from its ``texture_seed``), ``--site
+my_site.json`` or ``--site model.ifc`` reads one; the starts are placed around that building.
+
 Learning curve: ``--checkpoints RUN [RUN ...]`` evaluates every checkpoint folder
 (``RUN/checkpoints/step_<N>/``, written by ``train_viewpoint_ppo.py``) of each training run (one
 per training seed) deterministically on the same episodes, and plots the final-step success rate,
@@ -81,6 +85,8 @@ DEFAULTS: dict[str, Any] = {
     "json_out": None,
     "overwrite": False,
     "max_cycles": None,
+    "site": None,
+    "site_seed": None,
     "trust_pickle": False,
     "checkpoints": None,
 }
@@ -347,6 +353,13 @@ def check_options(opt: dict[str, Any]) -> None:
     check_option("seed", opt["seed"], 0, integer=True)
     if opt["max_cycles"] is not None:
         check_option("max_cycles", opt["max_cycles"], 1, integer=True)
+    site = opt["site"]
+    if site is not None and not (site in ("paper", "random") or (
+            isinstance(site, str) and site.lower().endswith((".json", ".ifc")) and Path(site).is_file())):
+        raise ConfigError(f"site must be 'paper', 'random' or an existing *.json / *.ifc site file, "
+                          f"got {site!r}")
+    if opt["site_seed"] is not None:
+        check_option("site_seed", opt["site_seed"], 0, integer=True)
     for run in opt["checkpoints"] or ():
         if not checkpoint_folders(run):
             raise UsageError(f"--checkpoints {str(run)!r} holds no checkpoints/step_<N>/model.zip "
@@ -372,7 +385,8 @@ def env_config(opt: dict[str, Any]) -> tuple[Any, str]:
     evaluate a policy under another association than it was trained with). Otherwise the
     configuration the runs recorded in ``train.json`` (all the same, or refused), so a run keeps
     its meaning when the named configuration changes; ``state`` for runs that recorded none and
-    for baselines alone. ``--association`` and ``--max-cycles`` apply on top.
+    for baselines alone. ``--association``, ``--max-cycles``, ``--site`` and ``--site-seed``
+    apply on top.
 
     Raises:
         UsageError: if the runs recorded different configurations.
@@ -413,6 +427,12 @@ def env_config(opt: dict[str, Any]) -> tuple[Any, str]:
         source += f"; --association {opt['association']}"
     if opt["max_cycles"] is not None:
         config = config.replace(env={"max_cycles": opt["max_cycles"]})
+    if opt["site"] is not None:  # another building than the one trained on
+        config = config.replace(env={"site": opt["site"]})
+        source += f"; --site {opt['site']}"
+    if opt["site_seed"] is not None:
+        config = config.replace(env={"texture_seed": opt["site_seed"]})
+        source += f"; --site-seed {opt['site_seed']}"
     return config, source
 
 
@@ -501,6 +521,11 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--json-out", default=None, help="write the summary (JSON) to this file")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --plot / --json-out")
     p.add_argument("--max-cycles", type=int, default=None, help="episode length (default: the config's)")
+    p.add_argument("--site", default=None,
+                   help="evaluate on another building: paper | random (drawn from --site-seed) | a "
+                   "*.json or *.ifc site file (default: the one trained on)")
+    p.add_argument("--site-seed", type=int, default=None,
+                   help="the env's texture_seed, which also draws --site random (default: the config's)")
     p.add_argument("--checkpoints", nargs="+", default=None, metavar="RUN",
                    help="training run folders (one per seed): evaluate every checkpoint into a "
                    "learning curve instead of comparing policies")

@@ -230,6 +230,24 @@ def test_the_trainer_marks_time_limits_for_bootstrapping_unless_told_not_to(exam
         assert [i.get("TimeLimit.truncated") for i in infos] == [True if bootstrap else None] * 4
 
 
+def test_evaluate_on_another_building(example, trained, tmp_path):
+    out, _ = trained
+    evaluate = example("evaluate_policy")
+    summary = evaluate.main(model=str(out), policies=("ppo", "hold"), episodes=1, max_cycles=2,
+                            site="random", site_seed=2, json_out=str(tmp_path / "e.json"))
+    assert summary["env_config"]["env"]["site"] == "random"
+    assert summary["env_config"]["env"]["texture_seed"] == 2
+    assert summary["env_config_source"].endswith("; --site random; --site-seed 2")
+    paper = evaluate.main(model=str(out), policies=("hold",), episodes=1, max_cycles=2)
+    # the starts are placed around the other building: not the paper's start distances
+    assert (summary["results"]["hold"]["start_distance_median_m"]
+            != paper["results"]["hold"]["start_distance_median_m"])
+    with pytest.raises(ConfigError, match="site must be 'paper', 'random' or an existing"):
+        evaluate.main(policies=("hold",), site="nowhere.ifc")
+    with pytest.raises(ValueError, match="site_seed"):
+        evaluate.main(policies=("hold",), site="random", site_seed=-1)
+
+
 def test_evaluate_reads_the_model_folder_without_unpickling(example, trained, tmp_path):
     import pickle
 
