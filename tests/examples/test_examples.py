@@ -242,7 +242,8 @@ def test_evaluate_on_another_building(example, trained, tmp_path):
     # the starts are placed around the other building: not the paper's start distances
     assert (summary["results"]["hold"]["start_distance_median_m"]
             != paper["results"]["hold"]["start_distance_median_m"])
-    with pytest.raises(ConfigError, match="site must be 'paper', 'random' or an existing"):
+    with pytest.raises(ConfigError, match=r"site must be 'paper', 'random', a Site or an existing "
+                       r"\*.json / \*.ifc file, got 'nowhere.ifc'"):
         evaluate.main(policies=("hold",), site="nowhere.ifc")
     with pytest.raises(ValueError, match="site_seed"):
         evaluate.main(policies=("hold",), site="random", site_seed=-1)
