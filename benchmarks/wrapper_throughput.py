@@ -6,6 +6,8 @@ ends the episode and the next one starts). One agent-step is one agent's observa
 
     .venv/bin/python benchmarks/wrapper_throughput.py --config state --steps 400
     .venv/bin/python benchmarks/wrapper_throughput.py --config state --mode robust  # association
+    .venv/bin/python benchmarks/wrapper_throughput.py --config state --no-warm-start  # search
+                                                 # every frame (the configs start from the last pose)
     .venv/bin/python benchmarks/wrapper_throughput.py --config state --render-images  # as before
                                                  # ray-cast visibility: frames rendered and dropped
     .venv/bin/python benchmarks/wrapper_throughput.py --config state --model runs/ppo_state
@@ -87,7 +89,7 @@ def record(env, model: str, episodes: int, seed: int) -> list[list[dict[str, np.
 
 def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: int = 0,
          render_images: bool = False, mode: str | None = None, model: str | None = None,
-         episodes: int = 20) -> dict:
+         episodes: int = 20, warm_start: bool | None = None) -> dict:
     warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
     from uav_struct_env.wrappers import make_train_env
     from uav_struct_env.wrappers.configs import TRAIN_CONFIGS
@@ -95,6 +97,8 @@ def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: in
     train = TRAIN_CONFIGS[config]
     if mode is not None:  # the association mode of the named config, overridden
         train = train.replace(wrapper={"mode": mode})
+    if warm_start is not None:  # the config's warm start, overridden
+        train = train.replace(wrapper={"warm_start": warm_start})
     wrapped = make_train_env(train, **({"observe_image": True} if render_images else {}))
     bare = wrapped.env
     actions = record(wrapped, model, episodes, seed) if model is not None else policy
@@ -105,6 +109,7 @@ def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: in
     out = {
         "config": config,
         "mode": train.wrapper["mode"],
+        "warm_start": train.wrapper.get("warm_start", False),
         "policy": f"trained ({model}, {episodes} episodes replayed)" if model is not None else policy,
         "observe_image": wrapped.unwrapped.config.observe_image,
         "agent_steps": n,
@@ -134,6 +139,8 @@ if __name__ == "__main__":
     p.add_argument("--model", default=None,
                    help="a trained policy's folder (train_viewpoint_ppo.py --out): its actions, replayed")
     p.add_argument("--episodes", type=int, default=20, help="episodes recorded with --model")
+    p.add_argument("--warm-start", action=argparse.BooleanOptionalAction, default=None,
+                   help="start each association from the last pose and the action (default: the config's)")
     args = p.parse_args()
     if args.episodes < 1:
         p.error(f"--episodes must be at least 1, got {args.episodes}")

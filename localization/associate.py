@@ -62,6 +62,18 @@ Two methods:
        among enough wrong detections some four fit some pose near the prior.
 
     Gating means a detection (clutter) or a landmark (miss, occlusion) may stay unassigned.
+
+    *Warm start* (``warm_start``: a predicted pose, e.g. the previous frame's estimate moved by
+    the commanded motion). Before any hypothesis, the landmarks are projected with the predicted
+    pose, assigned within ``coarse_gate_px / 4`` and refined with re-association as in step 2.
+    The result is accepted without a search only when it explains the whole frame: every finite
+    detection paired, every landmark its pose projects inside the image detected, the pose
+    within the prior's Mahalanobis gate, the residuals within the fit test, and more pairs than
+    the minimum. Anything less (a new landmark entering the view, clutter, a miss, a prediction
+    that has drifted) runs the full search above, so a warm start changes which frames are
+    searched, not what is accepted -- except that the rivals of step 4 are not searched: the
+    prediction carries the previous frame's identities, which is what resolves a periodic
+    layout's ambiguity over time.
 """
 
 from __future__ import annotations
@@ -128,6 +140,8 @@ class Association:
         failure_reason: set when nothing could be assigned (e.g. no landmark in front of the
             camera), else None.
         failure_code: the :class:`~localization.failure.FailureCode` of ``failure_reason``.
+        warm_started: True when the robust association's warm start (a predicted pose) was
+            accepted and no hypothesis search ran (:func:`associate_robust`, ``warm_start``).
     """
 
     assignment: NDArray[np.int64]
@@ -137,6 +151,7 @@ class Association:
     n_hypotheses: int = 1
     failure_reason: str | None = None
     failure_code: FailureCode | None = None
+    warm_started: bool = False
 
     @property
     def n_assigned(self) -> int:
@@ -478,6 +493,7 @@ def associate_robust(
     ambiguity_margin: float = AMBIGUITY_MARGIN,
     fit_quantile: float = 1.0 - 1e-6,
     detection_scores: NDArray[np.float64] | None = None,
+    warm_start: NDArray[np.float64] | None = None,
 ) -> Association:
     """Robust association: upright two-point hypotheses, batched re-association, likelihood scoring.
 
@@ -526,6 +542,9 @@ def associate_robust(
         detection_scores: (N,) probability in [0, 1] that each detection is a landmark (the
             learned detector's scores), or None; they enter the scoring as log-odds (module
             docstring, step 3). Not validated here (:meth:`Localizer.localize` does).
+        warm_start: (4, 4) a predicted ``cam_from_world`` for this frame, or None: tried before
+            any hypothesis and accepted only when it explains the whole frame (module docstring,
+            *Warm start*); else the full search runs. Not validated here.
     """
     sig = prior_sigmas or PriorSigmas()
     gate = float(gate_px) if gate_px is not None else max(5.0 * pixel_sigma, 3.0)
@@ -559,6 +578,11 @@ def associate_robust(
         np.ascontiguousarray(K, dtype=f64), np.ascontiguousarray(prior, dtype=f64), image_size, margin_px,
         pixel_sigma, sig, gate, coarse_gate_px, max_iterations, need, _log_odds(detection_scores),
     )
+
+    if warm_start is not None:
+        warm = _warm_association(P, warm_start, max_prior_mahalanobis_sq, fit_quantile)
+        if warm is not None:
+            return warm
 
     def covered(coarse: list[tuple[NDArray, NDArray]]) -> NDArray:
         """(C,) whether each hypothesis' pairs all agree with an explored result.
@@ -781,6 +805,45 @@ def associate_robust(
                            FailureCode.NO_CONSISTENT_ASSOCIATION)
     res, _ = reprojection_residuals(K, T, landmarks_xyz[a[m]], det[m])
     return Association(a, T, float(np.sum(res**2)), float(score_best), len(finals), None)
+
+
+def _warm_association(
+    P: _Problem, start: NDArray, max_prior_mahalanobis_sq: float | None, fit_quantile: float
+) -> Association | None:
+    """The association of the predicted pose ``start`` alone, or None if it leaves anything open.
+
+    Accepted (module docstring, *Warm start*) when, refined with re-association, it pairs every
+    finite detection, detects every landmark its pose projects inside the image, keeps more
+    pairs than the minimum, stays within the prior's Mahalanobis gate and passes the fit test.
+    """
+    idx, proj = candidate_landmarks(P.landmarks_xyz, P.K, start, P.image_size, P.margin_px)
+    if idx.size <= P.need or P.good.size <= P.need:
+        return None
+    local = assign(P.det[P.good], proj, P.coarse_gate_px / 4.0)
+    a = np.full(P.det.shape[0], -1, dtype=np.int64)
+    a[P.good[local >= 0]] = idx[local[local >= 0]]
+    if (a >= 0).sum() <= P.need:
+        return None
+    A, T, alive = P.refine(a[None], np.ascontiguousarray(start, dtype=np.float64)[None], False)
+    a = A[0]
+    pairs = int((a >= 0).sum())
+    if not alive[0] or pairs != P.good.size or pairs <= P.need:
+        return None
+    prior_sq, chi = P.checks(A, T)
+    if max_prior_mahalanobis_sq is not None and prior_sq[0] > max_prior_mahalanobis_sq:
+        return None
+    if chi[0] > _chi2_quantiles(fit_quantile, 2 * pairs - 6)[2 * pairs - 6]:
+        return None
+    w, h = P.image_size
+    missed = missed_many(
+        P.K, P.landmarks_xyz, A, np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3]),
+        int(w), int(h),
+    )
+    if missed[0] > 0:
+        return None
+    score, _ = P.nll(A, T, chi, prior_sq, 0.0)
+    return Association(a, T[0], float(chi[0]) * P.pixel_sigma**2, float(score[0]), 1, None,
+                       warm_started=True)
 
 
 def _minimal_fit_reason(P: _Problem, a: NDArray, T: NDArray) -> str | None:

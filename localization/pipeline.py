@@ -64,6 +64,8 @@ class PoseEstimate:
             ``total``). ``associate`` includes the PnP runs made inside robust association.
         prior_mahalanobis_sq: squared Mahalanobis distance of the estimate from the prior.
         n_hypotheses: association hypotheses evaluated.
+        warm_started: True when the robust association accepted the warm start
+            (:meth:`Localizer.localize`, ``warm_start``) and searched no hypothesis.
     """
 
     success: bool
@@ -77,6 +79,7 @@ class PoseEstimate:
     prior_mahalanobis_sq: float = float("nan")
     n_hypotheses: int = 0
     failure_code: FailureCode | None = None
+    warm_started: bool = False
 
     def __post_init__(self) -> None:
         if not self.success and self.failure_code is None:
@@ -252,11 +255,12 @@ class Localizer:
         prior: NDArray[np.float64],
         prior_sigmas: PriorSigmas | None = None,
         scores: NDArray[np.float64] | None = None,
+        warm_start: NDArray[np.float64] | None = None,
     ) -> Association:
         """Run the configured association only (validated inputs).
 
-        ``prior_sigmas`` as in :meth:`localize`; ``scores`` the detections' probabilities of
-        being landmarks (robust mode only).
+        ``prior_sigmas`` and ``warm_start`` as in :meth:`localize`; ``scores`` the detections'
+        probabilities of being landmarks (robust mode only).
         """
         if self.association == "paper":
             return associate_paper(
@@ -277,6 +281,7 @@ class Localizer:
             prior_sigmas=self.prior_sigmas if prior_sigmas is None else prior_sigmas,
             max_prior_mahalanobis_sq=self.max_prior_mahalanobis_sq,
             detection_scores=scores,
+            warm_start=warm_start,
         )
 
     def localize(
@@ -285,6 +290,7 @@ class Localizer:
         prior_cam_from_world: ArrayLike,
         *,
         prior_sigmas: PriorSigmas | tuple | None = None,
+        warm_start: ArrayLike | None = None,
     ) -> PoseEstimate:
         """Estimate ``cam_from_world`` from anonymous detections and a rough prior pose.
 
@@ -295,6 +301,11 @@ class Localizer:
             prior_sigmas: this frame's prior sigmas (as the constructor's), e.g. a filter's
                 prediction (:meth:`localization.temporal.PoseFilter.prior_sigmas`); None: the
                 localizer's own.
+            warm_start: robust mode: a (4, 4) ``cam_from_world`` predicted for this frame (e.g.
+                the previous frame's estimate moved by the commanded motion), tried before the
+                hypothesis search and accepted only when it explains the whole frame
+                (:mod:`localization.associate`, *Warm start*); None (default): the full search.
+                Ignored by the ``paper`` association.
 
         Returns:
             A :class:`PoseEstimate`. Degenerate input (too few usable detections or
@@ -316,6 +327,8 @@ class Localizer:
         if not is_pinhole(self.distortion):  # pinhole pixels from here on
             det = undistort_points(det, self.K, self.distortion)
         prior = check_transform("prior_cam_from_world", prior_cam_from_world)
+        if warm_start is not None:
+            warm_start = check_transform("warm_start", warm_start)
         sigmas = self.prior_sigmas if prior_sigmas is None else self._prior_sigmas(prior_sigmas)
         n = det.shape[0]
         unassigned = np.full(n, -1, dtype=np.int64)
@@ -352,7 +365,7 @@ class Localizer:
             timings.update(associate=0.0, pnp=0.0, covariance=0.0)
             return fail(FailureCode.DEGENERATE_GEOMETRY, edge_on)
 
-        assoc = self.associate(det, prior, sigmas, scores)
+        assoc = self.associate(det, prior, sigmas, scores, warm_start)
         t2 = time.perf_counter()
         timings["associate"] = t2 - t1
         if assoc.failure_reason is not None:
@@ -441,6 +454,7 @@ class Localizer:
             timings=timings,
             prior_mahalanobis_sq=prior_mahalanobis_sq(T, prior, sigmas),
             n_hypotheses=assoc.n_hypotheses,
+            warm_started=assoc.warm_started,
         )
 
 

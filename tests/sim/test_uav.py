@@ -82,3 +82,18 @@ def test_obstacles_from_paper_site():
     assert obs.distances([[6.0, 2.0, slab.z_top + 0.2]])[0] == pytest.approx(0.2)
     d, name = obs.nearest([4.0, 4.0, 7.5])
     assert name.startswith("C1") and d == pytest.approx(7.5 - site.columns[-1].z_top)
+
+
+def test_state_from_a_camera_pose_round_trips_and_drops_roll():
+    rng = np.random.default_rng(5)
+    for pitch in [*rng.uniform(-math.pi / 2, math.pi / 2, 200), math.pi / 2, -math.pi / 2]:
+        s = UavState.make(rng.normal(0, 20, 3), rng.uniform(-math.pi, math.pi), pitch)
+        back = UavState.from_world_from_cam(s.world_from_cam)
+        np.testing.assert_allclose(back.world_from_cam, s.world_from_cam, atol=1e-9)
+    # an estimate with a small roll: the same heading and pitch, roll 0 (what the gimbal holds)
+    from localization.attitude import world_from_cam_from_attitude
+
+    rolled = world_from_cam_from_attitude([1.0, 2.0, 3.0], [math.radians(0.5), 0.4, 1.2])
+    s = UavState.from_world_from_cam(rolled)
+    assert s.attitude[0] == 0.0
+    assert abs(s.pitch - 0.4) < 1e-12 and abs(s.yaw - 1.2) < 1e-12

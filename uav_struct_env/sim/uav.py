@@ -169,6 +169,24 @@ class UavState:
         p = np.asarray(position, dtype=np.float64).reshape(3)
         return cls((float(p[0]), float(p[1]), float(p[2])), float(wrap_angle(yaw)), float(pitch))
 
+    @classmethod
+    def from_world_from_cam(cls, world_from_cam: ArrayLike) -> UavState:
+        """The state whose camera is nearest a (4, 4) ``world_from_cam`` (an estimate, say).
+
+        Position as given; heading and gimbal pitch of the optical axis (the yaw and pitch of
+        :func:`~localization.attitude.attitude_from_world_from_cam`, at a fraction of its
+        cost); a roll is dropped. Looking straight down, the heading is the camera's left
+        axis.
+        """
+        T = np.asarray(world_from_cam, dtype=np.float64)
+        fx, fy, fz = float(T[0, 2]), float(T[1, 2]), float(T[2, 2])  # camera z: the body's forward
+        if math.hypot(fx, fy) > 1e-9:
+            yaw = math.atan2(fy, fx)
+        else:  # camera x is the body's right: horizontal while the roll is 0
+            yaw = math.atan2(T[1, 0], T[0, 0]) + 0.5 * math.pi
+        pitch = math.asin(min(1.0, max(-1.0, -fz)))
+        return cls.make(T[:3, 3], yaw, pitch)
+
     @property
     def xyz(self) -> NDArray[np.float64]:
         """Position as a float64 (3,) array."""

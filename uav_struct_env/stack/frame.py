@@ -66,6 +66,7 @@ def localize_frame(
     model_ids: NDArray[np.int64] | None = None,
     *,
     prior_sigmas: Any = None,
+    warm_start: NDArray[np.float64] | None = None,
 ) -> FrameLocalization:
     """Detect, localize and score one frame.
 
@@ -79,11 +80,13 @@ def localize_frame(
         model_ids: (M,) landmark id of each model index (for association scores); default the
             index itself.
         prior_sigmas: this frame's :class:`~localization.PriorSigmas` (None: the localizer's).
+        warm_start: a (4, 4) ``cam_from_world`` predicted for this frame
+            (:meth:`localization.Localizer.localize`), or None.
     """
     t0 = time.perf_counter()
     det = detector.detect(image, context)
     t_detect = time.perf_counter() - t0
-    est = localizer.localize(det, prior_cam_from_world, prior_sigmas=prior_sigmas)
+    est = localizer.localize(det, prior_cam_from_world, prior_sigmas=prior_sigmas, warm_start=warm_start)
     latency = t_detect + float(est.timings.get("total", 0.0))
     scores = (
         association_scores(est.assignment, det.true_ids, model_ids)

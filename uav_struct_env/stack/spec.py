@@ -213,6 +213,7 @@ class LocalizationStack:
         prior_cam_from_world: NDArray[np.float64],
         gt_cam_from_world: NDArray[np.float64] | None = None,
         prior_sigmas: PriorSigmas | None = None,
+        warm_start: NDArray[np.float64] | None = None,
     ) -> FrameLocalization:
         """Detect, localize and score one frame.
 
@@ -225,6 +226,9 @@ class LocalizationStack:
             gt_cam_from_world: (4, 4) ground truth, or None (errors are then NaN).
             prior_sigmas: this frame's prior sigmas for structural association (a filter's
                 prediction); None: the localizer's. ArUco poses take the prior as a tie-break only.
+            warm_start: a (4, 4) ``cam_from_world`` predicted for this frame, tried before the
+                robust association's search (:meth:`localization.Localizer.localize`); None:
+                the full search. ArUco ignores it.
         """
         if self.aruco is not None:
             return localize_aruco_frame(
@@ -244,6 +248,7 @@ class LocalizationStack:
             gt_cam_from_world,
             self.model_ids,
             prior_sigmas=prior_sigmas,
+            warm_start=warm_start,
         )
 
 

@@ -7,7 +7,8 @@ on 2 CPU cores (docs/training.md):
   ray-cast (:mod:`uav_struct_env.sim.raycast`); the policy sees ``gnss``, ``attitude``, ``pose``,
   ``pose_std``, ``localized`` and ``layout``. Column tops, robust association (the one that
   fails rather than accept wrong identities) on a clean projection detector (1 px noise at the
-  paper's resolution), ``error`` reward, 30-step episodes, random
+  paper's resolution) started from each agent's previous pose and commanded motion
+  (``warm_start``), ``error`` reward, 30-step episodes, random
   starts 15-35 m out turned by up to +-60 deg of heading (some start views miss part of the
   structure).
 * ``"image"``: the same plus a low-resolution 64 x 36 RGB ``image`` (``MultiInputPolicy`` with
@@ -80,6 +81,7 @@ _WRAPPER = {
     "detector": "projection",
     "mode": "robust",
     "reward": "error",
+    "warm_start": True,
 }
 
 TRAIN_CONFIGS: dict[str, TrainConfig] = {

@@ -79,6 +79,11 @@ class LocalizationWrapper(ParallelWrapper):
             pose at every step and its prediction is the next frame's association prior.
         filter_noise: with ``temporal``, the filters' :class:`~localization.temporal.FilterNoise`
             (default: matched to the env's sensor model).
+        warm_start: ``robust`` mode: start each frame's association from the pose that the
+            agent's previous estimate and its commanded action predict, and search hypotheses
+            only when that pose does not explain the whole frame
+            (:class:`~uav_struct_env.wrappers.LocalizePoses`); the training configurations set
+            it. Default False: every frame searched on its own.
 
     Raises:
         ConfigError: for an unknown option or when the env does not provide the landmark truth.
@@ -107,6 +112,7 @@ class LocalizationWrapper(ParallelWrapper):
         privileged: bool = False,
         temporal: bool = False,
         filter_noise: Any = None,
+        warm_start: bool = False,
     ) -> None:
         check_choice("mode", mode, MODES, error=ConfigError)
         reward_obj = make_reward(
@@ -128,7 +134,9 @@ class LocalizationWrapper(ParallelWrapper):
             refiner_model=refiner_model,
             localizer_kwargs=localizer_kwargs or {},
         )
-        chain: Any = LocalizePoses(env, spec, temporal=temporal, filter_noise=filter_noise)
+        chain: Any = LocalizePoses(
+            env, spec, temporal=temporal, filter_noise=filter_noise, warm_start=warm_start
+        )
         self.poses = chain
         chain = LayoutObservation(chain, privileged=privileged)
         chain = RewardWrapper(chain, reward_obj)
@@ -176,5 +184,6 @@ class LocalizationWrapper(ParallelWrapper):
         return (
             f"LocalizationWrapper({self.env!r}, landmarks={self.poses.landmarks!r}, "
             f"detector={self.detector_name!r}, mode={self.mode!r}, reward={self.reward_name!r}, "
-            f"drop_image={self.drop_image}, temporal={self.temporal})"
+            f"drop_image={self.drop_image}, temporal={self.temporal}, "
+            f"warm_start={self.poses.warm_start})"
         )

@@ -12,7 +12,8 @@ wrapper adds to that agent's observation
 
 and to its info ``localization`` (success, translation_error_m, rotation_error_deg,
 prior_translation_error_m, n_correspondences, n_detections, n_visible, association_precision,
-association_recall, association_f1, reprojection_rmse_px, position_std_m, failure_code). Nothing
+association_recall, association_f1, reprojection_rmse_px, position_std_m, failure_code,
+warm_started). Nothing
 it adds to the observation needs ground truth; the errors in ``info`` do (simulation only).
 
 The info holds numbers only, the same for the same seed (what tensor-based RL libraries and
@@ -29,6 +30,14 @@ is 1 when the frame's fix was accepted by the filter's gate, and ``info["localiz
 ``filtered_translation_error_m``, ``filtered_rotation_error_deg``, ``filtered_position_std_m``,
 ``fix_accepted``, ``fix_nis`` (UNDEFINED without a fix) and ``gnss_fix``; its
 ``prior_translation_error_m`` is then the prediction's.
+
+With ``warm_start=True`` each agent's robust association first tries the pose predicted from its
+previous successful estimate and the action it was commanded (the env's kinematics,
+:func:`~uav_struct_env.sim.uav.step_uav`, applied to the estimate: what a real UAV's flight
+controller knows), and searches hypotheses only when that prediction does not explain the whole
+frame (:mod:`localization.associate`, *Warm start*). ``info["localization"]["warm_started"]`` says
+which frames it answered. The training configurations use it (the same poses at a fraction of
+the cost: docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -43,6 +52,7 @@ from localization.failure import FailureCode
 from localization.geometry import camera_center, invert, quat_wxyz_from_matrix
 from localization.metrics import pose_errors
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.sim.uav import UavState, step_uav
 from uav_struct_env.stack import FrameLocalization, LocalizationStack, StackSpec, build_stack
 from uav_struct_env.wrappers.base import ParallelWrapper
 from uav_struct_env.wrappers.temporal import PoseTracks
@@ -86,6 +96,8 @@ class LocalizePoses(ParallelWrapper):
         temporal: filter each agent's pose over time (module docstring).
         filter_noise: with ``temporal``, the filters' :class:`~localization.temporal.FilterNoise`
             (default: matched to the env's sensor model).
+        warm_start: start each frame's robust association from the pose predicted by the
+            previous estimate and the commanded action (module docstring).
         **fields: :class:`~uav_struct_env.stack.StackSpec` fields.
 
     Raises:
@@ -100,6 +112,7 @@ class LocalizePoses(ParallelWrapper):
         *,
         temporal: bool = False,
         filter_noise: Any = None,
+        warm_start: bool = False,
         **fields: Any,
     ) -> None:
         super().__init__(env)
@@ -156,6 +169,14 @@ class LocalizePoses(ParallelWrapper):
         self._observation_space = spaces.Dict(keys)
         self.last_frames: dict[str, FrameLocalization] = {}
         self.tracks = PoseTracks(base, filter_noise) if temporal else None
+        if not isinstance(warm_start, (bool, np.bool_)):
+            raise ConfigError(f"warm_start must be True or False, got {warm_start!r}")
+        self.warm_start = bool(warm_start)
+        self._limits, self._dt = config.limits, float(config.control_period)
+        #: per agent, the last successful estimate's ``world_from_cam`` (warm start), then the
+        #: pose it predicts for the coming frame (``cam_from_world``)
+        self._estimated: dict[str, np.ndarray] = {}
+        self._predicted: dict[str, np.ndarray] = {}
 
     @property
     def localizer(self) -> Any:
@@ -174,6 +195,7 @@ class LocalizePoses(ParallelWrapper):
             self.stack.seed(self._rng)
         obs, infos = self.env.reset(seed=seed, options=options)
         self.last_frames = {}
+        self._estimated, self._predicted = {}, {}
         if self.tracks is not None:
             self.tracks.reset()
         for agent in obs:
@@ -184,10 +206,17 @@ class LocalizePoses(ParallelWrapper):
         """Step the env and localize every agent that produced an observation."""
         if self.tracks is not None:
             self.tracks.command(actions)
+        self._predicted = {a: self._predict(T, actions.get(a)) for a, T in self._estimated.items()}
         obs, rewards, terminations, truncations, infos = self.env.step(actions)
         for agent in obs:
             self._localize(agent, obs[agent], infos[agent])
         return obs, rewards, terminations, truncations, infos
+
+    def _predict(self, world_from_cam: np.ndarray, action: Any) -> np.ndarray:
+        """``cam_from_world`` after ``action`` (None: hover, as the env) from an estimated pose."""
+        a = np.zeros(5) if action is None else np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        state = step_uav(UavState.from_world_from_cam(world_from_cam), a, self._limits, self._dt)
+        return invert(state.world_from_cam)
 
     def _localize(self, agent: str, obs: dict, info: dict) -> FrameLocalization:
         gt = invert(info["world_from_cam"])
@@ -197,9 +226,16 @@ class LocalizePoses(ParallelWrapper):
         sigmas = None
         if self.tracks is not None:
             prior, sigmas = self.tracks.prior(agent, obs, info)
-        frame = self.stack.localize(obs.get("image"), truth_sets, prior, gt, prior_sigmas=sigmas)
+        frame = self.stack.localize(
+            obs.get("image"), truth_sets, prior, gt, prior_sigmas=sigmas,
+            warm_start=self._predicted.get(agent),
+        )
         est = frame.estimate
         world_from_cam = invert(est.cam_from_world)
+        if self.warm_start and est.success:
+            self._estimated[agent] = world_from_cam
+        else:
+            self._estimated.pop(agent, None)
         std = est.pose_std if est.success else self.stack.prior_std
         localized = est.success
         if self.tracks is not None:
@@ -229,6 +265,7 @@ class LocalizePoses(ParallelWrapper):
             "position_std_m": _number(position_std),
             "failure_code": 0 if est.success else failure_code_number(
                 est.failure_code or FailureCode.UNKNOWN),
+            "warm_started": bool(est.warm_started),
         }
         if self.tracks is not None:
             info["localization"].update(self._temporal_info(agent, info, gt))
