@@ -24,7 +24,8 @@ def test_a_good_prediction_answers_with_the_full_search_result(building, center,
         X, T, det, order, prior = _frame(building, center, k, rng)
         loc = Localizer(X, PAPER_K, image_size=PAPER_IMAGE_SIZE)
         full = loc.localize(det, prior)
-        warm = loc.localize(det, prior, warm_start=perturb_attitude(T, [0.05, -0.03, 0.04], np.radians([0.1, 0, -0.1])))
+        near = perturb_attitude(T, [0.05, -0.03, 0.04], np.radians([0.1, 0, -0.1]))
+        warm = loc.localize(det, prior, warm_start=near)
         assert full.success and not full.warm_started and full.n_hypotheses > 1
         assert warm.success and warm.warm_started and warm.n_hypotheses == 1
         np.testing.assert_array_equal(warm.assignment, order)

@@ -10,7 +10,8 @@ from uav_struct_env.wrappers import TRAIN_CONFIGS, LocalizationWrapper, make_loc
 
 def _flight(warm: bool, seed: int, steps: int = 12):
     """Per step and agent: (success, warm_started, pose obs) of a seeded random flight."""
-    env = make_train_env(TRAIN_CONFIGS["state"].replace(wrapper={"warm_start": warm}, env={"max_cycles": steps}))
+    config = TRAIN_CONFIGS["state"].replace(wrapper={"warm_start": warm}, env={"max_cycles": steps})
+    env = make_train_env(config)
     rng = np.random.default_rng(seed)
     obs, infos = env.reset(seed=seed)
     out = [{a: (infos[a]["localization"]["success"], infos[a]["localization"]["warm_started"],
