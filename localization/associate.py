@@ -65,7 +65,8 @@ Two methods:
 
     *Warm start* (``warm_start``: a predicted pose, e.g. the previous frame's estimate moved by
     the commanded motion). Before any hypothesis, the landmarks are projected with the predicted
-    pose, assigned within ``coarse_gate_px / 4`` and refined with re-association as in step 2.
+    pose, paired (mutual nearest neighbours) within ``coarse_gate_px / 4`` and refined with
+    re-association as in step 2.
     The result is accepted without a search only when it explains the whole frame: every finite
     detection paired, every landmark its pose projects inside the image detected, the pose
     within the prior's Mahalanobis gate, the residuals within the fit test, and more pairs than
@@ -97,7 +98,7 @@ from localization.batch import (
 )
 from localization.compiled import refine_reassign, shift_votes
 from localization.compiled_frame import assignment_costs, assignment_rows, candidates, upright_starts
-from localization.compiled_scores import anchor_pairs, check_many, missed_many
+from localization.compiled_scores import anchor_pairs, check_many, missed_many, warm_hypothesis
 from localization.failure import FailureCode
 from localization.geometry import camera_center, inverse_intrinsics, project
 from localization.pnp import (
@@ -415,6 +416,21 @@ class _Problem:
     #: it), or None without scores.
     log_odds: NDArray | None = None
 
+    @functools.cached_property
+    def prior_R(self) -> NDArray:
+        """(3, 3) the prior's rotation, contiguous (the compiled checks take it)."""
+        return np.ascontiguousarray(self.prior[:3, :3])
+
+    @functools.cached_property
+    def prior_C(self) -> NDArray:
+        """(3,) the prior's camera centre."""
+        return camera_center(self.prior)
+
+    @functools.cached_property
+    def sig_array(self) -> NDArray:
+        """(6,) the prior's sigmas (position m, rotation rad)."""
+        return self.sig.as_array()
+
     def refine(self, a: NDArray, starts: NDArray, first_robust: bool) -> tuple[NDArray, NDArray, NDArray]:
         """Coarse assignments (H, N) and start poses (H, 4, 4) -> (assignments, poses, alive (H,)).
 
@@ -446,7 +462,7 @@ class _Problem:
         R, t = np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
         prior_sq, chi, far = check_many(
             self.K, self.landmarks_xyz, self.det, np.ascontiguousarray(a, dtype=np.int64), R, t,
-            np.ascontiguousarray(self.prior[:3, :3]), camera_center(self.prior), self.sig.as_array(),
+            self.prior_R, self.prior_C, self.sig_array,
         )
         for h in np.flatnonzero(far):  # rotations near pi from the prior's: the exact logarithm
             prior_sq[h] = prior_mahalanobis_sq(T[h], self.prior, self.sig)
@@ -815,35 +831,31 @@ def _warm_association(
     Accepted (module docstring, *Warm start*) when, refined with re-association, it pairs every
     finite detection, detects every landmark its pose projects inside the image, keeps more
     pairs than the minimum, stays within the prior's Mahalanobis gate and passes the fit test.
+    One compiled call (:func:`localization.compiled_scores.warm_hypothesis`).
     """
-    idx, proj = candidate_landmarks(P.landmarks_xyz, P.K, start, P.image_size, P.margin_px)
-    if idx.size <= P.need or P.good.size <= P.need:
-        return None
-    local = assign(P.det[P.good], proj, P.coarse_gate_px / 4.0)
-    a = np.full(P.det.shape[0], -1, dtype=np.int64)
-    a[P.good[local >= 0]] = idx[local[local >= 0]]
-    if (a >= 0).sum() <= P.need:
-        return None
-    A, T, alive = P.refine(a[None], np.ascontiguousarray(start, dtype=np.float64)[None], False)
-    a = A[0]
-    pairs = int((a >= 0).sum())
-    if not alive[0] or pairs != P.good.size or pairs <= P.need:
-        return None
-    prior_sq, chi = P.checks(A, T)
-    if max_prior_mahalanobis_sq is not None and prior_sq[0] > max_prior_mahalanobis_sq:
-        return None
-    if chi[0] > _chi2_quantiles(fit_quantile, 2 * pairs - 6)[2 * pairs - 6]:
+    if P.good.size <= P.need:
         return None
     w, h = P.image_size
-    missed = missed_many(
-        P.K, P.landmarks_xyz, A, np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3]),
-        int(w), int(h),
+    start = np.ascontiguousarray(start, dtype=np.float64)
+    a, R, t, alive, prior_sq, far, chi, missed = warm_hypothesis(
+        P.K, P.landmarks_xyz, P.det, np.ascontiguousarray(P.good, dtype=np.int64), start[:3, :3],
+        start[:3, 3], int(w), int(h), float(P.margin_px), float(P.gate_px), float(P.coarse_gate_px),
+        int(P.max_iterations), int(P.need), P.prior_R, P.prior_C, P.sig_array,
     )
-    if missed[0] > 0:
+    pairs = int((a >= 0).sum())
+    if not alive or missed > 0 or pairs != P.good.size or pairs <= P.need:
         return None
-    score, _ = P.nll(A, T, chi, prior_sq, 0.0)
-    return Association(a, T[0], float(chi[0]) * P.pixel_sigma**2, float(score[0]), 1, None,
-                       warm_started=True)
+    T = to_transforms(R[None], t[None])[0]
+    if far:  # a rotation near pi from the prior's: the exact logarithm
+        prior_sq = prior_mahalanobis_sq(T, P.prior, P.sig)
+    if max_prior_mahalanobis_sq is not None and prior_sq > max_prior_mahalanobis_sq:
+        return None
+    chi = chi / P.pixel_sigma**2
+    if chi > _chi2_quantiles(fit_quantile, 2 * pairs - 6)[2 * pairs - 6]:
+        return None
+    # the score of _Problem.nll with nothing unassigned and nothing missed
+    score = chi + prior_sq - (0.0 if P.log_odds is None else float(np.sum(P.log_odds[a >= 0])))
+    return Association(a, T, chi * P.pixel_sigma**2, float(score), 1, None, warm_started=True)
 
 
 def _minimal_fit_reason(P: _Problem, a: NDArray, T: NDArray) -> str | None:

@@ -16,6 +16,8 @@ localization package's synthetic data shares it; ``uav_struct_env.sim.attitude``
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
@@ -34,21 +36,21 @@ BODY_FROM_CAM = np.array(
 
 def world_from_cam_from_attitude(position: ArrayLike, attitude: ArrayLike) -> NDArray[np.float64]:
     """4x4 ``world_from_cam`` of a camera at ``position`` (3,) with ``attitude`` (roll, pitch, yaw)."""
-    roll, pitch, yaw = np.asarray(attitude, dtype=np.float64).reshape(3)
-    # Rz(yaw) @ Ry(pitch) @ Rx(roll), written out (scipy's from_euler("ZYX") gives the same
-    # matrix at several times the cost, and the env builds one per agent-step)
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    cy, sy = np.cos(yaw), np.sin(yaw)
-    world_from_body = np.array([
-        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-        [-sp, cp * sr, cp * cr],
+    roll, pitch, yaw = (float(a) for a in np.asarray(attitude, dtype=np.float64).reshape(3))
+    # Rz(yaw) @ Ry(pitch) @ Rx(roll) @ BODY_FROM_CAM, written out on Python floats (scipy's
+    # from_euler("ZYX") gives the same matrix at several times the cost, and the env builds
+    # several per agent-step); BODY_FROM_CAM only permutes and negates columns, so the product
+    # is exact: camera x = -body y, camera y = -body z, camera z = body x
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    x, y, z = (float(p) for p in np.asarray(position, dtype=np.float64).reshape(3))
+    return np.array([
+        [-(cy * sp * sr - sy * cr), -(cy * sp * cr + sy * sr), cy * cp, x],
+        [-(sy * sp * sr + cy * cr), -(sy * sp * cr - cy * sr), sy * cp, y],
+        [-(cp * sr), -(cp * cr), -sp, z],
+        [0.0, 0.0, 0.0, 1.0],
     ])
-    out = np.eye(4)
-    out[:3, :3] = world_from_body @ BODY_FROM_CAM
-    out[:3, 3] = np.asarray(position, dtype=np.float64).reshape(3)
-    return out
 
 
 def attitude_from_world_from_cam(

@@ -10,8 +10,9 @@ bit). This module imports nothing of the package, so the geometry module at the 
 layers can use it.
 
 Every localization ends with a few small computations on its one pose -- its squared Mahalanobis
-distance from the prior (:func:`localization.pnp.prior_mahalanobis_sq`) and its covariance from
-the Jacobian of the projections (:func:`localization.pnp.pose_covariance`). As numpy code they
+distance from the prior (:func:`localization.pnp.prior_mahalanobis_sq`), its covariance from
+the Jacobian of the projections (:func:`localization.pnp.pose_covariance`) and the spread of its
+detections across their best-fit line (:func:`minor_spread`, the edge-on test). As numpy code they
 were 50-180 microseconds each, of call overhead on 3 x 3 and 6 x 6 arrays, paid by every agent at
 every step of a training env. Here each is one compiled function with the numpy code's
 arithmetic; :func:`prior_distance_sq` also scores robust association's hypotheses
@@ -204,3 +205,33 @@ def covariance(K: NDArray, R: NDArray, C: NDArray, X: NDArray, pixel_sigma: floa
         for q in range(6):
             out[p, q] = pixel_sigma**2 * 0.5 * (inv[p, q] / (d[p] * d[q]) + inv[q, p] / (d[q] * d[p]))
     return out
+
+
+@njit(cache=True, nogil=True)
+def minor_spread(uv: NDArray) -> float:
+    """RMS distance of points ``uv`` (N, 2) from their best-fit line (0 for fewer than 3).
+
+    The smaller eigenvalue of the centred points' 2 x 2 scatter matrix, in closed form, over N
+    (``localization.pipeline._minor_spread_px``).
+    """
+    n = uv.shape[0]
+    if n < 3:
+        return 0.0
+    mu = 0.0
+    mv = 0.0
+    for i in range(n):
+        mu += uv[i, 0]
+        mv += uv[i, 1]
+    mu /= n
+    mv /= n
+    a = 0.0
+    b = 0.0
+    c = 0.0
+    for i in range(n):
+        du = uv[i, 0] - mu
+        dv = uv[i, 1] - mv
+        a += du * du
+        b += du * dv
+        c += dv * dv
+    smaller = 0.5 * (a + c) - np.hypot(0.5 * (a - c), b)
+    return np.sqrt(max(smaller, 0.0) / n)

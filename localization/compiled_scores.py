@@ -13,7 +13,10 @@ of it call overhead on arrays of 4-20 points). Here the same computations run as
 - :func:`anchor_pairs` -- the spread-out detections of the two-point hypotheses
   (``associate._anchor_pairs``);
 - :func:`translation_scores` -- the winner's pose moved by each of the layout's
-  self-translations, scored against the detections (``ambiguity.translation_hypotheses``).
+  self-translations, scored against the detections (``ambiguity.translation_hypotheses``);
+- :func:`warm_hypothesis` -- the warm start's whole hypothesis in one call: the predicted pose's
+  gated assignment, its refinement with re-association (:func:`~localization.compiled.refine_reassign`),
+  its checks and misses (``associate._warm_association``).
 
 They replace numpy code with the same arithmetic (before the commit that added this module):
 on the 2,400 localizations of the localizer benchmark's images and 606 association calls
@@ -27,10 +30,10 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from localization.compiled import MIN_DEPTH, _candidates, _point
+from localization.compiled import MIN_DEPTH, _assign_one, _candidates, _point, refine_reassign
 from localization.compiled_pose import prior_distance_sq
 
-__all__ = ["anchor_pairs", "check_many", "missed_many", "translation_scores"]
+__all__ = ["anchor_pairs", "check_many", "missed_many", "translation_scores", "warm_hypothesis"]
 
 #: A projection behind the camera counts as this pixel (``np.nan_to_num(nan=1e6)`` before).
 _BEHIND_PX = 1e6
@@ -210,3 +213,43 @@ def translation_scores(
                 explained[q] += 1
             misfit[q] += best
     return uv, depth, explained, misfit
+
+
+@njit(cache=True, nogil=True)
+def warm_hypothesis(
+    K: NDArray, L: NDArray, det: NDArray, good: NDArray, R0: NDArray, t0: NDArray,
+    width: int, height: int, margin: float, gate: float, coarse_gate: float, max_iterations: int,
+    need: int, prior_R: NDArray, prior_C: NDArray, sigmas: NDArray,
+) -> tuple[NDArray, NDArray, NDArray, bool, float, bool, float, int]:
+    """One hypothesis from a predicted pose ``R0`` (3, 3), ``t0`` (3,), refined and checked.
+
+    The landmarks projected at the prediction are paired with the finite detections ``good``
+    within ``coarse_gate / 4`` (mutual nearest neighbours), then refined and re-associated as
+    :func:`~localization.compiled.refine_reassign` does without robust weights.
+
+    Returns:
+        ``(a (N,), R, t, alive, prior_sq, far, chi, missed)``: the assignment, the pose, whether
+        it survived the refinement, :func:`check_many`'s prior distance, far flag and chi-square
+        (px^2), and :func:`missed_many`'s count.
+    """
+    n = det.shape[0]
+    proj = np.empty((L.shape[0], 2))
+    _candidates(K, R0, t0, L, width, height, margin, proj)
+    dg = np.empty((good.size, 2))
+    for i in range(good.size):
+        dg[i] = det[good[i]]
+    local = np.empty(good.size, dtype=np.int64)
+    _assign_one(dg, proj, (coarse_gate / 4.0) ** 2, 3, local)
+    a0 = np.full((1, n), -1, dtype=np.int64)
+    for i in range(good.size):
+        a0[0, good[i]] = local[i]
+    R1 = np.empty((1, 3, 3))
+    R1[0] = R0
+    t1 = np.empty((1, 3))
+    t1[0] = t0
+    a, R, t, alive = refine_reassign(
+        K, L, det, good, a0, R1, t1, width, height, margin, gate, coarse_gate, max_iterations, need, False
+    )
+    prior_sq, chi, far = check_many(K, L, det, a, R, t, prior_R, prior_C, sigmas)
+    missed = missed_many(K, L, a, R, t, width, height)
+    return a[0], R[0], t[0], alive[0], prior_sq[0], far[0], chi[0], missed[0]

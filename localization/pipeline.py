@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from localization.associate import Association, associate_paper, associate_robust
 from localization.checks import check_choice, check_number
+from localization.compiled_pose import minor_spread
 from localization.detect import Detections, check_image_size
 from localization.distortion import check_distortion, is_pinhole, undistort_points
 from localization.failure import FailureCode
@@ -204,10 +205,20 @@ class Localizer:
             else check_number("max_prior_mahalanobis_sq", max_prior_mahalanobis_sq, 0, lo_open=True)
         )
         self.coplanar = is_coplanar(X)
-        self.distortion = check_distortion("distortion", distortion)
+        self.distortion = distortion
         if not isinstance(use_scores, (bool, np.bool_)):
             raise TypeError(f"use_scores must be True or False, got {use_scores!r}")
         self.use_scores = bool(use_scores)
+
+    @property
+    def distortion(self) -> NDArray[np.float64]:
+        """(5,) the camera's OpenCV coefficients ``(k1, k2, p1, p2, k3)``, zeros for a pinhole."""
+        return self._distortion
+
+    @distortion.setter
+    def distortion(self, value: ArrayLike | None) -> None:
+        self._distortion = check_distortion("distortion", value)
+        self._pinhole = is_pinhole(self._distortion)  # checked once, not per frame
 
     @staticmethod
     def _prior_sigmas(value: PriorSigmas | tuple | None) -> PriorSigmas:
@@ -324,8 +335,8 @@ class Localizer:
                 scores = _check_scores(detections_uv.scores)
             detections_uv = detections_uv.uv
         det = as_points("detections_uv", detections_uv, 2)
-        if not is_pinhole(self.distortion):  # pinhole pixels from here on
-            det = undistort_points(det, self.K, self.distortion)
+        if not self._pinhole:  # pinhole pixels from here on
+            det = undistort_points(det, self.K, self._distortion)
         prior = check_transform("prior_cam_from_world", prior_cam_from_world)
         if warm_start is not None:
             warm_start = check_transform("warm_start", warm_start)
@@ -485,17 +496,12 @@ def _minor_spread_px(uv: NDArray[np.float64]) -> float:
     """RMS distance of image points from their best-fit line, px (0 for fewer than 3 points).
 
     The smaller singular value of the centred points over ``sqrt(N)``, from the smaller
-    eigenvalue of their 2 x 2 scatter matrix in closed form (an SVD per frame cost 30 us; the
-    closed form loses about 1e-5 px to cancellation on exactly collinear points, far below the
-    1-2 px threshold it is compared with).
+    eigenvalue of their 2 x 2 scatter matrix in closed form, compiled
+    (:func:`localization.compiled_pose.minor_spread`; an SVD per frame cost 30 us, numpy's
+    closed form 8 us). The closed form loses about 1e-5 px to cancellation on exactly collinear
+    points, far below the 1-2 px threshold it is compared with.
     """
-    n = uv.shape[0]
-    if n < 3:
-        return 0.0
-    centred = uv - uv.mean(axis=0)
-    (a, b), (_, c) = (centred.T @ centred).tolist()
-    smaller = 0.5 * (a + c) - math.hypot(0.5 * (a - c), b)
-    return math.sqrt(max(smaller, 0.0) / n)
+    return float(minor_spread(np.ascontiguousarray(uv, dtype=np.float64)))
 
 
 def _check_scores(scores: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -485,14 +485,12 @@ class UavStructParallelEnv(ParallelEnv):
                 if fence is not None
                 else ("collision_structure" if clearance[k] < cfg.uav_radius else None)
             )
+        # pairwise distances once (each row the norms of the others minus this one, as before)
+        apart = np.linalg.norm(pos[None, :, :] - pos[:, None, :], axis=2)
+        np.fill_diagonal(apart, np.inf)
         for k, a in enumerate(live):
-            if reasons[a] is None:
-                others = np.delete(pos, k, axis=0)
-                if (
-                    len(others)
-                    and np.min(np.linalg.norm(others - pos[k], axis=1)) < 2 * cfg.uav_radius
-                ):
-                    reasons[a] = "collision_uav"
+            if reasons[a] is None and len(live) > 1 and apart[k].min() < 2 * cfg.uav_radius:
+                reasons[a] = "collision_uav"
         return reasons
 
     def _observe(self, agents: list[str], dt: float, reasons: dict[str, str | None]):
