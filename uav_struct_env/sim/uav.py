@@ -216,7 +216,8 @@ def step_uav(
     Velocities are expressed in the heading frame at the start of the period (explicit Euler).
     """
     # on Python floats: the same arithmetic as on (5,) arrays, a fifth of the overhead
-    forward, left, up, yaw_rate, pitch_rate = (float(x) for x in np.asarray(action, dtype=np.float64).reshape(5))
+    a = np.asarray(action, dtype=np.float64).reshape(5)
+    forward, left, up, yaw_rate, pitch_rate = (float(x) for x in a)
     norm = float(np.hypot(forward, left))  # C's hypot (math.hypot rounds differently)
     if norm > 1.0:
         forward, left = forward / norm, left / norm
