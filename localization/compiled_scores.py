@@ -14,6 +14,8 @@ of it call overhead on arrays of 4-20 points). Here the same computations run as
   (``associate._anchor_pairs``);
 - :func:`translation_scores` -- the winner's pose moved by each of the layout's
   self-translations, scored against the detections (``ambiguity.translation_hypotheses``);
+- :func:`association_counts` -- an assignment's correct, assigned and true detections
+  (:func:`localization.metrics.association_scores`, scored for every agent at every step);
 - :func:`warm_hypothesis` -- the warm start's whole hypothesis in one call: the predicted pose's
   gated assignment, its refinement with re-association (:func:`~localization.compiled.refine_reassign`),
   its checks and misses (``associate._warm_association``).
@@ -33,7 +35,7 @@ from numpy.typing import NDArray
 from localization.compiled import MIN_DEPTH, _assign_one, _candidates, _point, refine_reassign
 from localization.compiled_pose import prior_distance_sq
 
-__all__ = ["anchor_pairs", "check_many", "missed_many", "translation_scores", "warm_hypothesis"]
+__all__ = ["anchor_pairs", "association_counts", "check_many", "missed_many", "translation_scores", "warm_hypothesis"]
 
 #: A projection behind the camera counts as this pixel (``np.nan_to_num(nan=1e6)`` before).
 _BEHIND_PX = 1e6
@@ -253,3 +255,23 @@ def warm_hypothesis(
     prior_sq, chi, far = check_many(K, L, det, a, R, t, prior_R, prior_C, sigmas)
     missed = missed_many(K, L, a, R, t, width, height)
     return a[0], R[0], t[0], alive[0], prior_sq[0], far[0], chi[0], missed[0]
+
+
+@njit(cache=True, nogil=True)
+def association_counts(a: NDArray, true_ids: NDArray, model_ids: NDArray) -> tuple[int, int, int]:
+    """``(correct, assigned, true_detections)`` of assignment ``a`` (N,) (model index or -1).
+
+    ``true_ids`` (N,) the true landmark id of each detection (-1: clutter); ``model_ids`` (M,)
+    the id of each model index. A pair is correct when its model id is the detection's true id.
+    """
+    correct = 0
+    assigned = 0
+    true_det = 0
+    for i in range(a.size):
+        if true_ids[i] >= 0:
+            true_det += 1
+        if a[i] >= 0:
+            assigned += 1
+            if true_ids[i] >= 0 and model_ids[a[i]] == true_ids[i]:
+                correct += 1
+    return correct, assigned, true_det

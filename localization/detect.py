@@ -74,6 +74,10 @@ class Detector(Protocol):
 
 def check_image_size(name: str, image_size: Any) -> tuple[int, int]:
     """Return ``image_size`` as ``(W, H)`` positive ints, or raise naming ``name``."""
+    if type(image_size) is tuple and len(image_size) == 2:  # the common case, checked quickly
+        w, h = image_size
+        if type(w) is int and type(h) is int and w > 0 and h > 0:
+            return w, h
     try:
         w, h = image_size
     except (TypeError, ValueError):
@@ -132,7 +136,7 @@ class ProjectionDetector:
             KeyError: if the context lacks the landmark set or the image size.
             ValueError: if the landmark arrays have inconsistent shapes.
         """
-        if not isinstance(context, Mapping):
+        if not isinstance(context, (dict, Mapping)):  # a dict is checked without the ABC
             raise TypeError(f"context must be a mapping, got {type(context).__name__}")
         try:
             gt = context["landmarks"][self.landmarks]
@@ -154,7 +158,7 @@ class ProjectionDetector:
                 f"visible {visible.shape[0]}"
             )
         rng = self.rng
-        keep = visible & np.isfinite(uv_all).all(axis=1)
+        keep = visible & np.isfinite(uv_all[:, 0]) & np.isfinite(uv_all[:, 1])
         if self.miss_rate > 0:
             keep &= rng.random(keep.shape[0]) >= self.miss_rate
         uv = uv_all[keep] + rng.normal(0.0, self.pixel_sigma, size=(int(keep.sum()), 2))

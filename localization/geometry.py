@@ -55,6 +55,8 @@ def as_points(name: str, points: ArrayLike, dim: int) -> NDArray[np.float64]:
         ValueError: if the shape is not ``(N, dim)``.
     """
     arr = np.asarray(points)
+    if arr.dtype == np.float64 and arr.ndim == 2 and arr.shape[1] == dim:
+        return arr  # already what is asked (the common case, called several times per frame)
     if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_):
         raise TypeError(
             f"{name} must be a numeric array of shape (N, {dim}), got dtype {arr.dtype}"

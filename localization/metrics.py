@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization.compiled_scores import association_counts
 from localization.geometry import (
     as_points,
     camera_center,
@@ -298,22 +299,20 @@ def association_scores(
         true_ids: (N,) true landmark id per detection or -1 (false positive).
         model_ids: (M,) landmark id of each model index; default the index itself.
     """
-    a = np.asarray(assignment).astype(np.int64).reshape(-1)
-    t = np.asarray(true_ids).astype(np.int64).reshape(-1)
+    a = np.ascontiguousarray(np.asarray(assignment).astype(np.int64, copy=False).reshape(-1))
+    t = np.ascontiguousarray(np.asarray(true_ids).astype(np.int64, copy=False).reshape(-1))
     if a.shape != t.shape:
         raise ValueError(
             f"assignment and true_ids must have equal lengths, got {a.shape} and {t.shape}"
         )
+    top = int(a.max(initial=-1))
     if model_ids is None:
-        assigned_ids = a
+        ids = np.arange(top + 1, dtype=np.int64)  # each index its own id
     else:
-        ids = np.asarray(model_ids).astype(np.int64).reshape(-1)
-        if a.size and a.max(initial=-1) >= ids.size:
-            raise ValueError(f"assignment index {a.max()} out of range for {ids.size} model_ids")
-        assigned_ids = np.where(a >= 0, ids[np.maximum(a, 0)], -1)
-    assigned = int(np.sum(a >= 0))
-    correct = int(np.sum((a >= 0) & (assigned_ids == t) & (t >= 0)))
-    true_det = int(np.sum(t >= 0))
+        ids = np.ascontiguousarray(np.asarray(model_ids).astype(np.int64, copy=False).reshape(-1))
+        if top >= ids.size:
+            raise ValueError(f"assignment index {top} out of range for {ids.size} model_ids")
+    correct, assigned, true_det = association_counts(a, t, ids)  # compiled: one loop
     p = correct / assigned if assigned else float("nan")
     r = correct / true_det if true_det else float("nan")
     if assigned == 0 and true_det == 0:

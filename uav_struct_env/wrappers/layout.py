@@ -115,6 +115,6 @@ class LayoutObservation(ParallelWrapper):
         if len(uv):
             half = np.array([w / 2.0, h / 2.0])
             c = (uv.mean(axis=0) - (half - 0.5)) / half
-            out[2:4] = np.clip(c, -1.0, 1.0)
-            out[4:6] = np.clip(uv.std(axis=0) / half, 0.0, 2.0)
+            out[2:4] = np.minimum(np.maximum(c, -1.0), 1.0)  # np.clip's result, half the cost
+            out[4:6] = np.minimum(np.maximum(uv.std(axis=0) / half, 0.0), 2.0)
         return out
