@@ -35,7 +35,14 @@ from numpy.typing import NDArray
 from localization.compiled import MIN_DEPTH, _assign_one, _candidates, _point, refine_reassign
 from localization.compiled_pose import prior_distance_sq
 
-__all__ = ["anchor_pairs", "association_counts", "check_many", "missed_many", "translation_scores", "warm_hypothesis"]
+__all__ = [
+    "anchor_pairs",
+    "association_counts",
+    "check_many",
+    "missed_many",
+    "translation_scores",
+    "warm_hypothesis",
+]
 
 #: A projection behind the camera counts as this pixel (``np.nan_to_num(nan=1e6)`` before).
 _BEHIND_PX = 1e6

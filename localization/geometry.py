@@ -24,6 +24,7 @@ from localization.compiled_pose import (
     TRANSFORM_NOT_ROTATION,
     center,
     inverse,
+    quat_wxyz,
     transform_fault,
 )
 
@@ -242,25 +243,13 @@ def rotation_angle_deg(R_a: ArrayLike, R_b: ArrayLike) -> float:
 
 
 def quat_wxyz_from_matrix(R: ArrayLike) -> NDArray[np.float64]:
-    """Unit quaternion (w, x, y, z) with ``w >= 0`` of a rotation matrix (3x3 or the 4x4's block)."""
-    m = np.asarray(R, dtype=np.float64)[:3, :3]
-    # Shepperd's method: from the largest of 4 w^2, 4 x^2, 4 y^2, 4 z^2 (the best conditioned)
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    k = int(np.argmax([tr, m[0, 0], m[1, 1], m[2, 2]]))
-    if k == 0:
-        s = 2.0 * np.sqrt(max(1.0 + tr, 0.0))
-        q = np.array([0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s])
-    elif k == 1:
-        s = 2.0 * np.sqrt(max(1.0 + m[0, 0] - m[1, 1] - m[2, 2], 0.0))
-        q = np.array([(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s])
-    elif k == 2:
-        s = 2.0 * np.sqrt(max(1.0 - m[0, 0] + m[1, 1] - m[2, 2], 0.0))
-        q = np.array([(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s])
-    else:
-        s = 2.0 * np.sqrt(max(1.0 - m[0, 0] - m[1, 1] + m[2, 2], 0.0))
-        q = np.array([(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s])
-    q /= np.linalg.norm(q)
-    return q if q[0] >= 0 else -q
+    """Unit quaternion (w, x, y, z) with ``w >= 0`` of a rotation matrix (3x3 or the 4x4's block).
+
+    Shepperd's method, from the largest of 4 w^2, 4 x^2, 4 y^2, 4 z^2 (the best conditioned);
+    compiled (:func:`localization.compiled_pose.quat_wxyz`: every agent's pose, every step).
+    """
+    m = np.ascontiguousarray(np.asarray(R, dtype=np.float64)[:3, :3])
+    return quat_wxyz(m)
 
 
 def matrix_from_quat_wxyz(q: ArrayLike) -> NDArray[np.float64]:
