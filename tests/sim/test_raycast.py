@@ -196,3 +196,22 @@ def test_raycast_visibility_refuses_a_negative_window_radius():
         raycast_visibility(RayScene([]), np.zeros((1, 3)), [0], pose, camera, radius=-1)
     out = raycast_visibility(RayScene([]), np.zeros((1, 3)), [0], pose, camera, radius=0)
     assert out["in_frame"][0] and out["visible"][0]  # nothing in the scene hides it
+
+
+def test_the_rays_pass_through_a_skipped_body_such_as_the_cameras_own_airframe():
+    site = paper_site("columns")
+    camera = Camera().scaled(128, 72)
+    with SiteWorld(site, renderer="tiny", image_size=(128, 72)) as world:
+        eye = np.asarray(site.center) + [0.0, -25.0, 15.0]
+        T = look_at(eye, site.center)
+        bare = world.landmark_truth_raycast("column_tops", T, camera)
+        assert bare["visible"].sum() >= 8
+        ahead = np.eye(4)  # a box 6-14 m ahead of the camera, across the whole view
+        view = (np.asarray(site.center) - eye) / np.linalg.norm(np.asarray(site.center) - eye)
+        ahead[:3, 3] = eye + 10.0 * view
+        body = world.add_body((4.0, 4.0, 4.0), world_from_body=ahead)
+        assert not world.landmark_truth_raycast("column_tops", T, camera)["visible"].any()
+        skipped = world.landmark_truth_raycast("column_tops", T, camera, skip_body=body)
+        np.testing.assert_array_equal(skipped["visible"], bare["visible"])
+        with pytest.raises(ValueError, match="skip_body 12345 was not added with add_body"):
+            world.landmark_truth_raycast("column_tops", T, camera, skip_body=12345)

@@ -530,26 +530,28 @@ class UavStructParallelEnv(ParallelEnv):
             world_from_cam = state.world_from_cam
             cam_from_world = invert(world_from_cam)
             obs = {"gnss": gnss32, "attitude": att32}
-            with self._own_airframe_hidden(agent):
-                if self._lens is not None:
-                    obs, landmarks = self._observe_lens(agent, cam_from_world, obs, render, need_depth)
-                elif render:
-                    result = world.render(cam_from_world, self.camera, depth=need_depth)
-                    image = cfg.imaging.apply(result.rgb, self._rng)
-                    if cfg.observe_image:
-                        obs = {"image": image, **obs}
-                        self._last_images[agent] = image
-                    if cfg.observe_depth:
-                        obs["depth"] = np.asarray(result.depth, dtype=np.float32)
-                    landmarks = {
-                        name: world.landmark_truth(name, cam_from_world, self.camera, result.depth)
-                        for name in cfg.landmark_sets
-                    }
-                else:
-                    landmarks = {
-                        name: world.landmark_truth_raycast(name, cam_from_world, self.camera)
-                        for name in cfg.landmark_sets
-                    }
+            if self._lens is None and not render:  # ray cast: the rays pass through its airframe
+                own = None if self._airframes is None else self._airframes.bodies[agent]
+                landmarks = {
+                    name: world.landmark_truth_raycast(name, cam_from_world, self.camera, skip_body=own)
+                    for name in cfg.landmark_sets
+                }
+            else:
+                with self._own_airframe_hidden(agent):
+                    if self._lens is not None:
+                        obs, landmarks = self._observe_lens(agent, cam_from_world, obs, render, need_depth)
+                    else:
+                        result = world.render(cam_from_world, self.camera, depth=need_depth)
+                        image = cfg.imaging.apply(result.rgb, self._rng)
+                        if cfg.observe_image:
+                            obs = {"image": image, **obs}
+                            self._last_images[agent] = image
+                        if cfg.observe_depth:
+                            obs["depth"] = np.asarray(result.depth, dtype=np.float32)
+                        landmarks = {
+                            name: world.landmark_truth(name, cam_from_world, self.camera, result.depth)
+                            for name in cfg.landmark_sets
+                        }
             prior = world_from_cam_from_attitude(
                 gnss32.astype(np.float64), att32.astype(np.float64)
             )

@@ -220,10 +220,13 @@ def raycast_visibility(
     radius: int = 1,
     abs_tol: float = 0.03,
     rel_tol: float = 0.004,
+    skip_box: int = -1,
 ) -> dict[str, NDArray]:
     """:func:`~uav_struct_env.sim.visibility.landmark_visibility` by ray casting (no depth image).
 
-    Returns the same dict: ``ids``, ``xyz``, ``uv``, ``in_frame``, ``visible``.
+    ``skip_box``: the index in the scene's boxes of one the rays pass through unseen (-1: none),
+    e.g. the camera's own airframe. Returns the same dict: ``ids``, ``xyz``, ``uv``,
+    ``in_frame``, ``visible``.
     """
     xyz = as_points("landmarks_xyz", landmarks_xyz, 3)
     ids_arr = np.asarray(ids, dtype=np.int64).reshape(-1)
@@ -238,7 +241,8 @@ def raycast_visibility(
 
     def ray_depths(rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.float64]:
         rays = _pixel_rays(rows.ravel(), cols.ravel(), K_inv, R)
-        depth = scene.first_hit(-R.T @ t, rays, t_min=camera.near)
+        skip = None if skip_box < 0 else np.full(len(rays), skip_box, dtype=np.int64)
+        depth = scene.first_hit(-R.T @ t, rays, t_min=camera.near, skip_box=skip)
         return np.minimum(depth, camera.far).reshape(rows.shape)
 
     # The depth is exact (no buffer quantization): the tolerance of a 24-bit buffer.

@@ -142,10 +142,17 @@ def window_visibility(
     visible = np.zeros(len(xyz), dtype=bool)
     if rows.shape[0]:
         idx = np.flatnonzero(in_frame)
-        samples = np.asarray(sample_depth(rows, cols), dtype=np.float64).reshape(len(idx), -1)
-        tol = depth_tolerance(z[idx], camera, abs_tol=abs_tol, rel_tol=rel_tol,
-                              depth_bits=depth_bits)
-        visible[idx] = np.any(samples >= (z[idx] - tol)[:, None], axis=1)
+        limit = z[idx] - depth_tolerance(z[idx], camera, abs_tol=abs_tol, rel_tol=rel_tol,
+                                         depth_bits=depth_bits)
+        # The window's centre pixel first: a landmark it shows is visible whatever the other
+        # pixels show, so only the others' windows are sampled (a ray cast is per pixel).
+        centre = np.asarray(sample_depth(rows[:, radius, radius], cols[:, radius, radius]),
+                            dtype=np.float64).reshape(-1) >= limit
+        visible[idx] = centre
+        rest = np.flatnonzero(~centre)
+        if rest.size:
+            samples = np.asarray(sample_depth(rows[rest], cols[rest]), dtype=np.float64)
+            visible[idx[rest]] = np.any(samples.reshape(rest.size, -1) >= limit[rest, None], axis=1)
     return {"ids": ids.copy(), "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}
 
 

@@ -353,19 +353,30 @@ class SiteWorld:
         )
 
     def landmark_truth_raycast(
-        self, name: str, cam_from_world: ArrayLike, camera: Camera | None = None
+        self, name: str, cam_from_world: ArrayLike, camera: Camera | None = None, *,
+        skip_body: int | None = None,
     ) -> dict[str, NDArray]:
         """:meth:`landmark_truth` without a render: the same depth test on ray-cast depths.
 
         Casts rays through the pixel centres around each landmark's projection against the
         triangles this world renders and the bodies added with :meth:`add_body` (at their
         current poses); see :mod:`uav_struct_env.sim.raycast` for how closely it agrees.
+        ``skip_body``: an added body the rays pass through unseen (the camera's own airframe).
+
+        Raises:
+            ValueError: if ``skip_body`` was not added with :meth:`add_body`.
         """
         self._check_open()
         camera = self.camera if camera is None else camera
         self._sync_ray_boxes()
+        skip = -1
+        if skip_body is not None:
+            if skip_body not in self._body_row:
+                raise ValueError(f"skip_body {skip_body!r} was not added with add_body")
+            skip = self._body_row[skip_body]  # row order = the ray scene's box order
         points = self.site.landmarks(name)
-        return raycast_visibility(self._rays, points.xyz, points.ids, cam_from_world, camera)
+        return raycast_visibility(self._rays, points.xyz, points.ids, cam_from_world, camera,
+                                  skip_box=skip)
 
     def first_hits(
         self,
