@@ -570,17 +570,6 @@ def associate_robust(
     n = detections_uv.shape[0]
     empty = np.full(n, -1, dtype=np.int64)
     prior = prior_cam_from_world
-    idx, proj = candidate_landmarks(landmarks_xyz, K, prior, image_size, margin_px)
-    if idx.size == 0:
-        return Association(
-            empty,
-            prior,
-            0.0,
-            np.inf,
-            0,
-            "no landmark projects in front of the prior camera near the image",
-            FailureCode.NO_CANDIDATES,
-        )
     good = np.flatnonzero(np.isfinite(detections_uv).all(axis=1))
     if good.size == 0:
         return Association(
@@ -599,6 +588,18 @@ def associate_robust(
         warm = _warm_association(P, warm_start, max_prior_mahalanobis_sq, fit_quantile)
         if warm is not None:
             return warm
+    # the prior's candidates (only a search needs them: an accepted warm start returns first)
+    idx, proj = candidate_landmarks(landmarks_xyz, K, prior, image_size, margin_px)
+    if idx.size == 0:
+        return Association(
+            empty,
+            prior,
+            0.0,
+            np.inf,
+            0,
+            "no landmark projects in front of the prior camera near the image",
+            FailureCode.NO_CANDIDATES,
+        )
 
     def covered(coarse: list[tuple[NDArray, NDArray]]) -> NDArray:
         """(C,) whether each hypothesis' pairs all agree with an explored result.

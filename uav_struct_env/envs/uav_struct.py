@@ -525,8 +525,9 @@ class UavStructParallelEnv(ParallelEnv):
                         "a model must give a fix when dt == 0 (uav_struct_env.sim.sensors)"
                     )
                 gnss = self._priors[agent][:3, 3]
-            gnss32 = np.clip(gnss, -GNSS_BOUND, GNSS_BOUND).astype(np.float32)
-            att32 = np.clip(attitude, -np.pi, np.pi).astype(np.float32)
+            # np.minimum(np.maximum(...)): np.clip's result at half its cost (every agent-step)
+            gnss32 = np.minimum(np.maximum(gnss, -GNSS_BOUND), GNSS_BOUND).astype(np.float32)
+            att32 = np.minimum(np.maximum(attitude, -np.pi), np.pi).astype(np.float32)
             world_from_cam = state.world_from_cam
             cam_from_world = invert(world_from_cam)
             obs = {"gnss": gnss32, "attitude": att32}
