@@ -52,6 +52,8 @@ ACTION_COMPONENTS = ("forward", "left", "up", "yaw_rate", "gimbal_pitch_rate")
 
 def wrap_angle(a: ArrayLike) -> NDArray[np.float64] | float:
     """Wrap angles (rad) to [-pi, pi)."""
+    if isinstance(a, float):  # one angle (np.float64 too): Python's % is numpy's remainder
+        return (float(a) + math.pi) % (2.0 * math.pi) - math.pi
     out = (np.asarray(a, dtype=np.float64) + np.pi) % (2.0 * np.pi) - np.pi
     return float(out) if out.ndim == 0 else out
 
@@ -167,8 +169,11 @@ class UavState:
     @classmethod
     def make(cls, position: ArrayLike, yaw: float, pitch: float) -> UavState:
         """Build from an array position; the yaw is wrapped to [-pi, pi)."""
-        p = np.asarray(position, dtype=np.float64).reshape(3)
-        return cls((float(p[0]), float(p[1]), float(p[2])), float(wrap_angle(yaw)), float(pitch))
+        if type(position) is tuple and len(position) == 3:  # step_uav's (x, y, z) floats
+            p = position
+        else:
+            p = np.asarray(position, dtype=np.float64).reshape(3)
+        return cls((float(p[0]), float(p[1]), float(p[2])), float(wrap_angle(float(yaw))), float(pitch))
 
     @classmethod
     def from_world_from_cam(cls, world_from_cam: ArrayLike) -> UavState:
