@@ -39,7 +39,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check uav_struct_env localization tracking tests benchmarks examples
 
 bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in docs/benchmarks.md
-	for b in render env_step raycast localizer wrapper_throughput detector ifc_import worker_tracking; do \
+	for b in render env_step raycast localizer wrapper_throughput warm_start detector ifc_import worker_tracking; do \
 		[ -f benchmarks/$$b.py ] && $(BIN)/python benchmarks/$$b.py || exit 1; done
 
 # The active-site detector (localization/models/landmarks_active_v2.onnx +

@@ -52,3 +52,18 @@ def test_warm_start_flag_is_checked():
     env = make_localization_env("column_tops", env_overrides={"max_cycles": 4, "observe_image": False})
     with pytest.raises(ConfigError, match="warm_start must be True or False, got 'yes'"):
         LocalizationWrapper(env.env, warm_start="yes")
+
+
+def test_the_warm_start_benchmark_compares_every_warm_frame_with_the_full_search(load_script, capsys):
+    from pathlib import Path
+
+    from uav_struct_env.stack import LocalizationStack
+
+    bench = load_script(Path(__file__).resolve().parents[2] / "benchmarks" / "warm_start.py")
+    before = LocalizationStack.localize
+    out = bench.main(policy="hold", steps=240, seed=1)
+    assert LocalizationStack.localize is before  # the comparison is undone
+    assert 0 < out["answered"] <= out["frames"] and out["warm_wrong"] == out["full_wrong"] == 0
+    assert out["full_success"] <= out["warm_success"] <= out["frames"]
+    assert out["same"] >= out["full_success"] - len(out["differ"]) and out["max_pose_gap_m"] < 1e-4
+    assert "answered by it (no search)" in capsys.readouterr().out
