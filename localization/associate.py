@@ -71,10 +71,12 @@ Two methods:
     detection paired, every landmark its pose projects inside the image detected, the pose
     within the prior's Mahalanobis gate, the residuals within the fit test, and more pairs than
     the minimum. Anything less (a new landmark entering the view, clutter, a miss, a prediction
-    that has drifted) runs the full search above, so a warm start changes which frames are
-    searched, not what is accepted -- except that the rivals of step 4 are not searched: the
-    prediction carries the previous frame's identities, which is what resolves a periodic
-    layout's ambiguity over time.
+    that has drifted) runs the full search above. What it accepts passes the search's own tests;
+    the rivals of step 4 are not searched, though: the prediction carries the previous frame's
+    identities, which is what tells a periodic layout's shifts apart over time. So it may
+    localize a frame the search fails (ambiguous on its own, or a prior that projects every
+    landmark out of the image), and where both succeed the identities and poses agree
+    (``benchmarks/warm_start.py``).
 """
 
 from __future__ import annotations
