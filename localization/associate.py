@@ -229,15 +229,7 @@ def associate_paper(
     out = np.full(n, -1, dtype=np.int64)
     idx, proj = candidate_landmarks(landmarks_xyz, K, prior_cam_from_world, image_size, margin_px)
     if idx.size == 0:
-        return Association(
-            out,
-            prior_cam_from_world,
-            0.0,
-            0.0,
-            1,
-            "no landmark projects in front of the prior camera near the image",
-            FailureCode.NO_CANDIDATES,
-        )
+        return _no_candidates(out, prior_cam_from_world, 0.0, 1)
     good = np.flatnonzero(np.isfinite(detections_uv).all(axis=1))
     local = assign(detections_uv[good], proj, None)
     ok = local >= 0
@@ -593,15 +585,7 @@ def associate_robust(
     # the prior's candidates (only a search needs them: an accepted warm start returns first)
     idx, proj = candidate_landmarks(landmarks_xyz, K, prior, image_size, margin_px)
     if idx.size == 0:
-        return Association(
-            empty,
-            prior,
-            0.0,
-            np.inf,
-            0,
-            "no landmark projects in front of the prior camera near the image",
-            FailureCode.NO_CANDIDATES,
-        )
+        return _no_candidates(empty, prior, np.inf, 0)
 
     def covered(coarse: list[tuple[NDArray, NDArray]]) -> NDArray:
         """(C,) whether each hypothesis' pairs all agree with an explored result.
@@ -824,6 +808,14 @@ def associate_robust(
                            FailureCode.NO_CONSISTENT_ASSOCIATION)
     res, _ = reprojection_residuals(K, T, landmarks_xyz[a[m]], det[m])
     return Association(a, T, float(np.sum(res**2)), float(score_best), len(finals), None)
+
+
+def _no_candidates(assignment: NDArray, prior: NDArray, score: float, n_hypotheses: int) -> Association:
+    """The failed association of a prior that projects no landmark in front of it near the image."""
+    return Association(
+        assignment, prior, 0.0, score, n_hypotheses,
+        "no landmark projects in front of the prior camera near the image", FailureCode.NO_CANDIDATES,
+    )
 
 
 def _warm_association(
