@@ -67,3 +67,21 @@ def test_the_warm_start_benchmark_compares_every_warm_frame_with_the_full_search
     assert out["full_success"] <= out["warm_success"] <= out["frames"]
     assert out["same"] >= out["full_success"] - len(out["differ"]) and out["max_pose_gap_m"] < 1e-4
     assert "answered by it (no search)" in capsys.readouterr().out
+
+
+def test_the_warm_start_works_beside_the_pose_filter():
+    config = TRAIN_CONFIGS["state"].replace(wrapper={"temporal": True}, env={"max_cycles": 6})
+    poses = {}
+    for warm in (True, False):
+        env = make_train_env(config.replace(wrapper={"warm_start": warm}))
+        obs, infos = env.reset(seed=2)
+        started = []
+        while env.agents:
+            obs, _, _, _, infos = env.step({a: np.zeros(5, np.float32) for a in env.agents})
+            started += [infos[a]["localization"]["warm_started"] for a in obs]
+            assert all("filtered_translation_error_m" in infos[a]["localization"] for a in obs)
+        poses[warm] = {a: obs[a]["pose"] for a in obs}
+        assert any(started) == warm
+        env.close()
+    for agent, pose in poses[True].items():  # the same fixes, so the same filtered poses
+        np.testing.assert_allclose(pose, poses[False][agent], atol=2e-5)
