@@ -463,14 +463,19 @@ class _Problem:
         return prior_sq, chi / self.pixel_sigma**2
 
     def nll(
-        self, a: NDArray, T: NDArray, chi: NDArray, prior_sq: NDArray, miss_cost: float
+        self, a: NDArray, T: NDArray, chi: NDArray, prior_sq: NDArray, miss_cost: float,
+        n_missed: NDArray | None = None,
     ) -> tuple[NDArray, NDArray]:
-        """(H,) negative log-likelihoods (inliers, clutter, misses, prior) and (H,) miss counts."""
-        w, h = self.image_size
-        n_missed = missed_many(
-            self.K, self.landmarks_xyz, np.ascontiguousarray(a, dtype=np.int64),
-            np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3]), int(w), int(h),
-        )
+        """(H,) negative log-likelihoods (inliers, clutter, misses, prior) and (H,) miss counts.
+
+        ``n_missed``: the miss counts when already known (else counted here).
+        """
+        if n_missed is None:
+            w, h = self.image_size
+            n_missed = missed_many(
+                self.K, self.landmarks_xyz, np.ascontiguousarray(a, dtype=np.int64),
+                np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3]), int(w), int(h),
+            )
         n_unassigned = np.sum(a < 0, axis=1)
         nll = chi + n_unassigned * (self.gate_px / self.pixel_sigma) ** 2 + n_missed * miss_cost + prior_sq
         if self.log_odds is not None:
@@ -579,7 +584,7 @@ def associate_robust(
     )
 
     if warm_start is not None:
-        warm = _warm_association(P, warm_start, max_prior_mahalanobis_sq, fit_quantile)
+        warm = _warm_association(P, warm_start, max_prior_mahalanobis_sq, fit_quantile, miss_cost)
         if warm is not None:
             return warm
     # the prior's candidates (only a search needs them: an accepted warm start returns first)
@@ -819,7 +824,8 @@ def _no_candidates(assignment: NDArray, prior: NDArray, score: float, n_hypothes
 
 
 def _warm_association(
-    P: _Problem, start: NDArray, max_prior_mahalanobis_sq: float | None, fit_quantile: float
+    P: _Problem, start: NDArray, max_prior_mahalanobis_sq: float | None, fit_quantile: float,
+    miss_cost: float,
 ) -> Association | None:
     """The association of the predicted pose ``start`` alone, or None if it leaves anything open.
 
@@ -848,9 +854,8 @@ def _warm_association(
     chi = chi / P.pixel_sigma**2
     if chi > _chi2_quantiles(fit_quantile, 2 * pairs - 6)[2 * pairs - 6]:
         return None
-    # the score of _Problem.nll with nothing unassigned and nothing missed
-    score = chi + prior_sq - (0.0 if P.log_odds is None else float(np.sum(P.log_odds[a >= 0])))
-    return Association(a, T, chi * P.pixel_sigma**2, float(score), 1, None, warm_started=True)
+    score, _ = P.nll(a[None], T[None], np.array([chi]), np.array([prior_sq]), miss_cost, np.array([missed]))
+    return Association(a, T, chi * P.pixel_sigma**2, float(score[0]), 1, None, warm_started=True)
 
 
 def _minimal_fit_reason(P: _Problem, a: NDArray, T: NDArray) -> str | None:
