@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from localization.associate import Association, associate_paper, associate_robust
 from localization.checks import check_choice, check_number
+from localization.compiled_finish import finish_pose
 from localization.compiled_pose import minor_spread
 from localization.detect import Detections, check_image_size
 from localization.distortion import check_distortion, is_pinhole, undistort_points
@@ -34,8 +35,6 @@ from localization.pnp import (
     is_coplanar,
     pose_covariance,
     prior_mahalanobis_sq,
-    refine_pose,
-    reprojection_residuals,
     solve_pnp,
 )
 
@@ -62,7 +61,8 @@ class PoseEstimate:
         failure_code: why it failed, for grouping: a :class:`~localization.failure.FailureCode`
             (``UNKNOWN`` when a failed estimate was built without one), None on success.
         timings: seconds per stage (``validate``, ``associate``, ``pnp``, ``covariance``,
-            ``total``). ``associate`` includes the PnP runs made inside robust association.
+            ``total``). ``associate`` includes the PnP runs made inside robust association; in
+            robust mode ``pnp`` includes the covariance (one compiled call) and ``covariance`` is 0.
         prior_mahalanobis_sq: squared Mahalanobis distance of the estimate from the prior.
         n_hypotheses: association hypotheses evaluated.
         warm_started: True when the robust association accepted the warm start
@@ -244,13 +244,15 @@ class Localizer:
             raise ValueError(f"prior_sigmas must be positive and finite, got {value!r}")
         return PriorSigmas(tuple(pos.tolist()), tuple(rot.tolist()))
 
-    def _edge_on(self, what: str, uv: NDArray[np.float64]) -> str | None:
+    def _edge_on(self, what: str, uv: NDArray[np.float64], spread: float | None = None) -> str | None:
         """Why ``uv`` cannot give a pose when its points lie on one line, else None.
 
         Landmarks whose images lie on one line (a plane seen edge-on) admit several poses that
-        fit equally well; the covariance at any one of them does not show it.
+        fit equally well; the covariance at any one of them does not show it. ``spread``: the
+        points' spread across their line when already computed (:func:`_minor_spread_px`).
         """
-        spread = _minor_spread_px(uv)
+        if spread is None:
+            spread = _minor_spread_px(uv)
         if spread >= max(2.0 * self.pixel_sigma, 1.0):
             return None
         return (
@@ -423,24 +425,32 @@ class Localizer:
             a[idx_m[~res.inliers]] = -1
             m = a >= 0
             rmse = res.rmse_px
+            t3 = time.perf_counter()
+            timings["pnp"] = t3 - t2
+            cov = pose_covariance(self.K, T, self.landmarks_xyz[a[m]], self.pixel_sigma)
+            timings["covariance"] = time.perf_counter() - t3
+            spread, q = None, None
         else:
-            T, rmse = refine_pose(X, u, self.K, assoc.cam_from_world)
-            _, depth = reprojection_residuals(self.K, T, X, u)
-            if not np.all(depth > 0):
-                timings.update(pnp=time.perf_counter() - t2, covariance=0.0)
+            # refine_pose (10 x 20 LM steps, tol 1e-8), the depth check, pose_covariance, the
+            # edge-on spread and prior_mahalanobis_sq in one compiled call (their kernels)
+            T, rmse, in_front, cov, q, far, spread = finish_pose(
+                self.K, assoc.cam_from_world, X, u, self.pixel_sigma, np.ascontiguousarray(prior[:3, :3]),
+                camera_center(prior), sigmas.as_array(), 200, 1e-8,
+            )
+            if far:
+                q = prior_mahalanobis_sq(T, prior, sigmas)
+            t3 = time.perf_counter()
+            timings.update(pnp=t3 - t2, covariance=0.0)  # the covariance is in the refinement's call
+            if not in_front:
                 return fail(
                     FailureCode.BEHIND_CAMERA,
                     "refined pose puts landmarks behind the camera",
                     a,
                     assoc.n_hypotheses,
                 )
-        t3 = time.perf_counter()
-        timings["pnp"] = t3 - t2
-        cov = pose_covariance(self.K, T, self.landmarks_xyz[a[m]], self.pixel_sigma)
-        timings["covariance"] = time.perf_counter() - t3
         if not np.all(np.isfinite(T)):
             return fail(FailureCode.PNP_FAILED, "PnP returned a non-finite pose", a, assoc.n_hypotheses)
-        edge_on = self._edge_on("inlier detections", det[m])
+        edge_on = self._edge_on("inlier detections", det[m], spread)
         if edge_on is not None:
             return fail(FailureCode.DEGENERATE_GEOMETRY, edge_on, a, assoc.n_hypotheses)
         if self.max_position_std_m is not None:
@@ -463,7 +473,7 @@ class Localizer:
             covariance=cov,
             failure_reason=None,
             timings=timings,
-            prior_mahalanobis_sq=prior_mahalanobis_sq(T, prior, sigmas),
+            prior_mahalanobis_sq=prior_mahalanobis_sq(T, prior, sigmas) if q is None else float(q),
             n_hypotheses=assoc.n_hypotheses,
             warm_started=assoc.warm_started,
         )

@@ -1,0 +1,74 @@
+"""Compiled kernel (numba) of the last step of a robust localization: its one pose, finished.
+
+Once robust association has chosen its pairs, :meth:`localization.Localizer.localize` refines
+the pose on them (:func:`localization.pnp.refine_pose`), checks every landmark is in front of
+the camera (:func:`localization.pnp.reprojection_residuals`), computes the covariance
+(:func:`localization.pnp.pose_covariance`), the spread of the inlier detections across their
+best-fit line (the edge-on test) and the distance from the prior
+(:func:`localization.pnp.prior_mahalanobis_sq`). Each is compiled, but each through a Python
+wrapper that validates and converts its arguments: together some 60-90 us per frame, paid by
+every agent at every step of a training env, more than a warm-started association itself.
+
+:func:`finish_pose` runs the same kernels -- :func:`localization.compiled._lm_one` with
+``refine_pose``'s iterations and tolerance, :func:`localization.compiled_pose.residuals`,
+:func:`~localization.compiled_pose.covariance`, :func:`~localization.compiled_pose.minor_spread`,
+:func:`~localization.compiled_pose.prior_distance_sq` -- in one call, so its answers are theirs
+bit for bit (``tests/localization/test_compiled_finish.py`` compares them). Compiled and cached
+like :mod:`localization.compiled`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from localization.compiled import _lm_one
+from localization.compiled_pose import center, covariance, minor_spread, prior_distance_sq, residuals
+
+__all__ = ["finish_pose"]
+
+
+@njit(cache=True, nogil=True)
+def finish_pose(
+    K: NDArray, T0: NDArray, X: NDArray, uv: NDArray, pixel_sigma: float,
+    prior_R: NDArray, prior_C: NDArray, sigmas: NDArray, iterations: int, tol: float,
+) -> tuple[NDArray, float, bool, NDArray, float, bool, float]:
+    """Refine ``T0`` on the pairs ``X`` (N, 3) <-> ``uv`` (N, 2) and measure the result.
+
+    Args:
+        K: (3, 3) intrinsics.
+        T0: (4, 4) ``cam_from_world`` to start from.
+        X: (N, 3) landmarks of the correspondences (N >= 1).
+        uv: (N, 2) their detections, pinhole pixels.
+        pixel_sigma: the detector's noise, px (the covariance).
+        prior_R: (3, 3) the prior's rotation.
+        prior_C: (3,) the prior's camera centre.
+        sigmas: (6,) the prior's sigmas (:meth:`localization.pnp.PriorSigmas.as_array`).
+        iterations: Levenberg-Marquardt steps (``refine_pose``'s ``10 * max_iterations``).
+        tol: relative cost decrease below which the refinement stops (``refine_pose``'s).
+
+    Returns:
+        ``(T, rmse_px, in_front, covariance, prior_q, prior_far, spread_px)``: the refined pose,
+        its RMSE (inf when a point is at or behind the camera), whether every point has positive
+        depth, the (6, 6) covariance, the squared Mahalanobis distance from the prior and whether
+        the rotation is near pi from the prior's (then recompute it exactly, as
+        ``prior_mahalanobis_sq`` does), and the RMS distance of ``uv`` from its best-fit line.
+    """
+    n = X.shape[0]
+    R = T0[:3, :3].copy()
+    t = T0[:3, 3].copy()
+    cost = _lm_one(K, R, t, X, uv, np.ones(n), iterations, 0.0, tol)
+    T = np.zeros((4, 4))
+    T[:3, :3] = R
+    T[:3, 3] = t
+    T[3, 3] = 1.0
+    rmse = np.sqrt(cost / max(n, 1))
+    _, depth = residuals(K, T, X, uv)
+    in_front = True
+    for j in range(n):
+        if not depth[j] > 0:
+            in_front = False
+    cov = covariance(K, R, center(T), X, pixel_sigma)
+    q, far = prior_distance_sq(R, t, prior_R, prior_C, sigmas)
+    return T, rmse, in_front, cov, q, far, minor_spread(uv)
