@@ -36,7 +36,7 @@ BODY_FROM_CAM = np.array(
 
 def world_from_cam_from_attitude(position: ArrayLike, attitude: ArrayLike) -> NDArray[np.float64]:
     """4x4 ``world_from_cam`` of a camera at ``position`` (3,) with ``attitude`` (roll, pitch, yaw)."""
-    roll, pitch, yaw = (float(a) for a in np.asarray(attitude, dtype=np.float64).reshape(3))
+    roll, pitch, yaw = _three_floats(attitude)
     # Rz(yaw) @ Ry(pitch) @ Rx(roll) @ BODY_FROM_CAM, written out on Python floats (scipy's
     # from_euler("ZYX") gives the same matrix at several times the cost, and the env builds
     # several per agent-step); BODY_FROM_CAM only permutes and negates columns, so the product
@@ -44,13 +44,21 @@ def world_from_cam_from_attitude(position: ArrayLike, attitude: ArrayLike) -> ND
     cr, sr = math.cos(roll), math.sin(roll)
     cp, sp = math.cos(pitch), math.sin(pitch)
     cy, sy = math.cos(yaw), math.sin(yaw)
-    x, y, z = (float(p) for p in np.asarray(position, dtype=np.float64).reshape(3))
+    x, y, z = _three_floats(position)
     return np.array([
         [-(cy * sp * sr - sy * cr), -(cy * sp * cr + sy * sr), cy * cp, x],
         [-(sy * sp * sr + cy * cr), -(sy * sp * cr - cy * sr), sy * cp, y],
         [-(cp * sr), -(cp * cr), -sp, z],
         [0.0, 0.0, 0.0, 1.0],
     ])
+
+
+def _three_floats(values: ArrayLike) -> tuple[float, float, float]:
+    """``values`` (3 numbers) as three Python floats; a tuple of floats (a state's) as it is."""
+    if type(values) is tuple and len(values) == 3 and all(type(v) is float for v in values):
+        return values
+    a, b, c = (float(v) for v in np.asarray(values, dtype=np.float64).reshape(3))
+    return a, b, c
 
 
 def attitude_from_world_from_cam(

@@ -262,3 +262,21 @@ def test_default_observations_identical_when_only_ground_truth_changes():
             assert abs(e1 - e0) > 1.0
             assert outs[True, False][step][a]["layout"][0] > 0.3
             assert outs[True, True][step][a]["layout"][0] == 0.0
+
+
+def test_layout_centroid_and_spread_are_numpys_bit_for_bit(rng):
+    """The compiled centroid / spread components equal numpy's mean / std, clipped, exactly."""
+    from uav_struct_env.wrappers.layout import _centroid_spread
+
+    for k in range(3000):
+        w, h = ((128, 72), (1280, 720), (7, 5))[k % 3]
+        n = int(rng.integers(1, 25))
+        uv = np.column_stack([rng.uniform(-60, w + 60, n), rng.uniform(-60, h + 60, n)])
+        half = np.array([w / 2.0, h / 2.0])
+        want = np.concatenate([
+            np.clip((uv.mean(axis=0) - (half - 0.5)) / half, -1.0, 1.0),
+            np.clip(uv.std(axis=0) / half, 0.0, 2.0),
+        ])
+        np.testing.assert_array_equal(_centroid_spread(uv, w / 2.0, h / 2.0), want)
+    got = _centroid_spread(np.array([[np.nan, 1.0], [2.0, 3.0]]), 64.0, 36.0)
+    assert np.isnan(got[0]) and np.isnan(got[2]) and got[1] == np.clip((2.0 - 35.5) / 36.0, -1, 1)

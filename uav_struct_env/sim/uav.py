@@ -208,7 +208,7 @@ class UavState:
         """Ground-truth 4x4 ``world_from_cam`` (a fresh copy; computed once per state)."""
         cached = self.__dict__.get("_world_from_cam")
         if cached is None:  # a frozen state's pose never changes; an env step asks several times
-            cached = world_from_cam_from_attitude(self.position, self.attitude)
+            cached = world_from_cam_from_attitude(self.position, (0.0, self.pitch, self.yaw))
             object.__setattr__(self, "_world_from_cam", cached)
         return cached.copy()
 
