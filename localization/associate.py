@@ -476,7 +476,7 @@ class _Problem:
                 self.K, self.landmarks_xyz, np.ascontiguousarray(a, dtype=np.int64),
                 np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3]), int(w), int(h),
             )
-        n_unassigned = np.sum(a < 0, axis=1)
+        n_unassigned = (a < 0).sum(axis=1)
         nll = chi + n_unassigned * (self.gate_px / self.pixel_sigma) ** 2 + n_missed * miss_cost + prior_sq
         if self.log_odds is not None:
             nll = nll - (a >= 0) @ self.log_odds
@@ -567,12 +567,12 @@ def associate_robust(
     # hundreds of pixels, and a gate fixed in pixels would then match only coincidences.
     coarse_gate_px = max(coarse_gate_px, min(K[0, 0], K[1, 1]) * min(sig.rotation_rad))
     n = detections_uv.shape[0]
-    empty = np.full(n, -1, dtype=np.int64)
     prior = prior_cam_from_world
     good = np.flatnonzero(np.isfinite(detections_uv).all(axis=1))
     if good.size == 0:
         return Association(
-            empty, prior, 0.0, np.inf, 0, "no finite detection", FailureCode.TOO_FEW_DETECTIONS
+            np.full(n, -1, dtype=np.int64), prior, 0.0, np.inf, 0, "no finite detection",
+            FailureCode.TOO_FEW_DETECTIONS,
         )
     det = detections_uv
     need = max(min_correspondences, 3)
@@ -587,6 +587,7 @@ def associate_robust(
         warm = _warm_association(P, warm_start, max_prior_mahalanobis_sq, fit_quantile, miss_cost)
         if warm is not None:
             return warm
+    empty = np.full(n, -1, dtype=np.int64)  # the failures' assignment
     # the prior's candidates (only a search needs them: an accepted warm start returns first)
     idx, proj = candidate_landmarks(landmarks_xyz, K, prior, image_size, margin_px)
     if idx.size == 0:
@@ -843,10 +844,11 @@ def _warm_association(
         start[:3, 3], int(w), int(h), float(P.margin_px), float(P.gate_px), float(P.coarse_gate_px),
         int(P.max_iterations), int(P.need), P.prior_R, P.prior_C, P.sig_array,
     )
-    pairs = int((a >= 0).sum())
+    pairs = int(np.count_nonzero(a >= 0))
     if not alive or missed > 0 or pairs != P.good.size or pairs <= P.need:
         return None
-    T = to_transforms(R[None], t[None])[0]
+    T = np.zeros((4, 4))  # to_transforms' matrix
+    T[:3, :3], T[:3, 3], T[3, 3] = R, t, 1.0
     if far:  # a rotation near pi from the prior's: the exact logarithm
         prior_sq = prior_mahalanobis_sq(T, P.prior, P.sig)
     if max_prior_mahalanobis_sq is not None and prior_sq > max_prior_mahalanobis_sq:

@@ -31,16 +31,18 @@ __all__ = ["finish_pose"]
 
 @njit(cache=True, nogil=True)
 def finish_pose(
-    K: NDArray, T0: NDArray, X: NDArray, uv: NDArray, pixel_sigma: float,
+    K: NDArray, T0: NDArray, landmarks: NDArray, det: NDArray, assignment: NDArray, pixel_sigma: float,
     prior_R: NDArray, prior_C: NDArray, sigmas: NDArray, iterations: int, tol: float,
 ) -> tuple[NDArray, float, bool, NDArray, float, bool, float]:
-    """Refine ``T0`` on the pairs ``X`` (N, 3) <-> ``uv`` (N, 2) and measure the result.
+    """Refine ``T0`` on the assigned pairs and measure the result.
 
     Args:
         K: (3, 3) intrinsics.
         T0: (4, 4) ``cam_from_world`` to start from.
-        X: (N, 3) landmarks of the correspondences (N >= 1).
-        uv: (N, 2) their detections, pinhole pixels.
+        landmarks: (M, 3) the model landmarks.
+        det: (D, 2) the detections, pinhole pixels.
+        assignment: (D,) the landmark of each detection, -1 for none; the pairs (N >= 1 of them)
+            are taken in detection order, ``landmarks[assignment[m]]`` <-> ``det[m]``.
         pixel_sigma: the detector's noise, px (the covariance).
         prior_R: (3, 3) the prior's rotation.
         prior_C: (3,) the prior's camera centre.
@@ -53,9 +55,21 @@ def finish_pose(
         its RMSE (inf when a point is at or behind the camera), whether every point has positive
         depth, the (6, 6) covariance, the squared Mahalanobis distance from the prior and whether
         the rotation is near pi from the prior's (then recompute it exactly, as
-        ``prior_mahalanobis_sq`` does), and the RMS distance of ``uv`` from its best-fit line.
+        ``prior_mahalanobis_sq`` does), and the RMS distance of the paired detections from their
+        best-fit line.
     """
-    n = X.shape[0]
+    n = 0
+    for i in range(assignment.shape[0]):
+        if assignment[i] >= 0:
+            n += 1
+    X = np.empty((n, 3))
+    uv = np.empty((n, 2))
+    j = 0
+    for i in range(assignment.shape[0]):
+        if assignment[i] >= 0:
+            X[j] = landmarks[assignment[i]]
+            uv[j] = det[i]
+            j += 1
     R = T0[:3, :3].copy()
     t = T0[:3, 3].copy()
     cost = _lm_one(K, R, t, X, uv, np.ones(n), iterations, 0.0, tol)

@@ -244,12 +244,15 @@ class Localizer:
             raise ValueError(f"prior_sigmas must be positive and finite, got {value!r}")
         return PriorSigmas(tuple(pos.tolist()), tuple(rot.tolist()))
 
-    def _edge_on(self, what: str, uv: NDArray[np.float64], spread: float | None = None) -> str | None:
+    def _edge_on(
+        self, what: str, uv: NDArray[np.float64] | None = None, spread: float | None = None
+    ) -> str | None:
         """Why ``uv`` cannot give a pose when its points lie on one line, else None.
 
         Landmarks whose images lie on one line (a plane seen edge-on) admit several poses that
         fit equally well; the covariance at any one of them does not show it. ``spread``: the
-        points' spread across their line when already computed (:func:`_minor_spread_px`).
+        points' spread across their line (:func:`_minor_spread_px`) when already computed,
+        instead of ``uv``.
         """
         if spread is None:
             spread = _minor_spread_px(uv)
@@ -344,7 +347,6 @@ class Localizer:
             warm_start = check_transform("warm_start", warm_start)
         sigmas = self.prior_sigmas if prior_sigmas is None else self._prior_sigmas(prior_sigmas)
         n = det.shape[0]
-        unassigned = np.full(n, -1, dtype=np.int64)
         t1 = time.perf_counter()
         timings["validate"] = t1 - t0
 
@@ -358,7 +360,7 @@ class Localizer:
             return PoseEstimate(
                 success=False,
                 cam_from_world=prior.copy(),
-                assignment=unassigned if assignment is None else assignment,
+                assignment=np.full(n, -1, dtype=np.int64) if assignment is None else assignment,
                 failure_reason=reason,
                 failure_code=code,
                 timings=timings,
@@ -367,13 +369,14 @@ class Localizer:
             )
 
         usable = np.isfinite(det).all(axis=1)
+        n_usable = int(np.count_nonzero(usable))
         need = self.min_correspondences
-        if usable.sum() < need:
+        if n_usable < need:
             timings.update(associate=0.0, pnp=0.0, covariance=0.0)
-            what = "no detections" if n == 0 else f"{int(usable.sum())} usable (finite) detections"
+            what = "no detections" if n == 0 else f"{n_usable} usable (finite) detections"
             return fail(FailureCode.TOO_FEW_DETECTIONS, f"too few detections: {what}, need {need}")
 
-        edge_on = self._edge_on("detections", det[usable])
+        edge_on = self._edge_on("detections", det if n_usable == n else det[usable])
         if edge_on is not None:  # no association can help: fail before trying any
             timings.update(associate=0.0, pnp=0.0, covariance=0.0)
             return fail(FailureCode.DEGENERATE_GEOMETRY, edge_on)
@@ -390,17 +393,18 @@ class Localizer:
             )
         a = assoc.assignment.copy()
         m = a >= 0
-        if m.sum() < need:
+        n_pairs = int(np.count_nonzero(m))
+        if n_pairs < need:
             timings.update(pnp=0.0, covariance=0.0)
             return fail(
                 FailureCode.TOO_FEW_CORRESPONDENCES,
-                f"too few correspondences: {int(m.sum())} assigned, need {need}",
+                f"too few correspondences: {n_pairs} assigned, need {need}",
                 a,
                 assoc.n_hypotheses,
             )
 
-        X, u = self.landmarks_xyz[a[m]], det[m]
         if self.association == "paper":
+            X, u = self.landmarks_xyz[a[m]], det[m]
             res = solve_pnp(
                 X,
                 u,
@@ -424,18 +428,20 @@ class Localizer:
             idx_m = np.flatnonzero(m)
             a[idx_m[~res.inliers]] = -1
             m = a >= 0
+            n_pairs = int(np.count_nonzero(m))
             rmse = res.rmse_px
             t3 = time.perf_counter()
             timings["pnp"] = t3 - t2
             cov = pose_covariance(self.K, T, self.landmarks_xyz[a[m]], self.pixel_sigma)
             timings["covariance"] = time.perf_counter() - t3
-            spread, q = None, None
+            spread, q = _minor_spread_px(det[m]), None
         else:
-            # refine_pose (10 x 20 LM steps, tol 1e-8), the depth check, pose_covariance, the
-            # edge-on spread and prior_mahalanobis_sq in one compiled call (their kernels)
+            # refine_pose (10 x 20 LM steps, tol 1e-8) on the pairs in detection order, the depth
+            # check, pose_covariance, the edge-on spread and prior_mahalanobis_sq in one compiled
+            # call (their kernels)
             T, rmse, in_front, cov, q, far, spread = finish_pose(
-                self.K, assoc.cam_from_world, X, u, self.pixel_sigma, np.ascontiguousarray(prior[:3, :3]),
-                camera_center(prior), sigmas.as_array(), 200, 1e-8,
+                self.K, assoc.cam_from_world, self.landmarks_xyz, det, a, self.pixel_sigma,
+                np.ascontiguousarray(prior[:3, :3]), camera_center(prior), sigmas.as_array(), 200, 1e-8,
             )
             if far:
                 q = prior_mahalanobis_sq(T, prior, sigmas)
@@ -448,9 +454,9 @@ class Localizer:
                     a,
                     assoc.n_hypotheses,
                 )
-        if not np.all(np.isfinite(T)):
+        if not np.isfinite(T).all():
             return fail(FailureCode.PNP_FAILED, "PnP returned a non-finite pose", a, assoc.n_hypotheses)
-        edge_on = self._edge_on("inlier detections", det[m], spread)
+        edge_on = self._edge_on("inlier detections", spread=spread)
         if edge_on is not None:
             return fail(FailureCode.DEGENERATE_GEOMETRY, edge_on, a, assoc.n_hypotheses)
         if self.max_position_std_m is not None:
@@ -469,7 +475,7 @@ class Localizer:
             cam_from_world=T,
             assignment=a,
             reprojection_rmse_px=float(rmse),
-            n_inliers=int(m.sum()),
+            n_inliers=n_pairs,
             covariance=cov,
             failure_reason=None,
             timings=timings,

@@ -73,9 +73,7 @@ class PriorSigmas:
 
     def as_array(self) -> NDArray[np.float64]:
         """(6,) sigmas in the package's pose parameterization ``(C, dtheta)``."""
-        return np.concatenate(
-            [np.asarray(self.position_m, float), np.asarray(self.rotation_rad, float)]
-        )
+        return np.array((*self.position_m, *self.rotation_rad), dtype=np.float64)
 
 
 @dataclass(frozen=True, eq=False)

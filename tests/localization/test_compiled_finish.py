@@ -37,9 +37,9 @@ def _separately(X, uv, T0, prior, sigmas, pixel_sigma=1.0):
     return T, rmse, bool(np.all(depth > 0)), cov, prior_mahalanobis_sq(T, prior, sigmas), _minor_spread_px(uv)
 
 
-def _finished(X, uv, T0, prior, sigmas, pixel_sigma=1.0):
+def _finished(L, det, a, T0, prior, sigmas, pixel_sigma=1.0):
     T, rmse, in_front, cov, q, far, spread = finish_pose(
-        PAPER_K, T0, X, uv, pixel_sigma, np.ascontiguousarray(prior[:3, :3]), camera_center(prior),
+        PAPER_K, T0, L, det, a, pixel_sigma, np.ascontiguousarray(prior[:3, :3]), camera_center(prior),
         sigmas.as_array(), 200, 1e-8,
     )
     return T, rmse, in_front, cov, (prior_mahalanobis_sq(T, prior, sigmas) if far else q), spread
@@ -56,7 +56,14 @@ def test_finish_pose_is_the_separate_steps_bit_for_bit(rng, n):
         assert np.all(depth > 0)
         uv = uv + rng.normal(0.0, 1.0, uv.shape)
         start, prior = _moved(truth, rng, 0.3, 0.5), _moved(truth, rng, 3.0, 3.0)
-        a, b = _separately(L, uv, start, prior, sigmas), _finished(L, uv, start, prior, sigmas)
+        # the detections in another order, with two unassigned (clutter) among them
+        det = np.vstack([uv, rng.uniform(0, 1000, (2, 2))])
+        ids = np.concatenate([np.arange(n), [-1, -1]])
+        order = rng.permutation(n + 2)
+        det, ids = det[order], ids[order]
+        m = ids >= 0
+        a = _separately(L[ids[m]], det[m], start, prior, sigmas)
+        b = _finished(L, det, ids, start, prior, sigmas)
         np.testing.assert_array_equal(a[0], b[0])  # the refined pose
         assert a[1] == b[1] and a[2] is b[2] is True  # rmse, every point in front
         np.testing.assert_array_equal(a[3], b[3])  # covariance
@@ -72,7 +79,7 @@ def test_finish_pose_reports_points_behind_the_camera_and_far_priors(rng):
     X = np.vstack([L, camera_center(truth) + 2.0 * (camera_center(truth) - behind)])
     uv_b = np.vstack([uv, [[600.0, 400.0]]])
     sigmas = PriorSigmas()
-    b = _finished(X, uv_b, truth, truth, sigmas)
+    b = _finished(X, uv_b, np.arange(len(X)), truth, truth, sigmas)
     a = _separately(X, uv_b, truth, truth, sigmas)
     assert a[2] is b[2] is False
     np.testing.assert_array_equal(a[0], b[0])
@@ -81,8 +88,9 @@ def test_finish_pose_reports_points_behind_the_camera_and_far_priors(rng):
     flipped[:3, :3] = so3_exp(np.array([0.0, 0.0, np.pi - 0.01])) @ truth[:3, :3]
     flipped[:3, 3] = -flipped[:3, :3] @ camera_center(truth)
     _, _, _, _, _, far, _ = finish_pose(
-        PAPER_K, truth, L, uv, 1.0, np.ascontiguousarray(flipped[:3, :3]), camera_center(flipped),
-        sigmas.as_array(), 200, 1e-8,
+        PAPER_K, truth, L, uv, np.arange(len(L)), 1.0, np.ascontiguousarray(flipped[:3, :3]),
+        camera_center(flipped), sigmas.as_array(), 200, 1e-8,
     )
     assert far
-    assert _finished(L, uv, truth, flipped, sigmas)[4] == _separately(L, uv, truth, flipped, sigmas)[4]
+    assert _finished(L, uv, np.arange(len(L)), truth, flipped, sigmas)[4] == _separately(
+        L, uv, truth, flipped, sigmas)[4]
