@@ -62,6 +62,20 @@ class Detections:
     def __len__(self) -> int:
         return int(self.uv.shape[0])
 
+    @classmethod
+    def _of_checked(
+        cls, uv: NDArray[np.float64], scores: NDArray[np.float64] | None, true_ids: NDArray[np.int64] | None
+    ) -> Detections:
+        """Detections of arrays a detector built with the checked dtypes and shapes (no checks).
+
+        ``uv`` float64 (N, 2), ``scores`` float64 (N,) or None, ``true_ids`` int64 (N,) or None.
+        """
+        out = object.__new__(cls)
+        object.__setattr__(out, "uv", uv)
+        object.__setattr__(out, "scores", scores)
+        object.__setattr__(out, "true_ids", true_ids)
+        return out
+
 
 @runtime_checkable
 class Detector(Protocol):
@@ -161,7 +175,7 @@ class ProjectionDetector:
         keep = visible & np.isfinite(uv_all[:, 0]) & np.isfinite(uv_all[:, 1])
         if self.miss_rate > 0:
             keep &= rng.random(keep.shape[0]) >= self.miss_rate
-        uv = uv_all[keep] + rng.normal(0.0, self.pixel_sigma, size=(int(keep.sum()), 2))
+        uv = uv_all[keep] + rng.normal(0.0, self.pixel_sigma, size=(int(np.count_nonzero(keep)), 2))
         ids = ids_all[keep]
         n_fp = int(rng.poisson(self.false_positives)) if self.false_positives > 0 else 0
         if n_fp:
@@ -169,4 +183,4 @@ class ProjectionDetector:
             uv = np.vstack([uv, clutter])
             ids = np.concatenate([ids, np.full(n_fp, -1, dtype=np.int64)])
         order = rng.permutation(uv.shape[0])
-        return Detections(uv=uv[order], scores=None, true_ids=ids[order])
+        return Detections._of_checked(uv[order], None, ids[order])  # float64 (N, 2), int64 (N,)

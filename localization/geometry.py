@@ -203,6 +203,13 @@ def project(
     return uv, depth
 
 
+def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``np.cross`` of two (3,) vectors: its products and differences on floats (a tenth its cost)."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def look_at(
     eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)
 ) -> NDArray[np.float64]:
@@ -219,13 +226,13 @@ def look_at(
     if norm < 1e-12:
         raise ValueError(f"look_at needs eye != target, got eye={eye.tolist()}")
     z = forward / norm
-    x = np.cross(z, up)  # image right = forward x up
+    x = _cross(z, up)  # image right = forward x up
     if np.linalg.norm(x) < 1e-9:
         raise ValueError(
             f"look_at viewing direction {z.tolist()} is parallel to up={up.tolist()}; pass another up"
         )
     x /= np.linalg.norm(x)
-    y = np.cross(z, x)  # image down
+    y = _cross(z, x)  # image down
     world_from_cam = np.eye(4)
     world_from_cam[:3, 0] = x
     world_from_cam[:3, 1] = y

@@ -413,9 +413,9 @@ class UavStructParallelEnv(ParallelEnv):
                 f"({', '.join(ACTION_COMPONENTS)}), got shape {arr.shape}: {action!r}"
             )
         arr = arr.astype(np.float64)
-        if not np.all(np.isfinite(arr)):
+        if not np.isfinite(arr).all():
             raise ValueError(f"action for {agent!r} must be finite, got {arr.tolist()}")
-        return np.clip(arr, -1.0, 1.0)
+        return np.minimum(np.maximum(arr, -1.0), 1.0)  # np.clip's result (finite), half its cost
 
     def step(self, actions: dict[str, Any]):
         """Apply one action per live agent (missing agents hover) for ``control_period`` s.
@@ -517,7 +517,7 @@ class UavStructParallelEnv(ParallelEnv):
                 self._rng,
                 Reading(i, noise_index, state.xyz, state.attitude, float(clearance[k]), dt),
             )
-            gnss_fix = bool(np.all(np.isfinite(gnss)))
+            gnss_fix = bool(np.isfinite(gnss).all())
             if not gnss_fix:  # an outage: the onboard position is the last fix, held
                 if dt == 0.0 or agent not in self._priors:
                     raise ConfigError(

@@ -43,6 +43,7 @@ the cost: docs/benchmarks.md).
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any
 
 import numpy as np
@@ -251,7 +252,9 @@ class LocalizePoses(ParallelWrapper):
         obs["pose"] = np.minimum(np.maximum(pose, -POSE_BOUND), POSE_BOUND).astype(np.float32)
         obs["pose_std"] = np.minimum(np.maximum(std, 0.0), STD_BOUND).astype(np.float32)
         obs["localized"] = np.array([1.0 if localized else 0.0], np.float32)
-        position_std = float(np.sqrt(np.trace(est.covariance[:3, :3]))) if est.success else UNDEFINED
+        cov = est.covariance  # the position block's trace, summed as np.trace does (NaN: undefined)
+        trace = float(cov[0, 0] + cov[1, 1] + cov[2, 2])
+        position_std = math.sqrt(trace) if est.success and trace >= 0.0 else UNDEFINED
         s = frame.scores
         info["localization"] = {
             "success": bool(est.success),
