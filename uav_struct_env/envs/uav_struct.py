@@ -44,6 +44,7 @@ truncated kept the finished env stepping), and the end is terminal for the team,
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager, nullcontext
@@ -474,23 +475,27 @@ class UavStructParallelEnv(ParallelEnv):
     def _crashes(self, live: list[str]) -> dict[str, str | None]:
         """Termination reason per live agent (None: still flying)."""
         cfg = self.config
-        center = self.site.center[:2]
-        pos = np.array([self._states[a].xyz for a in live])
+        cx, cy = self.site.center[:2].tolist()
+        positions = [self._states[a].position for a in live]  # (x, y, z) floats
         reasons: dict[str, str | None] = {}
-        clearance = self.obstacles.distances(pos)
+        clearance = self.obstacles.distances(np.array(positions))
         for k, a in enumerate(live):
-            fence = self.geofence.violation(pos[k], center)
+            fence = self.geofence.violation(positions[k], (cx, cy))
             reasons[a] = (
                 fence
                 if fence is not None
                 else ("collision_structure" if clearance[k] < cfg.uav_radius else None)
             )
-        # pairwise distances once (each row the norms of the others minus this one, as before)
-        apart = np.linalg.norm(pos[None, :, :] - pos[:, None, :], axis=2)
-        np.fill_diagonal(apart, np.inf)
+        # the nearest other UAV: the norm np.linalg.norm gives, ((dx^2 + dy^2) + dz^2) ** 0.5
         for k, a in enumerate(live):
-            if reasons[a] is None and len(live) > 1 and apart[k].min() < 2 * cfg.uav_radius:
-                reasons[a] = "collision_uav"
+            if reasons[a] is None and len(live) > 1:
+                xk, yk, zk = positions[k]
+                nearest = min(
+                    math.sqrt((x - xk) * (x - xk) + (y - yk) * (y - yk) + (z - zk) * (z - zk))
+                    for j, (x, y, z) in enumerate(positions) if j != k
+                )
+                if nearest < 2 * cfg.uav_radius:
+                    reasons[a] = "collision_uav"
         return reasons
 
     def _observe(self, agents: list[str], dt: float, reasons: dict[str, str | None]):

@@ -68,10 +68,12 @@ class Camera:
 
     @property
     def K(self) -> NDArray[np.float64]:
-        """(3, 3) float64 intrinsic matrix."""
-        return np.array(
-            [[self.fx, self.skew, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]]
-        )
+        """(3, 3) float64 intrinsic matrix (a fresh copy; built once per camera)."""
+        cached = self.__dict__.get("_K")
+        if cached is None:  # a frozen camera's K never changes; every agent-step asks for it
+            cached = np.array([[self.fx, self.skew, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+            object.__setattr__(self, "_K", cached)
+        return cached.copy()
 
     @property
     def size(self) -> tuple[int, int]:

@@ -65,7 +65,7 @@ class RayScene:
         self._lo = np.array(lo).reshape(-1, 3) - pad
         self._hi = np.array(hi).reshape(-1, 3) + pad
         self._rects = np.array(rects, dtype=np.float64).reshape(-1, 5)
-        self._box_poses, self._box_halves = np.zeros((0, 4, 4)), np.zeros((0, 3))
+        self.set_boxes(np.zeros((0, 4, 4)), np.zeros((0, 3)))
 
     @property
     def boxes(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
@@ -80,6 +80,9 @@ class RayScene:
         """Set the oriented boxes at once: ``poses`` (B, 4, 4), ``half_extents`` (B, 3)."""
         self._box_poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
         self._box_halves = np.ascontiguousarray(half_extents, dtype=np.float64).reshape(-1, 3)
+        # the compiled loop's rotations and centres, once per pose change, not per query
+        self._box_R = np.ascontiguousarray(self._box_poses[:, :3, :3])
+        self._box_c = np.ascontiguousarray(self._box_poses[:, :3, 3])
 
     @property
     def n_triangles(self) -> int:
@@ -106,11 +109,9 @@ class RayScene:
         )
         if skip.shape != (len(d),):  # the compiled loop reads skip[r] for every ray, unchecked
             raise ValueError(f"skip_box must hold one box index per ray ({len(d)}), got shape {skip.shape}")
-        box_R = np.ascontiguousarray(self._box_poses[:, :3, :3])
-        box_c = np.ascontiguousarray(self._box_poses[:, :3, 3])
         return _first_hit(
             o, d, float(t_min), skip, self._rects, self._lo, self._hi, self._start, self._count,
-            self._v0, self._e1, self._e2, box_R, box_c, self._box_halves,
+            self._v0, self._e1, self._e2, self._box_R, self._box_c, self._box_halves,
         )
 
 

@@ -66,7 +66,7 @@ UNDEFINED = -1.0
 
 def _number(x: float) -> float:
     x = float(x)
-    return x if np.isfinite(x) else UNDEFINED
+    return x if math.isfinite(x) else UNDEFINED
 
 
 def failure_code_number(code: FailureCode | None) -> int:
