@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from localization.checks import check_number
 from localization.geometry import as_points, check_transform, inverse_intrinsics
 from uav_struct_env.sim.camera import Camera
-from uav_struct_env.sim.visibility import window_visibility
+from uav_struct_env.sim.visibility import _tolerances, _windows
 
 __all__ = ["RayScene", "raycast_visibility"]
 
@@ -84,6 +84,11 @@ class RayScene:
         self._box_R = np.ascontiguousarray(self._box_poses[:, :3, :3])
         self._box_c = np.ascontiguousarray(self._box_poses[:, :3, 3])
 
+    def _arrays(self) -> tuple[NDArray, ...]:
+        """The scene as :func:`_first_hit` reads it, after the ray arguments."""
+        return (self._rects, self._lo, self._hi, self._start, self._count, self._v0, self._e1, self._e2,
+                self._box_R, self._box_c, self._box_halves)
+
     @property
     def n_triangles(self) -> int:
         """Triangles tested one by one (flat rectangles excluded)."""
@@ -109,10 +114,7 @@ class RayScene:
         )
         if skip.shape != (len(d),):  # the compiled loop reads skip[r] for every ray, unchecked
             raise ValueError(f"skip_box must hold one box index per ray ({len(d)}), got shape {skip.shape}")
-        return _first_hit(
-            o, d, float(t_min), skip, self._rects, self._lo, self._hi, self._start, self._count,
-            self._v0, self._e1, self._e2, self._box_R, self._box_c, self._box_halves,
-        )
+        return _first_hit(o, d, float(t_min), skip, *self._arrays())
 
 
 def _area(tri: NDArray[np.float64]) -> float:
@@ -237,18 +239,76 @@ def raycast_visibility(
     if not isinstance(camera, Camera):
         raise TypeError(f"camera must be a uav_struct_env.sim.camera.Camera, got {type(camera).__name__}")
     check_number("radius (pixels)", radius, 0, integer=True, type_error=ValueError)
+    if not -1 <= skip_box < len(scene._box_halves):
+        raise ValueError(f"skip_box must be -1 or one of the scene's {len(scene._box_halves)} boxes, "
+                         f"got {skip_box}")
     R, t = np.ascontiguousarray(T[:3, :3]), T[:3, 3]
-    K_inv = inverse_intrinsics(camera.K)
-
-    def ray_depths(rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.float64]:
-        rays = _pixel_rays(rows.ravel(), cols.ravel(), K_inv, R)
-        skip = None if skip_box < 0 else np.full(len(rays), skip_box, dtype=np.int64)
-        depth = scene.first_hit(-R.T @ t, rays, t_min=camera.near, skip_box=skip)
-        return np.minimum(depth, camera.far).reshape(rows.shape)
-
+    K = camera.K
     # The depth is exact (no buffer quantization): the tolerance of a 24-bit buffer.
-    return window_visibility(xyz, ids_arr, T, camera, ray_depths, radius=radius, abs_tol=abs_tol,
-                             rel_tol=rel_tol, depth_bits=24)
+    uv, in_frame, visible = _raycast_windows(
+        np.ascontiguousarray(xyz), R, np.ascontiguousarray(t), K, inverse_intrinsics(K), -R.T @ t,
+        int(camera.width), int(camera.height), float(camera.near), float(camera.far), int(radius),
+        float(abs_tol), float(rel_tol), 24, int(skip_box), *scene._arrays(),
+    )
+    return {"ids": ids_arr.copy(), "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}
+
+
+@njit(cache=True, nogil=True)
+def _raycast_windows(
+    xyz: NDArray, R: NDArray, t: NDArray, K: NDArray, K_inv: NDArray, origin: NDArray, width: int,
+    height: int, near: float, far: float, radius: int, abs_tol: float, rel_tol: float, depth_bits: int,
+    skip_box: int, rects: NDArray, lo: NDArray, hi: NDArray, start: NDArray, count: NDArray,
+    v0: NDArray, e1: NDArray, e2: NDArray, box_R: NDArray, box_c: NDArray, box_half: NDArray,
+) -> tuple[NDArray, NDArray, NDArray]:
+    """:func:`~uav_struct_env.sim.visibility.window_visibility`'s test on ray-cast depths, compiled.
+
+    The windows and depth limits of the depth test (:func:`~uav_struct_env.sim.visibility._windows`,
+    ``_tolerances``); a ray through each in-frame landmark's window centre first (a landmark it
+    shows is visible whatever the other pixels show), then rays through the other pixels of the
+    windows whose centre is hidden; a pixel's depth is its first hit (:func:`_first_hit`, from
+    ``origin``, the camera centre) capped at ``far``. Returns ``(uv, in_frame, visible)``.
+    """
+    uv, z, in_frame, rows, cols = _windows(xyz, R, t, K, width, height, near, radius)
+    visible = np.zeros(xyz.shape[0], dtype=np.bool_)
+    f = rows.shape[0]
+    if f == 0:
+        return uv, in_frame, visible
+    idx = np.flatnonzero(in_frame)
+    zf = np.empty(f)
+    for j in range(f):
+        zf[j] = z[idx[j]]
+    limit = zf - _tolerances(zf, near, far, abs_tol, rel_tol, depth_bits)
+    depth = _first_hit(origin, _pixel_rays(rows[:, radius, radius].copy(), cols[:, radius, radius].copy(),
+                                           K_inv, R),
+                       near, np.full(f, skip_box, dtype=np.int64), rects, lo, hi, start, count, v0, e1,
+                       e2, box_R, box_c, box_half)
+    rest = []
+    for j in range(f):
+        d = depth[j]
+        visible[idx[j]] = (far if far < d else d) >= limit[j]  # np.minimum(depth, far), NaN kept
+        if not visible[idx[j]]:
+            rest.append(j)
+    if len(rest) == 0:
+        return uv, in_frame, visible
+    k = 2 * radius + 1
+    n = len(rest) * k * k
+    rr = np.empty(n, dtype=rows.dtype)
+    cc = np.empty(n, dtype=cols.dtype)
+    for q in range(len(rest)):
+        for a in range(k):
+            for b in range(k):
+                rr[(q * k + a) * k + b] = rows[rest[q], a, b]
+                cc[(q * k + a) * k + b] = cols[rest[q], a, b]
+    depth = _first_hit(origin, _pixel_rays(rr, cc, K_inv, R), near, np.full(n, skip_box, dtype=np.int64),
+                       rects, lo, hi, start, count, v0, e1, e2, box_R, box_c, box_half)
+    for q in range(len(rest)):
+        j = rest[q]
+        for p in range(k * k):
+            d = depth[q * k * k + p]
+            if (far if far < d else d) >= limit[j]:
+                visible[idx[j]] = True
+                break
+    return uv, in_frame, visible
 
 
 @njit(cache=True, nogil=True)

@@ -47,9 +47,22 @@ def depth_tolerance(
 ) -> NDArray[np.float64]:
     """Depth tolerance (m) of the occlusion test at depth ``z`` (m); see the module docstring."""
     z = np.asarray(z, dtype=np.float64)
-    n, f = camera.near, camera.far
-    step = z**2 * (f - n) / (f * n * 2.0**depth_bits)
-    return abs_tol + rel_tol * np.abs(z) + 2.0 * step
+    out = _tolerances(np.ascontiguousarray(z.reshape(-1)), float(camera.near), float(camera.far),
+                      float(abs_tol), float(rel_tol), int(depth_bits))
+    return out.reshape(z.shape)
+
+
+@njit(cache=True, nogil=True)
+def _tolerances(
+    z: NDArray, near: float, far: float, abs_tol: float, rel_tol: float, depth_bits: int
+) -> NDArray:
+    """:func:`depth_tolerance` of each depth in ``z`` (1-D), compiled (also the ray cast's)."""
+    out = np.empty(z.shape[0])
+    scale = far * near * 2.0**depth_bits
+    for i in range(z.shape[0]):
+        step = z[i] ** 2 * (far - near) / scale
+        out[i] = abs_tol + rel_tol * abs(z[i]) + 2.0 * step
+    return out
 
 
 def landmark_visibility(
@@ -130,8 +143,8 @@ def window_visibility(
 
     ``sample_depth(rows, cols)`` returns the depth (m along the optical axis; ``camera.far`` or
     more where nothing is hit) at integer pixels ``rows``, ``cols`` (same shape): a rendered depth
-    image's pixels (:func:`landmark_visibility`) or ray-cast depths
-    (:func:`uav_struct_env.sim.raycast.raycast_visibility`).
+    image's pixels (:func:`landmark_visibility`). The ray cast makes the same test in one compiled
+    call (:func:`uav_struct_env.sim.raycast.raycast_visibility`).
     """
     T = np.asarray(cam_from_world, dtype=np.float64)
     uv, z, in_frame, rows, cols = _windows(
@@ -144,15 +157,8 @@ def window_visibility(
         idx = np.flatnonzero(in_frame)
         limit = z[idx] - depth_tolerance(z[idx], camera, abs_tol=abs_tol, rel_tol=rel_tol,
                                          depth_bits=depth_bits)
-        # The window's centre pixel first: a landmark it shows is visible whatever the other
-        # pixels show, so only the others' windows are sampled (a ray cast is per pixel).
-        centre = np.asarray(sample_depth(rows[:, radius, radius], cols[:, radius, radius]),
-                            dtype=np.float64).reshape(-1) >= limit
-        visible[idx] = centre
-        rest = np.flatnonzero(~centre)
-        if rest.size:
-            samples = np.asarray(sample_depth(rows[rest], cols[rest]), dtype=np.float64)
-            visible[idx[rest]] = np.any(samples.reshape(rest.size, -1) >= limit[rest, None], axis=1)
+        samples = np.asarray(sample_depth(rows, cols), dtype=np.float64)
+        visible[idx] = np.any(samples.reshape(len(idx), -1) >= limit[:, None], axis=1)
     return {"ids": ids.copy(), "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}
 
 
