@@ -106,3 +106,16 @@ def test_bad_inputs_raise():
         view_matrix(np.eye(3))
     with pytest.raises(TypeError, match="cx must be a number"):
         Camera(cx="640")
+
+
+def test_a_replaced_camera_equals_dataclasses_replace_and_builds_its_own_K():
+    """The renders' unchecked copy (near plane, shifted principal point) is ``replace``'s camera."""
+    from dataclasses import replace
+
+    cam = Camera().scaled(64, 36)
+    before = cam.K  # cached on the camera
+    moved = cam._replaced(cx=cam.cx - 0.5, cy=cam.cy + 0.25, near=0.7)
+    assert moved == replace(cam, cx=cam.cx - 0.5, cy=cam.cy + 0.25, near=0.7)
+    assert moved.K[0, 2] == cam.cx - 0.5 and moved.K[1, 2] == cam.cy + 0.25  # not the cached K
+    np.testing.assert_array_equal(cam.K, before)
+    assert type(moved.near) is float and moved.width == 64

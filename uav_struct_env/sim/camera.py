@@ -17,7 +17,7 @@ so no extra offset is needed.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -74,6 +74,19 @@ class Camera:
             cached = np.array([[self.fx, self.skew, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
             object.__setattr__(self, "_K", cached)
         return cached.copy()
+
+    def _replaced(self, **floats: float) -> Camera:
+        """``dataclasses.replace`` of float fields, without the checks.
+
+        For values the caller derived from this camera's own (a render's near plane, a shifted
+        principal point): every render makes one or two such cameras. The cached ``K`` is not
+        carried over.
+        """
+        out = object.__new__(Camera)
+        values = {name: getattr(self, name) for name in _FIELDS}
+        values.update({name: float(v) for name, v in floats.items()})
+        out.__dict__.update(values)  # a frozen dataclass's fields live in its __dict__
+        return out
 
     @property
     def size(self) -> tuple[int, int]:
@@ -142,6 +155,9 @@ def view_matrix(cam_from_world: ArrayLike) -> tuple[float, ...]:
     T = check_transform("cam_from_world", cam_from_world)
     V = GL_FROM_CV @ T
     return tuple(float(x) for x in V.T.reshape(-1))
+
+
+_FIELDS = tuple(f.name for f in fields(Camera))
 
 
 def depth_from_buffer(buffer: ArrayLike, camera: Camera) -> NDArray[np.float32]:

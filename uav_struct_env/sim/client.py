@@ -299,7 +299,7 @@ class RenderClient:
         self.activate()
         if self.backend == "tiny":
             du, dv = TINY_PIXEL_SHIFT
-            shifted = replace(camera, cx=camera.cx - du, cy=camera.cy - dv)
+            shifted = camera._replaced(cx=camera.cx - du, cy=camera.cy - dv)
             raw = self._render_once(view, shifted, segmentation, light, p.ER_TINY_RENDERER)
             return RawImage(np.ascontiguousarray(raw.rgb), raw.depth_buffer, raw.segmentation)
         tw, th = EGL_MAX_TILE

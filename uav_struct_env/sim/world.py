@@ -252,7 +252,7 @@ class SiteWorld:
                 f"camera must be a uav_struct_env.sim.camera.Camera, got {type(camera).__name__}"
             )
         T = check_transform("cam_from_world", cam_from_world)
-        used = replace(camera, near=self._near_plane(T, camera))
+        used = camera._replaced(near=self._near_plane(T, camera))  # checked: >= near, < far
         raw = self._client.render(view_matrix(T), used, segmentation=segmentation, light=self.light)
         rgb = raw.rgb
         background = raw.depth_buffer >= _BACKGROUND_DEPTH
@@ -291,16 +291,15 @@ class SiteWorld:
             lo_x, hi_x = (-0.5 - K[0, 2]) / K[0, 0], (camera.width - 0.5 - K[0, 2]) / K[0, 0]
             lo_y, hi_y = (-0.5 - K[1, 2]) / K[1, 1], (camera.height - 0.5 - K[1, 2]) / K[1, 1]
             x, y, zc = cam[..., 0], cam[..., 1], cam[..., 2]
-            outside = (
-                np.all(x < lo_x * zc, axis=1) | np.all(x > hi_x * zc, axis=1)
-                | np.all(y < lo_y * zc, axis=1) | np.all(y > hi_y * zc, axis=1)
-            )
+            # all eight corners beyond one side plane (the four tests stacked: one reduction)
+            sides = np.stack([x < lo_x * zc, x > hi_x * zc, y < lo_y * zc, y > hi_y * zc])
+            outside = sides.all(axis=2).any(axis=0)
             corners = np.concatenate([corners, extra[~outside]])
         z = corners @ R[2] + t[2]  # (boxes, 8) depth of every box corner
-        in_front = z.max(axis=1) > 0
-        if np.any(z[in_front].min(axis=1) <= camera.near):
+        nearest_corner = z[z.max(axis=1) > 0].min(axis=1)  # of each box in front of the camera
+        if (nearest_corner <= camera.near).any():
             return camera.near  # a box straddles the camera plane or is very close
-        nearest = float(z[in_front].min()) if np.any(in_front) else np.inf
+        nearest = float(nearest_corner.min()) if nearest_corner.size else np.inf
         # Ground plane z = 0: 1/depth is affine over the image, so its extremes are at the corners.
         centre_z = float(-(R.T @ t)[2])
         if centre_z <= 0:
