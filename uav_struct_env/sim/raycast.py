@@ -260,7 +260,7 @@ def _raycast_windows(
     skip_box: int, rects: NDArray, lo: NDArray, hi: NDArray, start: NDArray, count: NDArray,
     v0: NDArray, e1: NDArray, e2: NDArray, box_R: NDArray, box_c: NDArray, box_half: NDArray,
 ) -> tuple[NDArray, NDArray, NDArray]:
-    """:func:`~uav_struct_env.sim.visibility.window_visibility`'s test on ray-cast depths, compiled.
+    """The depth test of :mod:`uav_struct_env.sim.visibility` on ray-cast depths, compiled.
 
     The windows and depth limits of the depth test (:func:`~uav_struct_env.sim.visibility._windows`,
     ``_tolerances``); a ray through each in-frame landmark's window centre first (a landmark it

@@ -23,8 +23,6 @@ more in front (a column, the slab edge) always does.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
@@ -34,7 +32,7 @@ from localization.geometry import as_points, check_transform
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.site.model import LandmarkSet
 
-__all__ = ["depth_tolerance", "landmark_visibility", "window_visibility"]
+__all__ = ["depth_tolerance", "landmark_visibility"]
 
 
 def depth_tolerance(
@@ -123,43 +121,42 @@ def landmark_visibility(
         )
     check_number("radius (pixels)", radius, 0, integer=True, type_error=ValueError)
 
-    return window_visibility(xyz, ids_arr, T, camera, lambda rows, cols: D[rows, cols],
-                             radius=radius, abs_tol=abs_tol, rel_tol=rel_tol, depth_bits=depth_bits)
-
-
-def window_visibility(
-    xyz: NDArray[np.float64],
-    ids: NDArray[np.int64],
-    cam_from_world: NDArray[np.float64],
-    camera: Camera,
-    sample_depth: Callable[[NDArray[np.intp], NDArray[np.intp]], NDArray],
-    *,
-    radius: int,
-    abs_tol: float,
-    rel_tol: float,
-    depth_bits: int,
-) -> dict[str, NDArray]:
-    """The test of the module docstring on checked inputs, with the depths from ``sample_depth``.
-
-    ``sample_depth(rows, cols)`` returns the depth (m along the optical axis; ``camera.far`` or
-    more where nothing is hit) at integer pixels ``rows``, ``cols`` (same shape): a rendered depth
-    image's pixels (:func:`landmark_visibility`). The ray cast makes the same test in one compiled
-    call (:func:`uav_struct_env.sim.raycast.raycast_visibility`).
-    """
-    T = np.asarray(cam_from_world, dtype=np.float64)
-    uv, z, in_frame, rows, cols = _windows(
-        np.ascontiguousarray(xyz, dtype=np.float64), np.ascontiguousarray(T[:3, :3]),
-        np.ascontiguousarray(T[:3, 3]), np.ascontiguousarray(camera.K, dtype=np.float64),
-        int(camera.width), int(camera.height), float(camera.near), int(radius),
+    uv, in_frame, visible = _image_windows(
+        np.ascontiguousarray(xyz), np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
+        camera.K, int(camera.width), int(camera.height), float(camera.near), float(camera.far),
+        int(radius), float(abs_tol), float(rel_tol), int(depth_bits), np.ascontiguousarray(D),
     )
-    visible = np.zeros(len(xyz), dtype=bool)
-    if rows.shape[0]:
-        idx = np.flatnonzero(in_frame)
-        limit = z[idx] - depth_tolerance(z[idx], camera, abs_tol=abs_tol, rel_tol=rel_tol,
-                                         depth_bits=depth_bits)
-        samples = np.asarray(sample_depth(rows, cols), dtype=np.float64)
-        visible[idx] = np.any(samples.reshape(len(idx), -1) >= limit[:, None], axis=1)
-    return {"ids": ids.copy(), "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}
+    return {"ids": ids_arr.copy(), "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}
+
+
+@njit(cache=True, nogil=True)
+def _image_windows(
+    xyz: NDArray, R: NDArray, t: NDArray, K: NDArray, width: int, height: int, near: float, far: float,
+    radius: int, abs_tol: float, rel_tol: float, depth_bits: int, depth: NDArray,
+) -> tuple[NDArray, NDArray, NDArray]:
+    """The test of the module docstring on a depth image, compiled: ``(uv, in_frame, visible)``.
+
+    The windows of :func:`_windows`; a landmark is visible when any pixel of its window has a
+    depth of at least ``z - tolerance(z)`` (:func:`_tolerances`). The ray cast makes the same
+    test on ray-cast depths (:func:`uav_struct_env.sim.raycast.raycast_visibility`).
+    """
+    uv, z, in_frame, rows, cols = _windows(xyz, R, t, K, width, height, near, radius)
+    visible = np.zeros(xyz.shape[0], dtype=np.bool_)
+    f = rows.shape[0]
+    if f == 0:
+        return uv, in_frame, visible
+    idx = np.flatnonzero(in_frame)
+    zf = np.empty(f)
+    for j in range(f):
+        zf[j] = z[idx[j]]
+    limit = zf - _tolerances(zf, near, far, abs_tol, rel_tol, depth_bits)
+    k = 2 * radius + 1
+    for j in range(f):
+        for a in range(k):
+            for b in range(k):
+                if depth[rows[j, a, b], cols[j, a, b]] >= limit[j]:
+                    visible[idx[j]] = True
+    return uv, in_frame, visible
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

@@ -25,7 +25,7 @@ import tempfile
 import time
 import warnings
 import weakref
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -340,12 +340,12 @@ class SiteWorld:
                 raise ValueError("landmark_truth needs a render made with depth=True")
             bits = depth.depth_bits
             if depth.camera is not None:
-                camera = replace(camera, near=depth.camera.near, far=depth.camera.far)
+                camera = camera._replaced(near=depth.camera.near, far=depth.camera.far)
             depth = depth.depth
         else:
             meta = self._depth_meta.get(id(depth))
             if meta is not None and meta[0]() is depth:
-                camera = replace(camera, near=meta[1], far=meta[2])
+                camera = camera._replaced(near=meta[1], far=meta[2])
                 bits = meta[3]
         return landmark_visibility(
             self.site.landmarks(name), cam_from_world, camera, depth, depth_bits=bits
