@@ -169,8 +169,8 @@ class Localizer:
             raise ValueError("landmarks_xyz must hold at least one landmark, got shape (0, 3)")
         if not np.all(np.isfinite(X)):
             raise ValueError("landmarks_xyz must be finite")
-        self.landmarks_xyz = X
-        self.K = check_intrinsics("K", K)
+        self.landmarks_xyz = np.ascontiguousarray(X)  # the compiled steps read it as it is
+        self.K = np.ascontiguousarray(check_intrinsics("K", K))
         self.association = check_choice(
             "association", association, ASSOCIATION_METHODS, type_error=TypeError
         )

@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from localization.checks import check_number
 from localization.geometry import as_points, check_transform, inverse_intrinsics
 from uav_struct_env.sim.camera import Camera
-from uav_struct_env.sim.visibility import _tolerances, _windows
+from uav_struct_env.sim.visibility import _window_limits
 
 __all__ = ["RayScene", "raycast_visibility"]
 
@@ -262,22 +262,20 @@ def _raycast_windows(
 ) -> tuple[NDArray, NDArray, NDArray]:
     """The depth test of :mod:`uav_struct_env.sim.visibility` on ray-cast depths, compiled.
 
-    The windows and depth limits of the depth test (:func:`~uav_struct_env.sim.visibility._windows`,
-    ``_tolerances``); a ray through each in-frame landmark's window centre first (a landmark it
-    shows is visible whatever the other pixels show), then rays through the other pixels of the
-    windows whose centre is hidden; a pixel's depth is its first hit (:func:`_first_hit`, from
-    ``origin``, the camera centre) capped at ``far``. Returns ``(uv, in_frame, visible)``.
+    The windows and depth limits of the depth test
+    (:func:`~uav_struct_env.sim.visibility._window_limits`); a ray through each in-frame
+    landmark's window centre first (a landmark it shows is visible whatever the other pixels
+    show), then rays through the other pixels of the windows whose centre is hidden; a pixel's
+    depth is its first hit (:func:`_first_hit`, from ``origin``, the camera centre) capped at
+    ``far``. Returns ``(uv, in_frame, visible)``.
     """
-    uv, z, in_frame, rows, cols = _windows(xyz, R, t, K, width, height, near, radius)
+    uv, in_frame, rows, cols, idx, limit = _window_limits(
+        xyz, R, t, K, width, height, near, far, radius, abs_tol, rel_tol, depth_bits
+    )
     visible = np.zeros(xyz.shape[0], dtype=np.bool_)
     f = rows.shape[0]
     if f == 0:
         return uv, in_frame, visible
-    idx = np.flatnonzero(in_frame)
-    zf = np.empty(f)
-    for j in range(f):
-        zf[j] = z[idx[j]]
-    limit = zf - _tolerances(zf, near, far, abs_tol, rel_tol, depth_bits)
     depth = _first_hit(origin, _pixel_rays(rows[:, radius, radius].copy(), cols[:, radius, radius].copy(),
                                            K_inv, R),
                        near, np.full(f, skip_box, dtype=np.int64), rects, lo, hi, start, count, v0, e1,

@@ -1,8 +1,10 @@
 """Ground-truth landmark visibility: pixel position, inside the image, and not occluded.
 
 No pybullet: the depth image may come from any renderer, so this is testable on synthetic depth
-maps. The projection and the windows are one compiled loop (numba, :func:`_windows`): this test
-runs for every agent at every env step.
+maps. The test runs for every agent at every env step, so it is compiled (numba): the projection
+and the windows (:func:`_windows`), the tolerances (:func:`_tolerances`) and the window test on a
+depth image (:func:`_image_windows`); the ray cast (:mod:`uav_struct_env.sim.raycast`) makes the
+same test on ray-cast depths with the same windows and tolerances.
 
 A landmark is **visible** when it is in front of the camera (depth > near), its projection lies
 inside the image (``-0.5 <= u < W - 0.5`` and the same for ``v``: the area covered by pixels) and
@@ -136,27 +138,39 @@ def _image_windows(
 ) -> tuple[NDArray, NDArray, NDArray]:
     """The test of the module docstring on a depth image, compiled: ``(uv, in_frame, visible)``.
 
-    The windows of :func:`_windows`; a landmark is visible when any pixel of its window has a
-    depth of at least ``z - tolerance(z)`` (:func:`_tolerances`). The ray cast makes the same
-    test on ray-cast depths (:func:`uav_struct_env.sim.raycast.raycast_visibility`).
+    The windows and limits of :func:`_window_limits`; a landmark is visible when any pixel of its
+    window has a depth of at least its limit. The ray cast makes the same test on ray-cast depths
+    (:func:`uav_struct_env.sim.raycast.raycast_visibility`).
     """
-    uv, z, in_frame, rows, cols = _windows(xyz, R, t, K, width, height, near, radius)
+    uv, in_frame, rows, cols, idx, limit = _window_limits(
+        xyz, R, t, K, width, height, near, far, radius, abs_tol, rel_tol, depth_bits
+    )
     visible = np.zeros(xyz.shape[0], dtype=np.bool_)
-    f = rows.shape[0]
-    if f == 0:
-        return uv, in_frame, visible
-    idx = np.flatnonzero(in_frame)
-    zf = np.empty(f)
-    for j in range(f):
-        zf[j] = z[idx[j]]
-    limit = zf - _tolerances(zf, near, far, abs_tol, rel_tol, depth_bits)
     k = 2 * radius + 1
-    for j in range(f):
+    for j in range(rows.shape[0]):
         for a in range(k):
             for b in range(k):
                 if depth[rows[j, a, b], cols[j, a, b]] >= limit[j]:
                     visible[idx[j]] = True
     return uv, in_frame, visible
+
+
+@njit(cache=True, nogil=True)
+def _window_limits(
+    xyz: NDArray, R: NDArray, t: NDArray, K: NDArray, width: int, height: int, near: float, far: float,
+    radius: int, abs_tol: float, rel_tol: float, depth_bits: int,
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """:func:`_windows` and the depth each in-frame landmark's window must reach to show it.
+
+    Returns ``(uv, in_frame, rows, cols, idx, limit)``: ``idx`` (F,) the in-frame landmarks'
+    indices, ``limit`` (F,) their ``z - tolerance(z)`` (:func:`_tolerances`).
+    """
+    uv, z, in_frame, rows, cols = _windows(xyz, R, t, K, width, height, near, radius)
+    idx = np.flatnonzero(in_frame)
+    zf = np.empty(idx.shape[0])
+    for j in range(idx.shape[0]):
+        zf[j] = z[idx[j]]
+    return uv, in_frame, rows, cols, idx, zf - _tolerances(zf, near, far, abs_tol, rel_tol, depth_bits)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
