@@ -22,6 +22,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
+from localization.checks import as_floats
+
 __all__ = ["BODY_FROM_CAM", "attitude_from_world_from_cam", "world_from_cam_from_attitude"]
 
 #: Rotation taking OpenCV camera axes to FLU body axes (columns: camera x, y, z in the body frame).
@@ -36,7 +38,7 @@ BODY_FROM_CAM = np.array(
 
 def world_from_cam_from_attitude(position: ArrayLike, attitude: ArrayLike) -> NDArray[np.float64]:
     """4x4 ``world_from_cam`` of a camera at ``position`` (3,) with ``attitude`` (roll, pitch, yaw)."""
-    roll, pitch, yaw = _three_floats(attitude)
+    roll, pitch, yaw = as_floats("attitude", attitude, 3)
     # Rz(yaw) @ Ry(pitch) @ Rx(roll) @ BODY_FROM_CAM, written out on Python floats (scipy's
     # from_euler("ZYX") gives the same matrix at several times the cost, and the env builds
     # several per agent-step); BODY_FROM_CAM only permutes and negates columns, so the product
@@ -44,21 +46,13 @@ def world_from_cam_from_attitude(position: ArrayLike, attitude: ArrayLike) -> ND
     cr, sr = math.cos(roll), math.sin(roll)
     cp, sp = math.cos(pitch), math.sin(pitch)
     cy, sy = math.cos(yaw), math.sin(yaw)
-    x, y, z = _three_floats(position)
+    x, y, z = as_floats("position", position, 3)
     return np.array([
         [-(cy * sp * sr - sy * cr), -(cy * sp * cr + sy * sr), cy * cp, x],
         [-(sy * sp * sr + cy * cr), -(sy * sp * cr - cy * sr), sy * cp, y],
         [-(cp * sr), -(cp * cr), -sp, z],
         [0.0, 0.0, 0.0, 1.0],
     ])
-
-
-def _three_floats(values: ArrayLike) -> tuple[float, float, float]:
-    """``values`` (3 numbers) as three Python floats; a tuple of floats (a state's) as it is."""
-    if type(values) is tuple and len(values) == 3 and all(type(v) is float for v in values):
-        return values
-    a, b, c = (float(v) for v in np.asarray(values, dtype=np.float64).reshape(3))
-    return a, b, c
 
 
 def attitude_from_world_from_cam(

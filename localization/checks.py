@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["check_choice", "check_number"]
+__all__ = ["as_floats", "check_choice", "check_number"]
 
 
 def _fmt(x: float) -> str:
@@ -109,3 +109,17 @@ def check_choice(
     if value not in options:
         raise error(f"{name} must be one of {tuple(options)}, got {value!r}")
     return value
+
+
+def as_floats(name: str, values: Any, n: int) -> tuple[float, ...]:
+    """``values`` (``n`` numbers) as a tuple of Python floats, or ValueError naming ``name``.
+
+    A tuple of ``n`` floats (a state's position, say) is returned as it is: the per-step callers
+    pay no array conversion.
+    """
+    if type(values) is tuple and len(values) == n and all(type(v) is float for v in values):
+        return values
+    arr = np.asarray(values, dtype=np.float64)
+    if arr.size != n:
+        raise ValueError(f"{name} must hold {n} numbers, got {values!r}")
+    return tuple(float(v) for v in arr.reshape(n))

@@ -141,3 +141,15 @@ def test_check_transform_names_each_fault_and_agrees_with_allclose_off_the_bound
         assert accepted == _allclose_reference(T)
         verdicts.append(accepted)
     assert 0.1 < np.mean(verdicts) < 0.9  # both sides of the boundary were tried
+
+
+def test_as_floats_passes_float_tuples_through_converts_the_rest_and_names_a_bad_size():
+    from localization.checks import as_floats
+
+    t = (1.0, 2.5, -3.0)
+    assert as_floats("p", t, 3) is t
+    got = as_floats("p", np.array([1, 2, 3], dtype=np.int32), 3)
+    assert got == (1.0, 2.0, 3.0) and all(type(v) is float for v in got)
+    assert as_floats("c", [np.float64(0.5), 2], 2) == (0.5, 2.0)
+    with pytest.raises(ValueError, match=r"center_xy must hold 2 numbers"):
+        as_floats("center_xy", [1.0, 2.0, 3.0], 2)

@@ -31,7 +31,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from localization.checks import check_number
+from localization.checks import as_floats, check_number
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.attitude import world_from_cam_from_attitude
 from uav_struct_env.site import Site
@@ -48,16 +48,6 @@ __all__ = [
 ]
 
 ACTION_COMPONENTS = ("forward", "left", "up", "yaw_rate", "gimbal_pitch_rate")
-
-
-def _floats(name: str, values: ArrayLike, n: int) -> tuple[float, ...]:
-    """``values`` (``n`` numbers) as Python floats; a tuple of floats (a state's) as it is."""
-    if type(values) is tuple and len(values) == n and all(type(v) is float for v in values):
-        return values
-    arr = np.asarray(values, dtype=np.float64)
-    if arr.size != n:
-        raise ValueError(f"{name} must hold {n} numbers, got {values!r}")
-    return tuple(float(v) for v in arr.reshape(n))
 
 
 def wrap_angle(a: ArrayLike) -> NDArray[np.float64] | float:
@@ -157,12 +147,12 @@ class Geofence:
 
     def violation(self, position: ArrayLike, center_xy: ArrayLike) -> str | None:
         """Why ``position`` (3,) is outside the fence (``"below_min_altitude"`` ...), or None."""
-        x, y, z = _floats("position", position, 3)
+        x, y, z = as_floats("position", position, 3)
         if z < self.min_altitude:
             return "below_min_altitude"
         if z > self.max_altitude:
             return "above_max_altitude"
-        cx, cy = _floats("center_xy", center_xy, 2)
+        cx, cy = as_floats("center_xy", center_xy, 2)
         if float(np.hypot(x - cx, y - cy)) > self.max_distance:
             return "beyond_max_distance"
         return None
