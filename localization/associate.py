@@ -102,7 +102,7 @@ from localization.compiled import refine_reassign, shift_votes
 from localization.compiled_frame import assignment_costs, assignment_rows, candidates, upright_starts
 from localization.compiled_scores import anchor_pairs, check_many, missed_many, warm_hypothesis
 from localization.failure import FailureCode
-from localization.geometry import camera_center, inverse_intrinsics, project
+from localization.geometry import camera_center, inverse_intrinsics, make_transform, project
 from localization.pnp import (
     PriorSigmas,
     is_coplanar,
@@ -847,8 +847,7 @@ def _warm_association(
     pairs = int(np.count_nonzero(a >= 0))
     if not alive or missed > 0 or pairs != P.good.size or pairs <= P.need:
         return None
-    T = np.zeros((4, 4))  # to_transforms' matrix
-    T[:3, :3], T[:3, 3], T[3, 3] = R, t, 1.0
+    T = make_transform(R, t)
     if far:  # a rotation near pi from the prior's: the exact logarithm
         prior_sq = prior_mahalanobis_sq(T, P.prior, P.sig)
     if max_prior_mahalanobis_sq is not None and prior_sq > max_prior_mahalanobis_sq:
