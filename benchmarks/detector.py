@@ -55,7 +55,8 @@ from uav_struct_env.datasets.landmarks import ACTIVITIES, CAMERAS, IMAGINGS
 #: repeat training images and are not held out.
 SEEN_SEEDS = {0: "keypoint-network training", 1: "validation (both networks)",
               3: "refiner training", 5: "keypoint-network training on the IFC building",
-              6: "refiner training on the IFC building"}
+              6: "refiner training on the IFC building",
+              7: "refiner training on busy sites (landmarks_active_v4's second refiner)"}
 
 
 def main(seed: int = 2, layouts: int = 20, views: int = 5, match_px: float = 3.0,

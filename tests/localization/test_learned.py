@@ -236,6 +236,7 @@ def test_truth_bookkeeping_with_no_visible_landmark():
     ("landmarks_active_v1.onnx", "landmarks_active_v1_refiner.onnx"),
     ("landmarks_active_v2.onnx", "landmarks_active_v2_refiner.onnx"),
     ("landmarks_active_v2.onnx", "landmarks_active_v3_refiner.onnx"),  # the pair landmarks_active_v3
+    ("landmarks_active_v2.onnx", "landmarks_active_v4_refiner.onnx"),  # landmarks_active_v4 (ensemble)
 ])
 def test_the_opt_in_active_site_weights_ship_and_run(model, refiner):
     from pathlib import Path

@@ -1,0 +1,101 @@
+r"""Average several ONNX networks of one interface into one ONNX file (an ensemble).
+
+:func:`average_models` takes networks with the same single input and the same first output
+(for instance two patch refiners, :class:`localization.refine.PatchRefiner`'s interface) and writes
+one model that runs all of them on the shared input and returns the element-wise mean of their
+outputs (an ONNX ``Mean`` node). The result is an ordinary model file, so everything that takes a
+refiner path (``LearnedDetector(refiner=...)``, ``uav-struct study --refiner-model``,
+``LocalizationWrapper(refiner_model=...)``) takes the ensemble unchanged; inference costs the
+sum of its members. For the refiner the mean is taken over the sigmoid probabilities and the
+offsets, the same as averaging the members' outputs after running them one by one (to float32
+rounding).
+
+The committed ``landmarks_active_v4_refiner.onnx`` was built this way (model card)::
+
+    python -m uav_struct_env.training.ensemble localization/models/landmarks_active_v3_refiner.onnx \
+        runs/det4/refiner/refiner.onnx --out localization/models/landmarks_active_v4_refiner.onnx
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+
+import onnx
+from onnx import compose, helper
+
+__all__ = ["average_models"]
+
+
+def _interface(model: onnx.ModelProto) -> tuple:
+    graph = model.graph
+    if len(graph.input) != 1:
+        raise ValueError(f"expected a model with one input, got {[i.name for i in graph.input]}")
+    out = graph.output[0]
+    return (graph.input[0].type.SerializeToString(), out.type.SerializeToString(),
+            tuple((o.domain, o.version) for o in model.opset_import))
+
+
+def average_models(models: Sequence[str | Path], out: str | Path) -> Path:
+    """Write to ``out`` one ONNX model returning the mean of ``models``' first outputs.
+
+    Every member must have one input and the same input type, first-output type and opsets as
+    the first member. Returns the path written.
+
+    Raises:
+        ValueError: fewer than two models, or members that differ in interface (the first
+            difference named). FileNotFoundError: a member file is missing.
+    """
+    paths = [Path(m) for m in models]
+    if len(paths) < 2:
+        raise ValueError(f"an ensemble needs at least two models, got {len(paths)}")
+    for p in paths:
+        if not p.is_file():
+            raise FileNotFoundError(f"ONNX model not found: {p}")
+    loaded = [onnx.load(str(p)) for p in paths]
+    ref = _interface(loaded[0])
+    for p, m in zip(paths[1:], loaded[1:], strict=True):
+        if _interface(m) != ref:
+            raise ValueError(f"{p} has another input, output or opset than {paths[0]}; an ensemble "
+                             "averages models of one interface")
+    shared_in = loaded[0].graph.input[0]
+    nodes, inits, outputs = [], [], []
+    for k, m in enumerate(loaded):
+        m = compose.add_prefix(m, f"m{k}_")
+        g = m.graph
+        own_in = g.input[0].name
+        for node in g.node:
+            node.input[:] = [shared_in.name if name == own_in else name for name in node.input]
+            nodes.append(node)
+        inits.extend(g.initializer)
+        outputs.append(g.output[0].name)
+    first_out = loaded[0].graph.output[0]
+    nodes.append(helper.make_node("Mean", outputs, [first_out.name], name="ensemble_mean"))
+    graph = helper.make_graph(nodes, "ensemble", [shared_in], [first_out], initializer=inits)
+    merged = helper.make_model(graph, opset_imports=list(loaded[0].opset_import),
+                               producer_name="uav_struct_env.training.ensemble")
+    merged.ir_version = loaded[0].ir_version
+    merged.doc_string = "mean of: " + ", ".join(p.name for p in paths)
+    onnx.checker.check_model(merged)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    onnx.save(merged, str(out))
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("models", nargs="+", help="ONNX files of one interface (two or more)")
+    ap.add_argument("--out", required=True, help="the ensemble's ONNX file")
+    a = ap.parse_args(argv)
+    try:
+        path = average_models(a.models, a.out)
+    except (ValueError, FileNotFoundError) as e:
+        ap.error(str(e))
+    print(f"wrote {path}: the mean of {len(a.models)} models")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
