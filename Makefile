@@ -43,11 +43,14 @@ bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in d
 		[ -f benchmarks/$$b.py ] && $(BIN)/python benchmarks/$$b.py || exit 1; done
 
 # The active-site detector (localization/models/landmarks_active_v2.onnx +
-# landmarks_active_v3_refiner.onnx, the pair landmarks_active_v3) from scratch, as
-# localization/models/MODEL_CARD.md ("landmarks_active_v3") trained it: six
-# rendered datasets (~25 min; existing ones are kept), the keypoint network (42 min), then the
-# patch refiner mined from that network's candidates (~2 min) and trained over 25,000 steps
-# (~34 min alone; a step budget, so a shared machine only makes it slower), into $(DETECTOR_RUN).
+# landmarks_active_v4_refiner.onnx, the pair landmarks_active_v4) from scratch, as
+# localization/models/MODEL_CARD.md ("landmarks_active_v4") trained it: seven
+# rendered datasets (~35 min; existing ones are kept), the keypoint network (42 min), then two
+# patch refiners mined from that network's candidates (~2-4 min each) and trained over 25,000
+# steps each (~34 and ~37 min alone; a step budget, so a shared machine only makes it slower):
+# the first on the six mixed datasets (landmarks_active_v3's refiner), the second on those and a
+# busy-site set through the Mavic; the committed refiner is the two averaged into one ONNX file
+# (python -m uav_struct_env.training.ensemble), into $(DETECTOR_RUN)/refiner.onnx.
 # The data is what an active site through a real camera looks like: site activity none, light and
 # busy in turn over the layouts (--activity mixed) and every other image through the Mavic 2 Pro
 # preset (--camera mixed: lens distortion, rolling shutter, motion blur), every other pair of images
@@ -67,7 +70,10 @@ IFC_BUILDING := tests/data/ifc/duplex.ifc
 KEYPOINT_DATA := $(DATA)/keypoint_train $(DATA)/keypoint_ifc
 REFINER_DATA := $(DATA)/refiner_train $(DATA)/refiner_ifc
 
-detector: $(DETECTOR_RUN)/refiner/refiner.onnx
+REFINER_ARGS := --val $(DATA)/refiner_val --minutes 120 --max-steps 25000 --eval-every 1000 \
+	--workers 1 --seed 0 --detector-model $(DETECTOR_RUN)/keypoint/model.onnx --overwrite
+
+detector: $(DETECTOR_RUN)/refiner.onnx
 
 $(DATA)/keypoint_train/labels.json: | $(STAMP)
 	$(DATASET) $(DATA)/keypoint_train --layouts 200 --views 15 --seed 0 --workers 2
@@ -81,6 +87,9 @@ $(DATA)/refiner_ifc/labels.json: | $(STAMP)
 	$(DATASET) $(DATA)/refiner_ifc --site $(IFC_BUILDING) --layouts 21 --views 10 --seed 6 --scale 1.0 --workers 2
 $(DATA)/refiner_val/labels.json: | $(STAMP)
 	$(DATASET) $(DATA)/refiner_val --layouts 9 --views 10 --seed 1 --scale 1.0 --workers 2
+$(DATA)/refiner_busy/labels.json: | $(STAMP)
+	$(BIN)/python -m uav_struct_env.datasets --activity busy --camera mavic2pro --imaging mixed --overwrite \
+		$(DATA)/refiner_busy --layouts 150 --views 10 --seed 7 --scale 1.0 --workers 2
 
 $(DETECTOR_RUN)/keypoint/model.onnx: $(KEYPOINT_DATA:%=%/labels.json) $(DATA)/keypoint_val/labels.json
 	$(BIN)/python -m uav_struct_env.training.train_detector --data $(KEYPOINT_DATA) \
@@ -90,9 +99,15 @@ $(DETECTOR_RUN)/keypoint/model.onnx: $(KEYPOINT_DATA:%=%/labels.json) $(DATA)/ke
 $(DETECTOR_RUN)/refiner/refiner.onnx: $(DETECTOR_RUN)/keypoint/model.onnx \
 		$(REFINER_DATA:%=%/labels.json) $(DATA)/refiner_val/labels.json
 	$(BIN)/python -m uav_struct_env.training.train_refiner --data $(REFINER_DATA) \
-		--val $(DATA)/refiner_val --out $(DETECTOR_RUN)/refiner --minutes 120 --max-steps 25000 \
-		--eval-every 1000 \
-		--workers 1 --seed 0 --detector-model $(DETECTOR_RUN)/keypoint/model.onnx --overwrite
+		--out $(DETECTOR_RUN)/refiner $(REFINER_ARGS)
+
+$(DETECTOR_RUN)/refiner_busy/refiner.onnx: $(DETECTOR_RUN)/keypoint/model.onnx \
+		$(REFINER_DATA:%=%/labels.json) $(DATA)/refiner_busy/labels.json $(DATA)/refiner_val/labels.json
+	$(BIN)/python -m uav_struct_env.training.train_refiner --data $(REFINER_DATA) $(DATA)/refiner_busy \
+		--out $(DETECTOR_RUN)/refiner_busy $(REFINER_ARGS)
+
+$(DETECTOR_RUN)/refiner.onnx: $(DETECTOR_RUN)/refiner/refiner.onnx $(DETECTOR_RUN)/refiner_busy/refiner.onnx
+	$(BIN)/python -m uav_struct_env.training.ensemble $^ --out $@
 
 clean:
 	rm -rf $(VENV) renders results site
