@@ -25,7 +25,7 @@ visible pairs then count, and the pose is as far off as that displaced point mak
 ``--detector-model`` / ``--refiner-model`` evaluate other weights than the committed ones;
 ``--keep DIR`` keeps every run's outputs.
 
-    .venv/bin/python benchmarks/site_conditions_study.py                  # ~10-15 min on 2 cores
+    .venv/bin/python benchmarks/site_conditions_study.py                  # ~2-3 min on 2 cores (2026-11-27)
     .venv/bin/python benchmarks/site_conditions_study.py --detector-model kp.onnx --refiner-model ref.onnx
 """
 
