@@ -32,7 +32,7 @@ def test_ensemble_output_is_the_mean_of_its_members(tmp_path):
 
 
 def test_committed_v4_refiner_contains_v3():
-    """landmarks_active_v4 = mean(v3, a second refiner): 2 x v3's output minus v4's is that one."""
+    """landmarks_active_v4 = mean(v3, a second refiner): 2 x v4's output minus v3's is that one."""
     x = _patches()
     v3, v4 = OnnxNet(V3)(x).astype(np.float64), OnnxNet(V4)(x).astype(np.float64)
     other = 2 * v4 - v3
@@ -56,7 +56,7 @@ def test_bad_members_are_refused(tmp_path, capsys):
         average_models([V3], tmp_path / "one.onnx")
     with pytest.raises(FileNotFoundError, match="nope.onnx"):
         average_models([V3, tmp_path / "nope.onnx"], tmp_path / "e.onnx")
-    with pytest.raises(ValueError, match="another input, output or opset"):
+    with pytest.raises(ValueError, match="has another input than .*one interface"):
         average_models([V3, DEFAULT_MODEL], tmp_path / "mixed.onnx")  # a keypoint network
     assert not (tmp_path / "mixed.onnx").exists()
     with pytest.raises(SystemExit):

@@ -28,13 +28,15 @@ from onnx import compose, helper
 __all__ = ["average_models"]
 
 
-def _interface(model: onnx.ModelProto) -> tuple:
+def _interface(path: Path, model: onnx.ModelProto) -> dict[str, bytes | tuple]:
+    """What members must share: the input's and first output's types, the opsets."""
     graph = model.graph
     if len(graph.input) != 1:
-        raise ValueError(f"expected a model with one input, got {[i.name for i in graph.input]}")
-    out = graph.output[0]
-    return (graph.input[0].type.SerializeToString(), out.type.SerializeToString(),
-            tuple((o.domain, o.version) for o in model.opset_import))
+        raise ValueError(f"{path} has inputs {[i.name for i in graph.input]}; an ensemble member "
+                         "has one input")
+    return {"input": graph.input[0].type.SerializeToString(),
+            "output": graph.output[0].type.SerializeToString(),
+            "opset": tuple((o.domain, o.version) for o in model.opset_import)}
 
 
 def average_models(models: Sequence[str | Path], out: str | Path) -> Path:
@@ -44,8 +46,9 @@ def average_models(models: Sequence[str | Path], out: str | Path) -> Path:
     the first member. Returns the path written.
 
     Raises:
-        ValueError: fewer than two models, or members that differ in interface (the first
-            difference named). FileNotFoundError: a member file is missing.
+        ValueError: fewer than two models, a member with more than one input, or members that
+            differ in interface (the first difference named). FileNotFoundError: a member file
+            is missing.
     """
     paths = [Path(m) for m in models]
     if len(paths) < 2:
@@ -54,11 +57,12 @@ def average_models(models: Sequence[str | Path], out: str | Path) -> Path:
         if not p.is_file():
             raise FileNotFoundError(f"ONNX model not found: {p}")
     loaded = [onnx.load(str(p)) for p in paths]
-    ref = _interface(loaded[0])
+    ref = _interface(paths[0], loaded[0])
     for p, m in zip(paths[1:], loaded[1:], strict=True):
-        if _interface(m) != ref:
-            raise ValueError(f"{p} has another input, output or opset than {paths[0]}; an ensemble "
-                             "averages models of one interface")
+        differ = [key for key, value in _interface(p, m).items() if value != ref[key]]
+        if differ:
+            raise ValueError(f"{p} has another {differ[0]} than {paths[0]}; an ensemble averages "
+                             "models of one interface (input, output, opset)")
     shared_in = loaded[0].graph.input[0]
     nodes, inits, outputs = [], [], []
     for k, m in enumerate(loaded):
