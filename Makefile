@@ -42,9 +42,9 @@ bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in d
 	for b in render env_step raycast localizer wrapper_throughput warm_start detector ifc_import worker_tracking; do \
 		[ -f benchmarks/$$b.py ] && $(BIN)/python benchmarks/$$b.py || exit 1; done
 
-# The active-site detector (localization/models/landmarks_active_v2.onnx +
+# The active-site detector (localization/detect/models/landmarks_active_v2.onnx +
 # landmarks_active_v4_refiner.onnx, the pair landmarks_active_v4) from scratch, as
-# localization/models/MODEL_CARD.md ("landmarks_active_v4") trained it: seven
+# localization/detect/models/MODEL_CARD.md ("landmarks_active_v4") trained it: seven
 # rendered datasets (~35 min; existing ones are kept), the keypoint network (42 min), then two
 # patch refiners mined from that network's candidates (~2-4 min each) and trained over 25,000
 # steps each (~34 and ~37 min alone; a step budget, so a shared machine only makes it slower):

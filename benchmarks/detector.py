@@ -4,7 +4,7 @@ Renders ``--layouts`` random sites x ``--views`` viewpoints at 1280 x 720 with t
 generator's domain randomization, from a dataset seed never used for training or validation
 (the committed weights' seeds are :data:`SEEN_SEEDS`, which the command line refuses; default
 here: 2), runs
-:class:`localization.learned.LearnedDetector` on every full-resolution image and prints, per
+:class:`localization.detect.learned.LearnedDetector` on every full-resolution image and prints, per
 landmark type, precision and recall at 3 px, the median pixel error of true positives, and the
 detection latency per 1280 x 720 image on one core (``--threads 1``: one ONNX Runtime thread per
 network, ``cv2.setNumThreads(1)``; all images are rendered before the timed detection).
@@ -45,7 +45,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from localization.learned import LANDMARK_TYPES, LearnedDetector, match_detections
+from localization.detect.learned import LANDMARK_TYPES, LearnedDetector, match_detections
 from uav_struct_env.datasets import DatasetConfig, render_layout
 from uav_struct_env.datasets.landmarks import ACTIVITIES, CAMERAS, IMAGINGS
 

@@ -41,14 +41,9 @@ from localization import (
     recall_at,
     summarize_errors,
 )
-from localization.geometry import invert
-from localization.synthetic import (
-    PAPER_IMAGE_SIZE,
-    PAPER_K,
-    landmark_context,
-    render_aruco_image,
-    sample_viewpoints,
-)
+from localization.geometry.camera import PAPER_IMAGE_SIZE, PAPER_K
+from localization.geometry.transforms import invert
+from localization.testing.synthetic import landmark_context, render_aruco_image, sample_viewpoints
 from uav_struct_env.sim.attitude import (
     attitude_from_world_from_cam,
     world_from_cam_from_attitude,

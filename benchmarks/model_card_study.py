@@ -3,7 +3,7 @@
 Runs the paper's study with the committed learned detector twice — ideal images and with camera
 effects (``--imaging camera``: blur, sensor noise, JPEG) — and writes the table between the
 ``<!-- BEGIN generated: ... -->`` / ``<!-- END generated -->`` markers of
-localization/models/MODEL_CARD.md. Latencies are left out: they depend on the machine's load; the
+localization/detect/models/MODEL_CARD.md. Latencies are left out: they depend on the machine's load; the
 rest is deterministic. ``--check`` rewrites nothing and exits 1 when the card differs from the run
 (tests/test_docs.py runs it in the slow suite).
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from localization.geometry import look_at
+from localization.geometry.transforms import look_at
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.world import SiteWorld
 from uav_struct_env.site import paper_site, random_site

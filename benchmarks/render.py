@@ -17,7 +17,7 @@ import warnings
 
 import numpy as np
 
-from localization.geometry import look_at
+from localization.geometry.transforms import look_at
 from uav_struct_env.errors import RendererUnavailableError
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.world import SiteWorld

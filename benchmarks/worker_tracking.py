@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 import uav_struct_env
-from localization.geometry import invert
+from localization.geometry.transforms import invert
 from tracking import error_summary, track_workers, worker_errors
 from uav_struct_env.tracking_sim import SimulatedWorkerDetector, camera_views
 

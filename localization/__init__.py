@@ -8,14 +8,16 @@ Pure numpy / scipy / OpenCV; usable on images and poses that did not come from t
     est.success, est.cam_from_world, est.assignment
 
 One stage per module: :mod:`~localization.detect`, :mod:`~localization.associate`,
-:mod:`~localization.pnp`, :mod:`~localization.aruco`, :mod:`~localization.metrics`, composed in
+:mod:`~localization.pose.pnp`, :mod:`~localization.aruco`, :mod:`~localization.metrics`, composed in
 :mod:`~localization.pipeline`. Conventions: :mod:`~localization.geometry`.
 """
 
 from localization.aruco import ARUCO_MODES, ArucoLocalizer, MarkerSpec
-from localization.associate import Association, assign, associate_paper, associate_robust
+from localization.associate.paper import Association, assign, associate_paper
+from localization.associate.robust import associate_robust
 from localization.checks import check_choice, check_number
-from localization.detect import Detections, Detector, ProjectionDetector
+from localization.detect.interface import Detections, Detector
+from localization.detect.projection import ProjectionDetector
 from localization.failure import FailureCode
 from localization.metrics import (
     AssociationScores,
@@ -35,7 +37,8 @@ from localization.metrics import (
     translation_error_m,
 )
 from localization.pipeline import ASSOCIATION_METHODS, Localizer, PoseEstimate, image_size_from_K
-from localization.pnp import PnPResult, PriorSigmas, pose_covariance, solve_pnp
+from localization.pose.covariance import PriorSigmas, pose_covariance
+from localization.pose.pnp import PnPResult, solve_pnp
 
 __all__ = [
     "ARUCO_MODES",

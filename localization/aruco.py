@@ -32,9 +32,9 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from localization.checks import check_number
-from localization.distortion import check_distortion, is_pinhole, undistort_points
 from localization.failure import FailureCode
-from localization.geometry import (
+from localization.geometry.distortion import check_distortion, is_pinhole, undistort_points
+from localization.geometry.transforms import (
     camera_center,
     check_intrinsics,
     check_transform,
@@ -42,14 +42,8 @@ from localization.geometry import (
     make_transform,
 )
 from localization.pipeline import PoseEstimate
-from localization.pnp import (
-    PriorSigmas,
-    pose_covariance,
-    prior_mahalanobis_sq,
-    refine_pose,
-    reprojection_residuals,
-    solve_pnp,
-)
+from localization.pose.covariance import PriorSigmas, pose_covariance, prior_mahalanobis_sq
+from localization.pose.pnp import refine_pose, reprojection_residuals, solve_pnp
 
 __all__ = ["ARUCO_MODES", "ArucoLocalizer", "MarkerSpec", "marker_corners"]
 
@@ -107,7 +101,7 @@ class ArucoLocalizer:
             corner refinement).
         dist_coeffs: the camera's OpenCV distortion coefficients ``(k1, k2, p1, p2, k3)``, or
             None for a pinhole. Detected corners are undistorted to pinhole pixels of ``K`` once
-            (:func:`localization.distortion.undistort_points`, exact) on entry to
+            (:func:`localization.geometry.distortion.undistort_points`, exact) on entry to
             :meth:`localize_corners`; everything after is the pinhole model.
         pixel_sigma: corner noise, px (candidate choice and covariance).
         prior_sigmas: prior uncertainty (default 3 m, 2/2/5 degrees).

@@ -1,7 +1,7 @@
 """Why a localization failed: a machine-readable :class:`FailureCode` beside the human message.
 
 Every failed :class:`~localization.pipeline.PoseEstimate` (and the
-:class:`~localization.associate.Association` / :class:`~localization.pnp.PnPResult` it came
+:class:`~localization.associate.paper.Association` / :class:`~localization.pose.pnp.PnPResult` it came
 from) carries ``failure_code`` -- one of a closed set, for grouping and counting -- and
 ``failure_reason``, a message with the numbers of that case (counts, thresholds) for people.
 Group by the code, never by the message: messages differ whenever the numbers do.
@@ -26,7 +26,7 @@ class FailureCode(str, Enum):
     #: No association hypothesis kept enough mutually consistent correspondences.
     NO_CONSISTENT_ASSOCIATION = "no_consistent_association"
     #: Two association hypotheses with conflicting identities and distinct poses fit about
-    #: equally well: the geometry cannot tell them apart (:mod:`localization.ambiguity`).
+    #: equally well: the geometry cannot tell them apart (:mod:`localization.associate.ambiguity`).
     AMBIGUOUS = "ambiguous"
     #: Fewer assigned detections than the minimum number of correspondences.
     TOO_FEW_CORRESPONDENCES = "too_few_correspondences"

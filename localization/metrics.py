@@ -5,7 +5,7 @@ reported beside them. Translation error is ``|C_est - C_gt|`` in metres (camera 
 rotation error is the geodesic angle of ``R_est^T R_gt`` in degrees.
 
 Cramér-Rao bound scalar. :func:`cramer_rao_bound` returns the full 6x6 covariance (in the package's
-``(C, dtheta)`` parameterization, see :mod:`localization.pnp`) and per-image scalars, of which
+``(C, dtheta)`` parameterization, see :mod:`localization.pose.pnp`) and per-image scalars, of which
 ``position_rms_m = sqrt(trace(cov[:3, :3]))`` and ``rotation_rms_deg = degrees(sqrt(trace(cov[3:,
 3:])))`` -- the root expected squared error of an efficient estimator -- are the headline ones.
 Median of that per-image scalar over 1,000 viewpoints of the benchmark's law (15-35 m
@@ -32,18 +32,18 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from localization.compiled_pose import pose_error
-from localization.compiled_scores import association_counts
-from localization.geometry import (
+from localization.geometry.kernels import center
+from localization.geometry.transforms import (
     as_points,
     camera_center,
     check_intrinsics,
     check_transform,
     rotation_angle_deg,
 )
-from localization.pnp import pose_covariance, pose_difference
+from localization.pose.covariance import pose_covariance, pose_difference
 
 __all__ = [
     "DEFAULT_THRESHOLDS",
@@ -103,7 +103,7 @@ def pose_nees(
     """Normalized estimation error squared ``e^T cov^-1 e`` of a pose (6 dof).
 
     ``e`` is the estimate minus the truth in the package's ``(C, dtheta)`` parameterization
-    (:func:`localization.pnp.pose_difference`), ``covariance`` the estimate's (6, 6). A calibrated
+    (:func:`localization.pose.covariance.pose_difference`), ``covariance`` the estimate's (6, 6). A calibrated
     covariance gives chi-square(6) values: median 5.35, mean 6. NaN when the covariance is not
     finite or not invertible.
     """
@@ -214,7 +214,7 @@ class CramerRaoBound:
     """Cramér-Rao bound of the pose for known correspondences and Gaussian pixel noise.
 
     Attributes:
-        covariance: (6, 6) in ``(C [m], dtheta [rad])`` (see :mod:`localization.pnp`).
+        covariance: (6, 6) in ``(C [m], dtheta [rad])`` (see :mod:`localization.pose.pnp`).
         position_rms_m: ``sqrt(trace(cov[:3, :3]))``, the RMS position error bound (the scalar
             behind docs/design.md's quoted medians).
         rotation_rms_deg: ``degrees(sqrt(trace(cov[3:, 3:])))``.
@@ -351,3 +351,43 @@ def latency_summary(timings: Iterable[Mapping[str, float]]) -> dict[str, dict[st
         }
         for k, v in by_stage.items()
     }
+
+
+@njit(cache=True, nogil=True)
+def association_counts(a: NDArray, true_ids: NDArray, model_ids: NDArray) -> tuple[int, int, int]:
+    """``(correct, assigned, true_detections)`` of assignment ``a`` (N,) (model index or -1).
+
+    ``true_ids`` (N,) the true landmark id of each detection (-1: clutter); ``model_ids`` (M,)
+    the id of each model index. A pair is correct when its model id is the detection's true id.
+    """
+    correct = 0
+    assigned = 0
+    true_det = 0
+    for i in range(a.size):
+        if true_ids[i] >= 0:
+            true_det += 1
+        if a[i] >= 0:
+            assigned += 1
+            if true_ids[i] >= 0 and model_ids[a[i]] == true_ids[i]:
+                correct += 1
+    return correct, assigned, true_det
+
+
+@njit(cache=True, nogil=True)
+def pose_error(est: NDArray, gt: NDArray) -> tuple[float, float]:
+    """``(camera-centre distance, rotation angle in degrees)`` of two ``cam_from_world`` (4, 4).
+
+    ``localization.metrics.pose_errors``: the centres ``-R^T t``, and the geodesic angle
+    ``acos((trace(R_est^T R_gt) - 1) / 2)`` with the cosine clipped to [-1, 1].
+    """
+    c_est = center(est)
+    c_gt = center(gt)
+    d = 0.0
+    for k in range(3):
+        d += (c_est[k] - c_gt[k]) ** 2
+    tr = 0.0
+    for r in range(3):
+        for c in range(3):
+            tr += est[r, c] * gt[r, c]
+    cos = min(max((tr - 1.0) / 2.0, -1.0), 1.0)
+    return np.sqrt(d), np.degrees(np.arccos(cos))

@@ -16,27 +16,23 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from localization.associate import Association, associate_paper, associate_robust
+from localization.associate.paper import Association, associate_paper
+from localization.associate.robust import associate_robust
 from localization.checks import check_choice, check_number
-from localization.compiled_finish import finish_pose
-from localization.compiled_pose import minor_spread
-from localization.detect import Detections, check_image_size
-from localization.distortion import check_distortion, is_pinhole, undistort_points
+from localization.detect.interface import Detections, check_image_size
 from localization.failure import FailureCode
-from localization.geometry import (
+from localization.geometry.distortion import check_distortion, is_pinhole, undistort_points
+from localization.geometry.kernels import minor_spread
+from localization.geometry.transforms import (
     as_points,
     camera_center,
     check_intrinsics,
     check_transform,
     invert,
 )
-from localization.pnp import (
-    PriorSigmas,
-    is_coplanar,
-    pose_covariance,
-    prior_mahalanobis_sq,
-    solve_pnp,
-)
+from localization.pose.covariance import PriorSigmas, pose_covariance, prior_mahalanobis_sq
+from localization.pose.finish import finish_pose
+from localization.pose.pnp import is_coplanar, solve_pnp
 
 __all__ = ["ASSOCIATION_METHODS", "Localizer", "PoseEstimate", "image_size_from_K"]
 
@@ -121,7 +117,7 @@ class Localizer:
         gate_px: robust final inlier gate, px; default ``max(5 * pixel_sigma, 3)``.
         coarse_gate_px: robust first-assignment gate, px.
         max_hypotheses: robust mode: distinct coarse assignments refined by PnP + re-association.
-        prior_sigmas: :class:`~localization.pnp.PriorSigmas` or a 2-tuple
+        prior_sigmas: :class:`~localization.pose.covariance.PriorSigmas` or a 2-tuple
             ``(position_m, (tilt_x_deg, tilt_y_deg, yaw_deg))``; default 3 m and 2, 2, 5 degrees.
         ransac: in ``paper`` mode, reject outliers with RANSAC before LM when >= 6 pairs.
         ransac_threshold_px: RANSAC inlier threshold, px.
@@ -131,7 +127,7 @@ class Localizer:
             farther from the prior than this squared Mahalanobis distance (6 dof; default the
             chi-square 99.9 % quantile); None disables the check.
         distortion: the camera's OpenCV coefficients ``(k1, k2, p1, p2, k3)``
-            (:mod:`localization.distortion`), or None for a pinhole. Detections are undistorted
+            (:mod:`localization.geometry.distortion`), or None for a pinhole. Detections are undistorted
             to pinhole pixels of ``K`` once, on entry; everything after (association, PnP,
             residuals, covariance) is the pinhole model.
         use_scores: robust mode, with :class:`Detections` that carry ``scores``: read them as the
@@ -513,7 +509,7 @@ def _minor_spread_px(uv: NDArray[np.float64]) -> float:
 
     The smaller singular value of the centred points over ``sqrt(N)``, from the smaller
     eigenvalue of their 2 x 2 scatter matrix in closed form, compiled
-    (:func:`localization.compiled_pose.minor_spread`; an SVD per frame cost 30 us, numpy's
+    (:func:`localization.geometry.kernels.minor_spread`; an SVD per frame cost 30 us, numpy's
     closed form 8 us). The closed form loses about 1e-5 px to cancellation on exactly collinear
     points, far below the 1-2 px threshold it is compared with.
     """

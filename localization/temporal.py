@@ -6,7 +6,7 @@ bias ``b_a`` (rad, on roll, pitch, yaw); its error state (12,) is::
 
     [dC (3, m), dtheta (3, rad), db_g (3, m), db_a (3, rad)]
 
-with the package's pose parameterization (:mod:`localization.pnp`): ``C = C_hat + dC`` and the
+with the package's pose parameterization (:mod:`localization.pose.pnp`): ``C = C_hat + dC`` and the
 world-frame rotation vector ``R = exp([dtheta]x) R_hat``, so the first 6 x 6 block of
 :attr:`PoseFilter.covariance` is directly comparable with a :class:`~localization.PoseEstimate`'s
 covariance and gives the association prior's sigmas (:meth:`PoseFilter.prior_sigmas`).
@@ -27,7 +27,7 @@ import it):
   Gauss-Markov process with stationary sigma ``s * gnss_bias_sigma`` and correlation time
   ``gnss_bias_tau``. ``s`` (>= 1, the caller's multipath factor near the structure) rescales the
   bias state when it changes: the same unit process seen through a larger factor.
-* Attitude: ``z = euler(R) + b_a + w`` (roll, pitch, yaw of :mod:`localization.attitude`),
+* Attitude: ``z = euler(R) + b_a + w`` (roll, pitch, yaw of :mod:`localization.geometry.attitude`),
   ``b_a`` constant, ``w ~ N(0, attitude_white_sigma^2)``.
 * Visual fix: a pose with its (6, 6) covariance (a :class:`~localization.PoseEstimate`).
 
@@ -47,10 +47,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2
 
-from localization.attitude import attitude_from_world_from_cam, world_from_cam_from_attitude
 from localization.checks import check_number
-from localization.geometry import check_transform, invert, so3_exp
-from localization.pnp import PriorSigmas, pose_difference
+from localization.geometry.attitude import attitude_from_world_from_cam, world_from_cam_from_attitude
+from localization.geometry.transforms import check_transform, invert, so3_exp
+from localization.pose.covariance import PriorSigmas, pose_difference
 
 __all__ = ["FilterNoise", "PoseFilter", "Update", "attitude_of"]
 
@@ -75,7 +75,9 @@ def _wrap(a: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def attitude_of(world_from_cam: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """:func:`~localization.attitude.attitude_from_world_from_cam` without scipy's gimbal-lock warning.
+    """Roll, pitch, yaw of a camera pose, without scipy's gimbal-lock warning.
+
+    As :func:`~localization.geometry.attitude.attitude_from_world_from_cam`.
 
     At pitch +-90 deg (a camera looking straight down) roll and yaw are not separable; the
     filter then skips the attitude update and says so (:meth:`PoseFilter.update_attitude`).
@@ -336,7 +338,7 @@ class PoseFilter:
         return self._update("gnss", y, H, np.diag(var))
 
     def update_attitude(self, attitude: ArrayLike) -> Update:
-        """Fuse one (roll, pitch, yaw) reading, rad (:mod:`localization.attitude`)."""
+        """Fuse one (roll, pitch, yaw) reading, rad (:mod:`localization.geometry.attitude`)."""
         self._check_started()
         z = self._vector("attitude", attitude)
         _, est = attitude_of(self.world_from_cam)

@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-from localization.geometry import invert
+from localization.geometry.transforms import invert
 from localization.metrics import cramer_rao_bound
 from uav_struct_env.baselines import BASELINES, GreedyCrbPolicy, make_baseline
 from uav_struct_env.sim.uav import UavState

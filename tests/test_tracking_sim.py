@@ -6,8 +6,8 @@ import pytest
 
 import uav_struct_env
 from localization import PoseEstimate
-from localization.geometry import invert, look_at, project
-from localization.synthetic import PAPER_IMAGE_SIZE, PAPER_K
+from localization.geometry.camera import PAPER_IMAGE_SIZE, PAPER_K
+from localization.geometry.transforms import invert, look_at, project
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.tracking_sim import SimulatedWorkerDetector, camera_views
 

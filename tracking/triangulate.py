@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
-from localization.pnp import pose_jacobian
+from localization.pose.covariance import pose_jacobian
 from tracking.views import CameraView
 
 __all__ = [

@@ -7,7 +7,7 @@ Conventions are :mod:`localization.geometry`'s: ``cam_from_world`` 4x4, OpenCV c
 integer pixel centres. A view's optional ``pose_covariance`` is a 6x6 covariance in the
 parameterization of :class:`localization.PoseEstimate` (camera centre [m], then a world-frame
 rotation vector [rad]); the tracker propagates it to pixels at each point (``J Sigma J^T`` with
-:func:`localization.pnp.pose_jacobian`) and adds it to the detector noise, so cameras localized
+:func:`localization.pose.covariance.pose_jacobian`) and adds it to the detector noise, so cameras localized
 with decimetre errors are weighted and gated by what their pose really knows.
 """
 
@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_number
-from localization.geometry import check_intrinsics, check_transform
+from localization.geometry.transforms import check_intrinsics, check_transform
 
 __all__ = ["CameraView", "WorkerDetection"]
 

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from localization.geometry import invert, matrix_from_quat_wxyz
+from localization.geometry.transforms import invert, matrix_from_quat_wxyz
 from localization.metrics import cramer_rao_bound
 from uav_struct_env.sim.attitude import attitude_from_world_from_cam
 from uav_struct_env.sim.uav import UavState, step_uav

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import cv2
 
-from localization.synthetic import PAPER_IMAGE_SIZE
+from localization.geometry.camera import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import RendererUnavailableError
 from uav_struct_env.outputs import StagedOutput, atomic_write_bytes
 from uav_struct_env.sim.schedule import ScheduleSpec

@@ -30,8 +30,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_choice, check_number
-from localization.geometry import invert
-from localization.pnp import PriorSigmas
+from localization.geometry.transforms import invert
+from localization.pose.covariance import PriorSigmas
 from tracking import CameraView, WorkerDetection
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.stack import PAPER_WIDTH_PX

@@ -53,7 +53,7 @@ def test_format_and_labels(tiny_dataset):
 
 def test_labels_match_projection(tiny_dataset):
     """Keypoints are the projections of the site's landmarks with the saved K and pose."""
-    from localization.geometry import project
+    from localization.geometry.transforms import project
 
     data = load_labels(tiny_dataset)
     xyz = _layout_landmarks(7, 0)
@@ -84,7 +84,7 @@ def test_an_ifc_building_dataset_labels_its_own_landmarks(tmp_path):
     pytest.importorskip("ifcopenshell")
     from pathlib import Path
 
-    from localization.geometry import project
+    from localization.geometry.transforms import project
     from uav_struct_env.site import ifc_stages, load_ifc
 
     duplex = Path(__file__).resolve().parents[1] / "data" / "ifc" / "duplex.ifc"
@@ -163,7 +163,7 @@ def camera_datasets(tmp_path_factory):
 
 def test_mavic_labels_are_where_the_lens_shows_the_landmarks(camera_datasets):
     """Labels = LensView.project (distortion, rolling shutter) of the landmarks, scaled to the image."""
-    from localization.geometry import project
+    from localization.geometry.transforms import project
     from uav_struct_env.sim.lens import MAVIC2PRO, LensView, Motion
     from uav_struct_env.sim.uav import FlightLimits
 

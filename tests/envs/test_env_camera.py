@@ -15,7 +15,7 @@ from env_helpers import small_parallel_env
 
 import uav_struct_env
 from localization.aruco import ArucoLocalizer
-from localization.geometry import invert
+from localization.geometry.transforms import invert
 from uav_struct_env.envs.settings import settings_markdown
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.camera import Camera
@@ -101,8 +101,8 @@ def test_aruco_finds_the_corners_where_the_info_says(mavic_step) -> None:
 def test_learned_detector_output_localizes_through_the_distorting_lens(mavic_step) -> None:
     """The learned detector's points (distorted pixels) localize once the localizer undistorts."""
     from localization import Localizer
-    from localization.geometry import camera_center
-    from localization.learned import LearnedDetector
+    from localization.detect.learned import LearnedDetector
+    from localization.geometry.transforms import camera_center
 
     _, _, env = mavic_step
     obs, infos = env.reset(seed=0, options={"viewpoint": 3})  # hovering: no rolling shutter

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from localization.synthetic import PAPER_K
+from localization.geometry.camera import PAPER_K
 
 _GRID_X = (0.0, 4.0, 8.0)
 _GRID_Y = (0.0, 4.0, 7.0, 11.0)

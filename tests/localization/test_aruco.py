@@ -2,9 +2,10 @@ import numpy as np
 import pytest
 
 from localization.aruco import ArucoLocalizer, MarkerSpec, marker_corners
-from localization.geometry import look_at, make_transform
+from localization.geometry.camera import PAPER_K
+from localization.geometry.transforms import look_at, make_transform
 from localization.metrics import pose_errors
-from localization.synthetic import PAPER_K, paper_prior, render_aruco_image
+from localization.testing.synthetic import paper_prior, render_aruco_image
 
 # the paper site's eight markers: flat on the ground, facing up, 1 m
 CENTRES = [(2, -3.3), (6, -3.3), (2, 14.3), (6, 14.3), (-3.3, 3), (-3.3, 8), (11.3, 3), (11.3, 8)]

@@ -14,10 +14,11 @@ from localization import (
     image_size_from_K,
 )
 from localization.aruco import MarkerSpec
-from localization.associate import Association
-from localization.geometry import check_transform, matrix_from_quat_wxyz, project
-from localization.pnp import PnPResult
-from localization.synthetic import PAPER_K, paper_prior, sample_viewpoints
+from localization.associate.paper import Association
+from localization.geometry.camera import PAPER_K
+from localization.geometry.transforms import check_transform, matrix_from_quat_wxyz, project
+from localization.pose.pnp import PnPResult
+from localization.testing.synthetic import paper_prior, sample_viewpoints
 
 
 def test_check_number_returns_typed_values_and_names_bad_ones():

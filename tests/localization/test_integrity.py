@@ -1,6 +1,6 @@
 """Issue 19, item 1: the robust localizer never reports a confident wrong pose.
 
-The fuzz suite draws problems with :func:`localization.fuzz.draw_case` (regular and irregular
+The fuzz suite draws problems with :func:`localization.testing.fuzz.draw_case` (regular and irregular
 grids, coplanar and 3D layouts, short and long focal lengths, centred and off-centre principal
 points, priors off by up to 3 m and 2, 2, 5 degrees, every in-frame landmark detected with 1 px
 noise) and holds every robust success to ``error <= max(1 m, 10 x its position std)`` and the
@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 
 from localization import Detections, FailureCode, Localizer, pose_nees
-from localization.fuzz import FuzzCase, draw_case
-from localization.geometry import camera_center, look_at, make_transform, project
-from localization.synthetic import PAPER_IMAGE_SIZE, PAPER_K, paper_prior
+from localization.geometry.camera import PAPER_IMAGE_SIZE, PAPER_K
+from localization.geometry.transforms import camera_center, look_at, make_transform, project
+from localization.testing.fuzz import FuzzCase, draw_case
+from localization.testing.synthetic import paper_prior
 
 SLICE = 1_000
 FULL = 10_000

@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from localization.geometry import look_at
+from localization.geometry.camera import PAPER_K
+from localization.geometry.transforms import look_at
 from localization.metrics import (
     association_scores,
     cramer_rao_bound,
@@ -11,7 +12,7 @@ from localization.metrics import (
     recall_at,
     summarize_errors,
 )
-from localization.synthetic import PAPER_K, perturb_attitude
+from localization.testing.synthetic import perturb_attitude
 
 
 def test_pose_errors():

@@ -2,9 +2,10 @@ import numpy as np
 import pytest
 
 from localization import Localizer, PoseEstimate, ProjectionDetector
-from localization.geometry import camera_center, invert, look_at, project
+from localization.geometry.camera import PAPER_K
+from localization.geometry.transforms import camera_center, invert, look_at, project
 from localization.metrics import association_scores, cramer_rao_bound, pose_errors
-from localization.synthetic import PAPER_K, landmark_context, paper_prior, sample_viewpoints
+from localization.testing.synthetic import landmark_context, paper_prior, sample_viewpoints
 
 
 @pytest.fixture

@@ -8,7 +8,7 @@
    off by metres it silently picks wrong identities, which is why ``robust`` exists.)
 
 Besides the paper's camera over random points (``scenes``), both draw from
-:func:`localization.fuzz.draw_case` (``fuzz_scenes``): regular and irregular grids on one or
+:func:`localization.testing.fuzz.draw_case` (``fuzz_scenes``): regular and irregular grids on one or
 several levels, long lenses and off-centre principal points -- the layouts of issue 19, where a
 regular grid seen through a long lens broke the bound.
 
@@ -21,9 +21,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from localization import Localizer
-from localization.fuzz import draw_case
-from localization.geometry import check_transform, look_at, project
-from localization.synthetic import PAPER_K, perturb_attitude
+from localization.geometry.camera import PAPER_K
+from localization.geometry.transforms import check_transform, look_at, project
+from localization.testing.fuzz import draw_case
+from localization.testing.synthetic import perturb_attitude
 
 W, H = 1280, 720
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from localization.attitude import attitude_from_world_from_cam, world_from_cam_from_attitude
-from localization.geometry import invert, so3_exp, so3_log
+from localization.geometry.attitude import attitude_from_world_from_cam, world_from_cam_from_attitude
+from localization.geometry.transforms import invert, so3_exp, so3_log
 from localization.metrics import pose_errors, pose_nees
 from localization.temporal import FilterNoise, PoseFilter
 

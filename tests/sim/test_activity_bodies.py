@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from localization.geometry import look_at
+from localization.geometry.transforms import look_at
 from uav_struct_env.sim.activity import ActivityBodies
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.world import SiteWorld

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from localization.geometry import invert, look_at, project
+from localization.geometry.transforms import invert, look_at, project
 from uav_struct_env.sim.attitude import attitude_from_world_from_cam, world_from_cam_from_attitude
 
 
@@ -54,7 +54,7 @@ def test_round_trip_and_agreement_with_look_at(seed):
 
 def test_look_at_cross_products_are_numpys_bit_for_bit(rng):
     """look_at's cross products (on floats) equal np.cross's, so its poses did not move."""
-    from localization.geometry import _cross
+    from localization.geometry.transforms import _cross
 
     for _ in range(2000):
         a = rng.normal(size=3) * 10 ** rng.uniform(-4, 4)

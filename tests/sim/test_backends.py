@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from localization.geometry import look_at, project
+from localization.geometry.transforms import look_at, project
 from uav_struct_env.sim.camera import Camera
 
 

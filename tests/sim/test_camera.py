@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from localization.geometry import look_at, project
+from localization.geometry.transforms import look_at, project
 from uav_struct_env.sim.camera import (
     GL_FROM_CV,
     Camera,

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from localization.aruco import ArucoLocalizer
-from localization.distortion import distort_points, undistort_points
-from localization.geometry import invert
+from localization.geometry.distortion import distort_points, undistort_points
+from localization.geometry.transforms import invert
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.lens import (
     MAVIC2PRO,

@@ -56,7 +56,7 @@ def _make_wrapped(renderer: str):
 def _world_on_ifc(renderer: str):
     """A SiteWorld of the duplex (an imported IFC site) that renders one view per "step"."""
     pytest.importorskip("ifcopenshell")
-    from localization.geometry import look_at
+    from localization.geometry.transforms import look_at
     from uav_struct_env.sim.world import SiteWorld
     from uav_struct_env.site import load_ifc
 

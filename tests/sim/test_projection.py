@@ -14,7 +14,7 @@ import pybullet as p
 import pytest
 from scipy.spatial.transform import Rotation
 
-from localization.geometry import invert, look_at, project
+from localization.geometry.transforms import invert, look_at, project
 from uav_struct_env.sim.camera import Camera, view_matrix
 from uav_struct_env.sim.client import RenderClient
 

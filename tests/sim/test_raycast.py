@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import uav_struct_env
-from localization.geometry import look_at
+from localization.geometry.transforms import look_at
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.raycast import RayScene
 from uav_struct_env.sim.world import SiteWorld

@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from localization.geometry import invert, project
+from localization.geometry.transforms import invert, project
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.schedule import PAPER_K, ScheduleSpec, make_schedule, sample_viewpoint
 from uav_struct_env.site import paper_site

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from localization.geometry import look_at, project
+from localization.geometry.transforms import look_at, project
 from uav_struct_env.sim.camera import Camera
 
 SIDES = {"south": (0.0, -25.0), "north": (0.0, 25.0), "west": (-25.0, 0.0), "east": (25.0, 0.0)}

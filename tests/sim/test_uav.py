@@ -91,7 +91,7 @@ def test_state_from_a_camera_pose_round_trips_and_drops_roll():
         back = UavState.from_world_from_cam(s.world_from_cam)
         np.testing.assert_allclose(back.world_from_cam, s.world_from_cam, atol=1e-9)
     # an estimate with a small roll: the same heading and pitch, roll 0 (what the gimbal holds)
-    from localization.attitude import world_from_cam_from_attitude
+    from localization.geometry.attitude import world_from_cam_from_attitude
 
     rolled = world_from_cam_from_attitude([1.0, 2.0, 3.0], [math.radians(0.5), 0.4, 1.2])
     s = UavState.from_world_from_cam(rolled)

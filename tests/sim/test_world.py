@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 import pytest
 
-from localization.geometry import invert, look_at, project
+from localization.geometry.transforms import invert, look_at, project
 from uav_struct_env.errors import ClosedError, ConfigError, RendererUnavailableError
 from uav_struct_env.sim import client as client_module
 from uav_struct_env.sim.camera import Camera

@@ -176,7 +176,7 @@ def test_duplex_report_drops_finish_floors_and_skips_non_structural(duplex_l2):
 
 
 def test_duplex_renders_with_its_floor_in_view(duplex_l2):
-    from localization.geometry import look_at
+    from localization.geometry.transforms import look_at
     from uav_struct_env.sim.camera import Camera
     from uav_struct_env.sim.world import SiteWorld
 

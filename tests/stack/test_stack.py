@@ -5,7 +5,7 @@ import pytest
 
 import uav_struct_env
 from localization import Localizer
-from localization.synthetic import PAPER_K
+from localization.geometry.camera import PAPER_K
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.stack import (
     ASSOCIATIONS,

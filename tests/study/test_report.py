@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from localization import FailureCode, Localizer
-from localization.synthetic import PAPER_K
+from localization.geometry.camera import PAPER_K
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.study.protocol import METHODS, StudyConfig
 from uav_struct_env.study.report import (

@@ -134,9 +134,9 @@ def test_bad_study_options_are_rejected_with_the_value():
 
 
 def test_learned_detector_weights_by_path(tmp_path, monkeypatch):
-    from localization.learned import DEFAULT_MODEL
-    from localization.refine import DEFAULT_REFINER
-    from localization.synthetic import PAPER_K
+    from localization.detect.learned import DEFAULT_MODEL
+    from localization.detect.refiner import DEFAULT_REFINER
+    from localization.geometry.camera import PAPER_K
     from uav_struct_env.stack import build_stack
     from uav_struct_env.study.run import stack_spec
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from localization.geometry import look_at, project
-from localization.synthetic import PAPER_K
+from localization.geometry.camera import PAPER_K
+from localization.geometry.transforms import look_at, project
 from tracking import CameraView, WorkerDetection
 
 SITE_CENTRE = np.array([10.0, 7.5, 0.0])

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from conftest import SITE_CENTRE, detect, four_views, random_workers
 
-from localization.geometry import invert, look_at, make_transform, project, so3_exp
-from localization.synthetic import PAPER_K
+from localization.geometry.camera import PAPER_K
+from localization.geometry.transforms import invert, look_at, make_transform, project, so3_exp
 from tracking import (
     CameraView,
     WorkerDetection,

@@ -7,9 +7,9 @@ import pytest
 
 pytest.importorskip("onnx")
 
-from localization.inference import OnnxNet  # noqa: E402
-from localization.learned import DEFAULT_MODEL, LearnedDetector  # noqa: E402
-from localization.refine import DEFAULT_REFINER, PATCH  # noqa: E402
+from localization.detect.learned import DEFAULT_MODEL, LearnedDetector
+from localization.detect.onnx_net import OnnxNet
+from localization.detect.refiner import DEFAULT_REFINER, PATCH
 from uav_struct_env.training.ensemble import average_models, main  # noqa: E402
 
 MODELS = DEFAULT_REFINER.parent

@@ -10,7 +10,7 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("onnx")
 
-from localization.learned import LearnedDetector, decode  # noqa: E402
+from localization.detect.learned import LearnedDetector, decode  # noqa: E402
 from uav_struct_env.training.train_detector import _targets, main, pool_labels  # noqa: E402
 
 

@@ -8,8 +8,8 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("onnx")
 
-from localization.learned import DEFAULT_MODEL  # noqa: E402
-from localization.refine import PATCH, POSITIVE_RADIUS, PatchRefiner  # noqa: E402
+from localization.detect.learned import DEFAULT_MODEL  # noqa: E402
+from localization.detect.refiner import PATCH, POSITIVE_RADIUS, PatchRefiner  # noqa: E402
 from uav_struct_env.training.train_refiner import WINDOW, PatchSamples, main, mine  # noqa: E402
 
 pytestmark = pytest.mark.skipif(not DEFAULT_MODEL.is_file(), reason="no committed keypoint model")

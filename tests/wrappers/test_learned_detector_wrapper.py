@@ -7,8 +7,8 @@ import shutil
 import numpy as np
 import pytest
 
-from localization.learned import DEFAULT_MODEL, LearnedDetector
-from localization.refine import DEFAULT_REFINER
+from localization.detect.learned import DEFAULT_MODEL, LearnedDetector
+from localization.detect.refiner import DEFAULT_REFINER
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.wrappers import make_localization_env
 

@@ -1,6 +1,6 @@
 """Labelled landmark images rendered from the simulator, with domain randomization.
 
-Used to train and evaluate the learned landmark detector (:mod:`localization.learned`).
+Used to train and evaluate the learned landmark detector (:mod:`localization.detect.learned`).
 Each *layout* is one random site (:func:`uav_struct_env.site.random_site`, both construction
 stages, with or without ArUco markers) -- or, with ``site`` a site file or an IFC file, that
 building at one of its stages drawn per layout (``python -m uav_struct_env.datasets OUT --site
@@ -93,8 +93,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from localization.checks import check_choice, check_number
-from localization.geometry import look_at
-from localization.synthetic import PAPER_IMAGE_SIZE
+from localization.geometry.camera import PAPER_IMAGE_SIZE
+from localization.geometry.transforms import look_at
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.imaging import IMAGING_PRESETS

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from localization.checks import check_choice, check_number
-from localization.synthetic import PAPER_IMAGE_SIZE
+from localization.geometry.camera import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError, SiteGeometryError
 from uav_struct_env.sim.imaging import ImagingModel, make_imaging
 from uav_struct_env.sim.lens import CameraModel, make_camera_model

@@ -56,7 +56,7 @@ from numpy.typing import NDArray
 from pettingzoo import ParallelEnv
 
 from localization.checks import check_number
-from localization.geometry import invert, quat_wxyz_from_matrix
+from localization.geometry.transforms import invert, quat_wxyz_from_matrix
 from uav_struct_env.envs.config import EnvConfig, make_config
 from uav_struct_env.envs.render import MapView, UavMarker, compose_frame, draw_site_map
 from uav_struct_env.errors import ClosedError, ConfigError, ResetNeededError

@@ -15,8 +15,8 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from localization.geometry import check_transform
-from localization.geometry import project as pinhole_project
+from localization.geometry.transforms import check_transform
+from localization.geometry.transforms import project as pinhole_project
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.site.activity import (
     WORKER_HALF_EXTENTS,

@@ -23,8 +23,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_number
-from localization.geometry import check_intrinsics, check_transform
-from localization.synthetic import PAPER_IMAGE_SIZE, PAPER_K
+from localization.geometry.camera import PAPER_IMAGE_SIZE, PAPER_K
+from localization.geometry.transforms import check_intrinsics, check_transform
 
 __all__ = ["GL_FROM_CV", "Camera", "depth_from_buffer", "projection_matrix", "view_matrix"]
 
@@ -36,7 +36,7 @@ GL_FROM_CV = np.diag([1.0, -1.0, -1.0, 1.0])
 class Camera:
     """Pinhole intrinsics, image size in pixels and the renderer's clip planes (metres).
 
-    The default is the paper's camera (:data:`localization.synthetic.PAPER_K`, the project's one
+    The default is the paper's camera (:data:`localization.geometry.camera.PAPER_K`, the project's one
     definition): 1280 x 720, fx = fy = 1108.5 px, principal point (640, 360).
     """
 

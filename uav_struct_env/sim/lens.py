@@ -2,7 +2,7 @@
 
 A :class:`CameraModel` is intrinsics (at the camera's own resolution, scaled to the env's image
 size like :meth:`Camera.scaled`), OpenCV's distortion coefficients ``(k1, k2, p1, p2, k3)``
-(:mod:`localization.distortion`), the rolling shutter's readout time and the exposure time.
+(:mod:`localization.geometry.distortion`), the rolling shutter's readout time and the exposure time.
 :class:`LensView` renders through one at a fixed image size and gives the ground truth of where
 each landmark appears in the delivered image.
 
@@ -48,13 +48,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_number
-from localization.distortion import (
+from localization.geometry.distortion import (
     check_distortion,
     distort_normalized,
     is_pinhole,
     undistort_normalized,
 )
-from localization.geometry import check_transform, so3_log
+from localization.geometry.transforms import check_transform, so3_log
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.named import resolve_named
 from uav_struct_env.sim.camera import Camera

@@ -27,7 +27,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_number
-from localization.geometry import as_points, check_transform, inverse_intrinsics
+from localization.geometry.transforms import as_points, check_transform, inverse_intrinsics
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.visibility import _window_limits
 

@@ -40,8 +40,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_number
-from localization.geometry import invert, look_at, project
-from localization.synthetic import PAPER_IMAGE_SIZE, PAPER_K
+from localization.geometry.camera import PAPER_IMAGE_SIZE, PAPER_K
+from localization.geometry.transforms import invert, look_at, project
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.attitude import attitude_from_world_from_cam
 from uav_struct_env.sim.uav import UavState

@@ -180,7 +180,7 @@ class UavState:
         """The state whose camera is nearest a (4, 4) ``world_from_cam`` (an estimate, say).
 
         Position as given; heading and gimbal pitch of the optical axis (the yaw and pitch of
-        :func:`~localization.attitude.attitude_from_world_from_cam`, at a fraction of its
+        :func:`~localization.geometry.attitude.attitude_from_world_from_cam`, at a fraction of its
         cost); a roll is dropped. Looking straight down, the heading is the camera's left
         axis.
         """

@@ -30,7 +30,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_number
-from localization.geometry import as_points, check_transform
+from localization.geometry.transforms import as_points, check_transform
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.site.model import LandmarkSet
 
@@ -181,7 +181,7 @@ def _windows(
 
     Returns ``(uv (M, 2), z (M,), in_frame (M,), rows (F, k, k), cols (F, k, k))``: pixels (NaN
     at or behind the camera) and depths of the points ``xyz`` at ``cam_from_world`` (R, t) as
-    :func:`localization.geometry.project` gives them; which are in front of ``near`` and inside
+    :func:`localization.geometry.transforms.project` gives them; which are in front of ``near`` and inside
     the image; and for the F in-frame ones, in order, the integer pixels of the
     ``k x k`` (``k = 2 radius + 1``) window around the rounded projection, clipped to the image.
     """

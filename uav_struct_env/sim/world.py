@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from localization.geometry import check_transform, quat_wxyz_from_matrix
+from localization.geometry.transforms import check_transform, quat_wxyz_from_matrix
 from uav_struct_env.errors import ClosedError, RendererUnavailableError
 from uav_struct_env.sim.camera import Camera, depth_from_buffer, view_matrix
 from uav_struct_env.sim.client import RenderClient, p, resolve_renderer  # p: pybullet, imported quietly

@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from localization import ASSOCIATION_METHODS, Detector, Localizer, PriorSigmas, ProjectionDetector
 from localization.checks import check_choice, check_number
-from localization.synthetic import PAPER_IMAGE_SIZE
+from localization.geometry.camera import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.site import LANDMARK_SETS
 from uav_struct_env.stack.frame import FrameLocalization, localize_aruco_frame, localize_frame
@@ -84,7 +84,7 @@ class StackSpec:
         landmarks: landmark set: ``slab_corners``, ``opening_corners``, ``column_tops``,
             ``aruco`` or ``all``.
         detector: ``"projection"`` (true projections + noise, misses, clutter),
-            ``"learned"`` (:class:`localization.learned.LearnedDetector` on the image),
+            ``"learned"`` (:class:`localization.detect.learned.LearnedDetector` on the image),
             ``"aruco"`` (OpenCV markers; needs ``landmarks="aruco"``), or any object with
             ``detect(image, context) -> Detections`` (used as given).
         association: ``"robust"`` or ``"paper"``.
@@ -257,7 +257,7 @@ _LEARNED: dict[tuple, Any] = {}
 
 def _learned(spec: StackSpec, width: int) -> Any:
     """One learned detector per process and (set, width, association, weights): they are large."""
-    from localization.learned import LearnedDetector
+    from localization.detect.learned import LearnedDetector
 
     key = (
         spec.landmarks,

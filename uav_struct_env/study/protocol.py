@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from localization.checks import check_choice, check_number
-from localization.synthetic import PAPER_IMAGE_SIZE
+from localization.geometry.camera import PAPER_IMAGE_SIZE
 from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.lens import CAMERA_MODELS
@@ -156,7 +156,7 @@ class StudyConfig:
         seed: seeds textures, detector noise and the ``gnss_ins`` prior.
         detector: ``"projection"`` (ground-truth projections + pixel noise, as the paper isolated
             association and pose from its vision model) or ``"learned"`` (the trained keypoint
-            network of :mod:`localization.learned` on the rendered image; ``pixel_sigma``,
+            network of :mod:`localization.detect.learned` on the rendered image; ``pixel_sigma``,
             ``miss_rate`` and ``false_positives`` then only set the localizer's noise model).
         association: ``"robust"`` or ``"paper"`` (plain linear assignment).
         noise: onboard prior model, ``"paper"`` (3 m, 2/2/5 deg, alternating signs) or
@@ -176,7 +176,7 @@ class StudyConfig:
         workers: processes rendering and localizing in parallel.
         methods: keys of :data:`METHODS` to run (default all).
         detector_model: with ``detector="learned"``, the keypoint network's ONNX file (None:
-            the committed ``localization/models/landmarks_v1.onnx``), e.g. one retrained with
+            the committed ``localization/detect/models/landmarks_v1.onnx``), e.g. one retrained with
             ``python -m uav_struct_env.training.train_detector``; stored resolved to an absolute path.
         refiner_model: with ``detector="learned"``, the patch refiner's ONNX file (None: the
             committed one), e.g. from ``python -m uav_struct_env.training.train_refiner``.

@@ -165,8 +165,8 @@ def settings_line(results: dict) -> str:
     Used by the table files, the figures and the console. A config key it does not spell out (a
     setting added later) is still listed, as ``key value``.
     """
-    from localization.learned import DEFAULT_MODEL
-    from localization.refine import DEFAULT_REFINER
+    from localization.detect.learned import DEFAULT_MODEL
+    from localization.detect.refiner import DEFAULT_REFINER
 
     c = dict(results["config"])
     sw = results.get("software") or {}

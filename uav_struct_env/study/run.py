@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from localization import cramer_rao_bound
-from localization.geometry import camera_center, invert, project
+from localization.geometry.transforms import camera_center, invert, project
 from localization.metrics import pose_errors
 from uav_struct_env.processes import run_chunks
 from uav_struct_env.stack import FrameLocalization, StackSpec, build_stack

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from localization.geometry import invert
+from localization.geometry.transforms import invert
 from localization.metrics import median_p90, pose_errors
 from uav_struct_env.outputs import prepare_output_dir, save_figure
 from uav_struct_env.provenance import software

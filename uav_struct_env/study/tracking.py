@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from localization.geometry import invert
+from localization.geometry.transforms import invert
 from tracking import error_summary, track_workers, worker_errors
 from uav_struct_env.study.cells import cell
 from uav_struct_env.tracking_sim import DEFAULT_WORKER_SIGMA_PX, SimulatedWorkerDetector, camera_views

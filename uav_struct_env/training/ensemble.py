@@ -1,7 +1,7 @@
 r"""Average several ONNX networks of one interface into one ONNX file (an ensemble).
 
 :func:`average_models` takes networks with the same single input and the same first output
-(for instance two patch refiners, :class:`localization.refine.PatchRefiner`'s interface) and writes
+(for instance two patch refiners, :class:`localization.detect.refiner.PatchRefiner`'s interface) and writes
 one model that runs all of them on the shared input and returns the element-wise mean of their
 outputs (an ONNX ``Mean`` node). The result is an ordinary model file, so everything that takes a
 refiner path (``LearnedDetector(refiner=...)``, ``uav-struct study --refiner-model``,
@@ -12,8 +12,8 @@ rounding).
 
 The committed ``landmarks_active_v4_refiner.onnx`` was built this way (model card)::
 
-    python -m uav_struct_env.training.ensemble localization/models/landmarks_active_v3_refiner.onnx \
-        runs/det4/refiner/refiner.onnx --out localization/models/landmarks_active_v4_refiner.onnx
+    python -m uav_struct_env.training.ensemble localization/detect/models/landmarks_active_v3_refiner.onnx \
+        runs/det4/refiner/refiner.onnx --out localization/detect/models/landmarks_active_v4_refiner.onnx
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Train the learned landmark detector (PyTorch, CPU) and export it to ONNX.
 
 Only this module imports torch (the ``train`` extra). The exported model runs without it, in
-:class:`localization.learned.LearnedDetector` (ONNX Runtime).
+:class:`localization.detect.learned.LearnedDetector` (ONNX Runtime).
 
 The network is a small fully-convolutional CenterNet-style keypoint net: an encoder to stride 16,
 a two-step top-down path back to stride 4, and a head with one heatmap per landmark type
@@ -14,7 +14,7 @@ has cell coordinate ``c = (u + 0.5) / 4 - 0.5``. Targets: a Gaussian (``sigma`` 
 around ``c`` per type with 1 at the nearest cell (penalty-reduced focal loss, as CenterNet), and
 the offsets ``c - j`` (L1) in the 3 x 3 cells around it.
 
-Example (the committed model, see ``localization/models/MODEL_CARD.md``)::
+Example (the committed model, see ``localization/detect/models/MODEL_CARD.md``)::
 
     python -m uav_struct_env.datasets /tmp/lmdata/train --layouts 200 --views 15 --seed 0
     python -m uav_struct_env.datasets /tmp/lmdata/val --layouts 10 --views 10 --seed 1
@@ -34,7 +34,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from localization.inference import OnnxNet
+from localization.detect.onnx_net import OnnxNet
 from uav_struct_env.datasets.landmarks import LANDMARK_TYPES, load_labels
 from uav_struct_env.errors import UsageError
 from uav_struct_env.outputs import atomic_path, atomic_write_json, prepare_output_dir
@@ -252,7 +252,7 @@ def export_onnx(model: KeypointNet, path: str | Path, size: tuple[int, int] = (6
 # ------------------------------------------------------------------------------------ training
 def _evaluate(model: KeypointNet, labels: dict) -> dict:
     """P/R at 1.5 px (3 px full resolution) on a validation set, with the numpy decoder."""
-    from localization.learned import decode, match_detections
+    from localization.detect.learned import decode, match_detections
 
     model.eval()
     root = Path(labels["root"])

@@ -1,9 +1,9 @@
 r"""Train the learned detector's full-resolution patch refiner (PyTorch, CPU); export to ONNX.
 
-The refiner (:class:`localization.refine.PatchRefiner` at inference, ONNX Runtime) takes a
+The refiner (:class:`localization.detect.refiner.PatchRefiner` at inference, ONNX Runtime) takes a
 ``PATCH x PATCH`` full-resolution patch around a keypoint candidate of the half-resolution
 keypoint network and returns, per landmark type, the probability that a landmark of that type
-lies within :data:`~localization.refine.POSITIVE_RADIUS` px of the patch centre and its offset.
+lies within :data:`~localization.detect.refiner.POSITIVE_RADIUS` px of the patch centre and its offset.
 
 Two steps, both seeded:
 
@@ -19,7 +19,7 @@ Two steps, both seeded:
    the offset of every type present within the positive radius. Checkpoints are chosen by the F1
    at 3 px of the whole detector (keypoint network + this refiner) on a validation dataset.
 
-Example (the committed refiner, see ``localization/models/MODEL_CARD.md``)::
+Example (the committed refiner, see ``localization/detect/models/MODEL_CARD.md``)::
 
     python -m uav_struct_env.datasets /tmp/refdata/train --layouts 150 --views 10 --seed 3 --scale 1.0
     python -m uav_struct_env.datasets /tmp/refdata/val --layouts 6 --views 10 --seed 1 --scale 1.0
@@ -40,8 +40,8 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from localization.learned import DEFAULT_MODEL, LANDMARK_TYPES, LearnedDetector, match_detections
-from localization.refine import HALF, PATCH, POSITIVE_RADIUS, extract_patches
+from localization.detect.learned import DEFAULT_MODEL, LANDMARK_TYPES, LearnedDetector, match_detections
+from localization.detect.refiner import HALF, PATCH, POSITIVE_RADIUS, extract_patches
 from uav_struct_env.datasets.landmarks import load_labels
 from uav_struct_env.outputs import atomic_path, atomic_write_json, prepare_output_dir
 from uav_struct_env.training.train_detector import LandmarkCrops, conv_bn_relu, export_checked

@@ -45,7 +45,7 @@ class LocalizationWrapper(ParallelWrapper):
             ``aruco`` or ``all``.
         detector: ``"projection"`` (simulated: true projections + noise, misses, clutter),
             ``"aruco"`` (OpenCV markers; only with ``landmarks="aruco"``), ``"learned"`` (the
-            trained detector of :mod:`localization.learned` on the image, at the operating
+            trained detector of :mod:`localization.detect.learned` on the image, at the operating
             point that suits ``mode``; its ``true_ids`` -- for the association scores only --
             come from matching to the env's truth within 3 px), or any object following
             :class:`localization.Detector`.

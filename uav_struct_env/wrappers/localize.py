@@ -50,7 +50,7 @@ import numpy as np
 from gymnasium import spaces
 
 from localization.failure import FailureCode
-from localization.geometry import camera_center, invert, quat_wxyz_from_matrix
+from localization.geometry.transforms import camera_center, invert, quat_wxyz_from_matrix
 from localization.metrics import pose_errors
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.uav import UavState, step_uav

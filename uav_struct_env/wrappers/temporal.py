@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from localization import PoseEstimate, PriorSigmas
-from localization.geometry import so3_log
+from localization.geometry.transforms import so3_log
 from localization.temporal import FilterNoise, PoseFilter, Update, attitude_of
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.sensors import DegradedGnssNoise, GnssInsNoise, NoNoise, PaperNoise

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from localization.checks import check_choice, check_number
-from localization.geometry import invert
+from localization.geometry.transforms import invert
 from tracking import TrackingResult, track_workers, worker_errors
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.tracking_sim import (

@@ -1,0 +1,13 @@
+"""Stage 1, detection: anonymous landmark pixels from an image.
+
+- :mod:`~localization.detect.interface` -- :class:`Detections` and the :class:`Detector` protocol;
+- :mod:`~localization.detect.projection` -- the projection detector (truth + noise, an ablation);
+- :mod:`~localization.detect.learned` -- the learned heatmap detector (ONNX, CPU);
+- :mod:`~localization.detect.refiner` -- its patch classifier;
+- :mod:`~localization.detect.onnx_net` -- one ONNX network run on the CPU.
+"""
+
+from localization.detect.interface import Detections, Detector, check_image_size
+from localization.detect.projection import ProjectionDetector
+
+__all__ = ["Detections", "Detector", "ProjectionDetector", "check_image_size"]
