@@ -10,7 +10,7 @@ STAMP := $(VENV)/.installed-stamp
 # in a fresh checkout (or a venv of their own, as docs/training.md shows).
 EXTRAS ?= dev,rl,train,ifc,docs,rl-extra
 
-.PHONY: demo test test-slow lint bench docs docs-serve detector clean
+.PHONY: demo test test-slow lint bench docs docs-serve detector clean distclean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -18,8 +18,10 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[$(EXTRAS)]'
 	touch $(STAMP)
 
+# A second `make demo` replaces the first's results/ (and says so); `--out` elsewhere keeps both.
 demo: $(STAMP)
-	$(BIN)/uav-struct study --out results --workers 2
+	@if [ -e results ]; then echo "make demo: replacing the earlier results in results/"; fi
+	$(BIN)/uav-struct study --out results --workers 2 --overwrite
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
@@ -109,5 +111,9 @@ $(DETECTOR_RUN)/refiner_busy/refiner.onnx: $(DETECTOR_RUN)/keypoint/model.onnx \
 $(DETECTOR_RUN)/refiner.onnx: $(DETECTOR_RUN)/refiner/refiner.onnx $(DETECTOR_RUN)/refiner_busy/refiner.onnx
 	$(BIN)/python -m uav_struct_env.training.ensemble $^ --out $@
 
+# clean removes what the commands wrote and keeps the installed venv; distclean removes the venv too.
 clean:
-	rm -rf $(VENV) renders results site
+	rm -rf renders results site
+
+distclean: clean
+	rm -rf $(VENV)
