@@ -5,22 +5,12 @@ construction stages and markers; the parametric grid (:mod:`~uav_struct_env.site
 and the IFC importer (:mod:`~uav_struct_env.site.ifc`, optional extra ``ifc``) produce them.
 """
 
-from uav_struct_env.site.elements import Beam, Element, Hole, Stage, Storey, TriangleMesh, Wall
+from uav_struct_env.site.elements import Beam, Column, Element, Hole, Slab, Stage, Storey, TriangleMesh, Wall
 from uav_struct_env.site.ifc import ImportReport, ifc_report, ifc_stages, load_ifc, write_ifc
-from uav_struct_env.site.model import (
-    LANDMARK_SETS,
-    STAGES,
-    STRUCTURAL_SETS,
-    ArucoMarker,
-    Building,
-    Column,
-    ColumnGrid,
-    LandmarkSet,
-    Opening,
-    Site,
-    Slab,
-)
-from uav_struct_env.site.parametric import building_site
+from uav_struct_env.site.landmarks import LANDMARK_SETS, STRUCTURAL_SETS, LandmarkSet
+from uav_struct_env.site.markers import ArucoMarker
+from uav_struct_env.site.model import Site
+from uav_struct_env.site.parametric import STAGES, Building, ColumnGrid, Opening, building_site
 from uav_struct_env.site.presets import (
     make_site,
     markers_around,
