@@ -3,6 +3,15 @@
 A :class:`Site` is a list of typed elements (:mod:`~uav_struct_env.site.elements`) with its
 construction stages and markers; the parametric grid (:mod:`~uav_struct_env.site.parametric`)
 and the IFC importer (:mod:`~uav_struct_env.site.ifc`, optional extra ``ifc``) produce them.
+
+Imports point one way, from the plain data up (``tests/site/test_imports.py`` checks it):
+
+* the plain data: ``polygons``, ``elements`` (the element types, stages, storeys), ``markers``;
+* what the site derives from it: ``landmarks``, and ``ifc_export`` (the IFC writer);
+* the site: ``model`` (:class:`Site`);
+* the producers of sites: ``parametric`` (:func:`building_site`), ``ifc`` (:func:`load_ifc`),
+  ``io`` (site files) and ``presets``; and what reads a site: ``mesh`` (with ``textures``),
+  ``activity``, ``as_built``.
 """
 
 from uav_struct_env.site.elements import Beam, Column, Element, Hole, Slab, Stage, Storey, TriangleMesh, Wall

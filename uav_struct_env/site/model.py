@@ -70,6 +70,14 @@ class Site:
         object.__setattr__(self, "stages", tuple(self.stages))
         object.__setattr__(self, "storeys", tuple(self.storeys))
         object.__setattr__(self, "markers", tuple(self.markers))
+        self._check_elements_and_stages()
+        check_length("ground_size", self.ground_size, MAX_GROUND_SIZE, type_error=SiteGeometryError)
+        if not isinstance(self.name, str):
+            raise SiteGeometryError(f"site name must be a string, got {self.name!r}")
+        self._check_markers()
+
+    def _check_elements_and_stages(self) -> None:
+        """Elements of their type with unique guids; unique stage names naming only known elements."""
         if not self.elements:
             raise SiteGeometryError("a site needs at least one building element, got none")
         for e in self.elements:
@@ -91,9 +99,9 @@ class Site:
             missing = sorted((st.built | set(st.floor)) - known)
             if missing:
                 raise SiteGeometryError(f"stage {st.name!r} names unknown elements {missing[:5]}")
-        check_length("ground_size", self.ground_size, MAX_GROUND_SIZE, type_error=SiteGeometryError)
-        if not isinstance(self.name, str):
-            raise SiteGeometryError(f"site name must be a string, got {self.name!r}")
+
+    def _check_markers(self) -> None:
+        """Markers with unique ids, on the ground, clear of the building's footprint and of each other."""
         ids = [m.id for m in self.markers]
         dupes = sorted({i for i in ids if ids.count(i) > 1})
         if dupes:

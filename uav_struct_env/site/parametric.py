@@ -188,6 +188,11 @@ class Building:
                 f"slab_overhang = {self.slab_overhang} m must cover the columns' half section "
                 f"{max(sx, sy) / 2} m"
             )
+        self._check_openings()
+
+    def _check_openings(self) -> None:
+        """Openings inside the slab, clear of every column and of each other, with unique names."""
+        sx, sy = self.column_section
         xmin, ymin, xmax, ymax = self.slab_bounds
         for op in self.openings:
             oxmin, oymin, oxmax, oymax = op.bounds
