@@ -32,7 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 from localization.checks import check_number
 from localization.geometry.transforms import as_points, check_transform
 from uav_struct_env.sim.camera import Camera
-from uav_struct_env.site.model import LandmarkSet
+from uav_struct_env.site.landmarks import LandmarkSet
 
 __all__ = ["depth_tolerance", "landmark_visibility"]
 

@@ -1,8 +1,10 @@
-"""IFC import and export: a :class:`~uav_struct_env.site.Site` from an IFC file, and back.
+"""IFC import: a :class:`~uav_struct_env.site.Site` from an IFC file (and :func:`write_ifc`, back).
 
-The only module that imports ifcopenshell (the optional extra ``ifc``:
-``pip install 'uav-struct-env[ifc]'``); it is imported inside the functions, so the rest of the
-package works without it.
+ifcopenshell (the optional extra ``ifc``: ``pip install 'uav-struct-env[ifc]'``) is imported
+inside the functions, so the rest of the package works without it. The export
+(:func:`write_ifc`, ``Site.to_ifc``) is :mod:`uav_struct_env.site.ifc_export`, which reads the
+plain data only and so sits below the :class:`~uav_struct_env.site.Site`; this module builds
+sites and sits above it.
 
 Import (:func:`load_ifc`, :func:`ifc_stages`, :func:`ifc_report`)
 -----------------------------------------------------------------
@@ -13,7 +15,8 @@ placement, TrueNorth and IfcMapConversion are read and recorded in ``site.source
 applied. Imported: IfcSlab, IfcColumn, IfcBeam, IfcWall (and their subtypes). Not imported (the
 report counts them by class): footings (below ground), members (stringers, mullions), stairs,
 railings, doors, windows, coverings, furniture and every other non-structural product;
-IfcOpeningElements become slab openings. Real files are messy; the rules, in order:
+IfcOpeningElements become slab openings. Real files are messy; the rules, in order (each is a
+function of the same name: :func:`_no_body_geometry`, ... :func:`_columns_beams_walls`):
 
 1. **No body geometry**: an element the iterator cannot tessellate is dropped.
 2. **Coincident duplicates**: an element whose kind, 3D bounding box (within
@@ -54,16 +57,6 @@ walls; by storey, then file order), so they are stable across loads of the same 
 The parse is cached in-process per (file, mtime, size, transform): loading another stage of the
 same file does not tessellate again. What was kept and dropped is an :class:`ImportReport` in
 ``site.source["report"]``, logged at INFO.
-
-Export (:func:`write_ifc`, ``Site.to_ifc``)
--------------------------------------------
-IFC4 through ``ifcopenshell.api``, in metres: project, site, building, one IfcBuildingStorey per
-storey (name, elevation), each element contained in its storey, placed at its bottom. An element
-without a mesh is an extruded IfcArbitraryClosedProfileDef of its outline; a slab's openings are
-IfcOpeningElement voids extruded through it. An element with its own mesh (an imported one) is an
-IfcTriangulatedFaceSet (its openings are already cut). GlobalIds are derived from the site name
-and element guid (the same site writes the same ids); the element guid goes into ``Tag``.
-Markers are not written (they are not building elements).
 """
 
 from __future__ import annotations
@@ -73,21 +66,19 @@ import functools
 import logging
 import math
 import os
-import uuid
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from uav_struct_env.errors import ConfigError, IfcImportError
 from uav_struct_env.site.elements import Beam, Column, Element, Hole, Slab, Stage, Storey, TriangleMesh, Wall
+from uav_struct_env.site.ifc_export import require_ifcopenshell, write_building
+from uav_struct_env.site.model import Site
 from uav_struct_env.site.polygons import canonical_outline
-
-if TYPE_CHECKING:
-    from uav_struct_env.site.model import Site
 
 __all__ = [
     "DUPLICATE_TOL",
@@ -106,8 +97,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-INSTALL_HINT = "pip install 'uav-struct-env[ifc]'"
 
 #: IFC classes imported (with their subtypes), by element kind.
 IMPORTED_CLASSES = {"IfcColumn": "column", "IfcSlab": "slab", "IfcBeam": "beam", "IfcWall": "wall"}
@@ -144,21 +133,12 @@ _NOT_IMPORTED = (
 _KIND_ORDER = {"column": 0, "slab": 1, "beam": 2, "wall": 3}
 _ELEMENT_CLASS = {"column": Column, "slab": Slab, "beam": Beam, "wall": Wall}
 
-
-def _ifcopenshell() -> Any:
-    """The ifcopenshell module (with geom and util), or an ImportError naming the extra."""
-    try:
-        import ifcopenshell
-        import ifcopenshell.geom
-        import ifcopenshell.util.element
-        import ifcopenshell.util.placement
-        import ifcopenshell.util.unit
-    except ImportError as exc:
-        raise ImportError(
-            f"IFC import/export needs ifcopenshell, which is not installed ({exc}); "
-            f"install the 'ifc' extra: {INSTALL_HINT}"
-        ) from exc
-    return ifcopenshell
+# A report row: (guid, ifc class, name, role or reason).
+_Row = tuple[str, str, str, str]
+# A tessellated product: vertices (V, 3) and triangles (T, 3).
+_Shape = tuple[NDArray[np.float64], NDArray[np.int64]]
+# Each element's plan outline (None: it has none), by guid.
+_Footprints = dict[str, NDArray[np.float64] | None]
 
 
 # ----------------------------------------------------------------------------- the report
@@ -359,7 +339,7 @@ def _check_transform(transform: ArrayLike | None) -> NDArray[np.float64]:
 
 
 def _open(path: Path) -> Any:
-    ios = _ifcopenshell()
+    ios = require_ifcopenshell()
     if not path.exists():
         raise FileNotFoundError(f"IFC file not found: {str(path)!r}")
     if not path.is_file():
@@ -418,28 +398,418 @@ def _georeference(f: Any, scale: float) -> dict[str, Any]:
     return out
 
 
+# ----------------------------------------------------------------------------- the file
+def _imported_by_kind(f: Any, products: list[Any], path: Path) -> dict[str, list[Any]]:
+    """The products of each imported class by element kind; an error when there is no slab and no column."""
+    by_kind = {kind: f.by_type(cls) for cls, kind in IMPORTED_CLASSES.items()}
+    if not by_kind["slab"] and not by_kind["column"]:
+        counts = Counter(p.is_a() for p in products)
+        found = ", ".join(f"{c} x{n}" for c, n in counts.most_common()) or "no products at all"
+        raise IfcImportError(
+            f"{str(path)!r} has no IfcSlab and no IfcColumn, so no structural landmarks: it contains "
+            f"{found}"
+        )
+    return by_kind
+
+
+@dataclass(frozen=True)
+class _Storeys:
+    """The storeys bottom up, and each IfcBuildingStorey's place among them (by entity id)."""
+
+    storeys: tuple[Storey, ...]
+    index: dict[int, int]
+
+    def of(self, e: Any, zmin: float) -> int:
+        """The storey that contains ``e`` (through aggregates), else the highest at or below ``zmin``."""
+        import ifcopenshell.util.element as ue
+
+        c = ue.get_container(e, ifc_class="IfcBuildingStorey")
+        if c is not None and c.id() in self.index:
+            return self.index[c.id()]
+        below = [k for k, s in enumerate(self.storeys) if s.elevation <= zmin + 0.1]
+        return below[-1] if below else 0
+
+    def name(self, k: int) -> str:
+        """The name of storey ``k``."""
+        return self.storeys[k].name
+
+
+def _storeys(f: Any, scale: float, transform: NDArray[np.float64]) -> _Storeys:
+    """IfcBuildingStorey in elevation order (its placement's z in the project frame), names unique.
+
+    A file without storeys gets one, ``"Building"`` at elevation 0.
+    """
+    entities = []
+    for s in f.by_type("IfcBuildingStorey"):
+        if s.ObjectPlacement is not None:
+            z = float(_matrix_m(s.ObjectPlacement, scale)[2, 3])
+        else:
+            z = float(s.Elevation or 0.0) * scale
+        entities.append((z + transform[2, 3], s.id(), s))
+    entities.sort(key=lambda t: (t[0], t[1]))
+    names = [s.Name or f"Storey {k}" for k, (_, _, s) in enumerate(entities)]
+    seen: Counter[str] = Counter()
+    for k, n in enumerate(names):
+        seen[n] += 1
+        if seen[n] > 1:
+            names[k] = f"{n} ({seen[n]})"
+    storeys = [Storey(n, z) for n, (z, _, _) in zip(names, entities, strict=True)]
+    index = {sid: k for k, (_, sid, _) in enumerate(entities)}
+    return _Storeys(tuple(storeys) or (Storey("Building", 0.0),), index)
+
+
+def _tessellate(ios_geom: Any, settings: Any, f: Any, include: list[Any]) -> dict[int, _Shape]:
+    """Vertices (V, 3) and triangles (T, 3) of the ``include`` products, by entity id, world metres."""
+    shapes: dict[int, _Shape] = {}
+    if include:
+        it = ios_geom.iterator(settings, f, 1, include=include)
+        if it.initialize():
+            while True:
+                sh = it.get()
+                g = sh.geometry
+                shapes[sh.id] = (np.asarray(g.verts, dtype=np.float64).reshape(-1, 3),
+                                 np.asarray(g.faces, dtype=np.int64).reshape(-1, 3))
+                if not it.next():
+                    break
+    return shapes
+
+
+def _to_project(verts: NDArray[np.float64], transform: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Vertices (..., 3) from the IFC world frame into the project frame."""
+    return verts @ transform[:3, :3].T + transform[:3, 3]
+
+
+def _voids(ios_geom: Any, settings: Any, slab: Any, transform: NDArray[np.float64]) -> tuple:
+    """``(guid, name, plan convex hull)`` of the IfcOpeningElements voiding ``slab`` (with geometry)."""
+    import shapely
+
+    voids = []
+    for rel in getattr(slab, "HasOpenings", ()) or ():
+        op = rel.RelatedOpeningElement
+        try:
+            osh = ios_geom.create_shape(settings, op)
+        except Exception:  # an opening without geometry: not matchable
+            continue
+        ov = _to_project(np.asarray(osh.geometry.verts, dtype=np.float64).reshape(-1, 3), transform)
+        if len(ov) >= 3:
+            hull = shapely.MultiPoint(ov[:, :2]).convex_hull
+            voids.append((op.GlobalId, op.Name or "opening", hull))
+    return tuple(voids)
+
+
+def _raw(ios_geom: Any, settings: Any, order: int, e: Any, shape: _Shape, transform: NDArray[np.float64],
+         storeys: _Storeys) -> _Raw:
+    """The tessellated product ``e`` (``order``-th in file order) in the project frame."""
+    import ifcopenshell.util.element as ue
+
+    v, fc = shape
+    tri = _to_project(v, transform)[fc]
+    kind = IMPORTED_CLASSES[next(c for c in IMPORTED_CLASSES if e.is_a(c))]
+    predefined = ue.get_predefined_type(e) if kind == "slab" else None
+    voids = _voids(ios_geom, settings, e, transform) if kind == "slab" else ()
+    storey = storeys.of(e, float(tri[:, :, 2].min()))
+    return _Raw(order, e.GlobalId, e.is_a(), e.Name or e.is_a(), kind, storey, predefined, tri, voids)
+
+
+def _mesh_of(tris: list[NDArray[np.float64]]) -> TriangleMesh:
+    t = np.concatenate(tris)
+    return TriangleMesh(t.reshape(-1, 3), np.arange(3 * len(t)).reshape(-1, 3))
+
+
+# ----------------------------------------------------------------------------- the rules
+def _no_body_geometry(
+    include: list[Any], shapes: dict[int, _Shape]
+) -> tuple[list[tuple[int, Any]], list[_Row]]:
+    """Rule 1: the products the iterator tessellated, with their file order; the others dropped."""
+    tessellated: list[tuple[int, Any]] = []
+    dropped: list[_Row] = []
+    for order, e in enumerate(include):
+        if e.id() not in shapes or len(shapes[e.id()][1]) == 0:
+            dropped.append((e.GlobalId, e.is_a(), e.Name or e.is_a(), "no body geometry"))
+        else:
+            tessellated.append((order, e))
+    return tessellated, dropped
+
+
+def _coincident(u: _Raw, r: _Raw, footprints: _Footprints) -> bool:
+    """Whether ``r`` repeats ``u``: same kind, bounding box within DUPLICATE_TOL, same footprint."""
+    import shapely
+
+    if u.kind != r.kind or np.max(np.abs(u.bbox() - r.bbox())) > DUPLICATE_TOL:
+        return False
+    fa, fb = footprints[u.guid], footprints[r.guid]
+    if fa is None or fb is None:
+        return False
+    pa, pb = shapely.Polygon(fa), shapely.Polygon(fb)
+    return pa.symmetric_difference(pb).area <= 0.01 * max(pa.area, 1e-9)
+
+
+def _coincident_duplicates(
+    raws: list[_Raw], footprints: _Footprints
+) -> tuple[list[_Raw], list[_Row]]:
+    """Rule 2: the elements that repeat no earlier one; the coincident duplicates dropped."""
+    unique: list[_Raw] = []
+    dropped: list[_Row] = []
+    for r in raws:
+        twin = next((u for u in unique if _coincident(u, r, footprints)), None)
+        if twin is not None:
+            why = f"coincident duplicate of {twin.guid} ({twin.name!r})"
+            dropped.append((r.guid, r.ifc_class, r.name, why))
+        else:
+            unique.append(r)
+    return unique, dropped
+
+
+def _finish_floor(r: _Raw, thick: list[_Raw], footprints: _Footprints) -> str | None:
+    """Rule 3: why slab ``r`` is dropped as thinner than MIN_SLAB_THICKNESS, or None if it is not."""
+    import shapely
+
+    t = r.zmax - r.zmin
+    if t < MIN_SLAB_THICKNESS:
+        fp = footprints[r.guid]
+        under = [s for s in thick if abs(s.zmax - r.zmin) <= SAME_LEVEL_TOL and fp is not None
+                 and footprints[s.guid] is not None
+                 and shapely.Polygon(footprints[s.guid]).intersects(shapely.Polygon(fp))]
+        return (f"finish floor {1000 * t:.0f} mm thick lying on slab {under[0].guid} ({under[0].name!r})"
+                if under else f"{1000 * t:.0f} mm thick, thinner than {1000 * MIN_SLAB_THICKNESS:.0f} mm: "
+                "not a structural floor")
+    return None
+
+
+def _not_a_floor(r: _Raw) -> str | None:
+    """Rule 4: why slab ``r`` bears no landmarks for its PredefinedType, or None if it is a floor."""
+    if r.predefined not in FLOOR_TYPES:
+        return f"slab of type {r.predefined}: rendered, bears no landmarks"
+    return None
+
+
+def _sloped_slab(top: _Top) -> str | None:
+    """Rule 5: why a slab with this top bears no landmarks (not flat-topped), or None."""
+    if not top.flat:
+        return "sloped or stepped top (no flat top face): rendered, no landmarks"
+    return None
+
+
+def _floor_pieces(
+    slabs: list[_Raw], tops: dict[str, _Top], footprints: _Footprints
+) -> tuple[list[_Raw], list[tuple[_Raw, str]], list[_Row]]:
+    """Rules 3-5 over the slabs, in order.
+
+    Returns the floor pieces, the slabs rendered without landmarks (with why) and the dropped rows.
+    """
+    thick = [r for r in slabs if r.zmax - r.zmin >= MIN_SLAB_THICKNESS]
+    pieces: list[_Raw] = []
+    rendered: list[tuple[_Raw, str]] = []
+    dropped: list[_Row] = []
+    for r in slabs:
+        finish = _finish_floor(r, thick, footprints)
+        if finish is not None:
+            dropped.append((r.guid, r.ifc_class, r.name, finish))
+            continue
+        why = _not_a_floor(r) or _sloped_slab(tops[r.guid])
+        if why is not None:
+            rendered.append((r, why))
+        else:
+            pieces.append(r)
+    return pieces, rendered, dropped
+
+
+def _root(parent: list[int], a: int) -> int:
+    """The root of ``a`` in the union-find forest ``parent`` (path halving)."""
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
 def _floor_groups(pieces: list[_Raw], tops: dict[str, _Top]) -> list[list[_Raw]]:
     """Pieces of one storey's floor grouped into slabs (rule 6).
 
     Connected components of "same level and at most PRECAST_JOINT apart", in file order.
     """
     parent = list(range(len(pieces)))
-
-    def find(a: int) -> int:
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
     for a in range(len(pieces)):
         for b in range(a + 1, len(pieces)):
             ta, tb = tops[pieces[a].guid], tops[pieces[b].guid]
             if abs(ta.z - tb.z) <= SAME_LEVEL_TOL and ta.polygon.distance(tb.polygon) <= PRECAST_JOINT:
-                parent[find(b)] = find(a)
+                parent[_root(parent, b)] = _root(parent, a)
     roots: dict[int, list[_Raw]] = {}
     for a, r in enumerate(pieces):
-        roots.setdefault(find(a), []).append(r)
+        roots.setdefault(_root(parent, a), []).append(r)
     return sorted(roots.values(), key=lambda g: g[0].order)
+
+
+def _precast_pieces(pieces: list[_Raw], tops: dict[str, _Top]) -> list[list[_Raw]]:
+    """Rule 6: the floor pieces grouped into slabs, storey by storey."""
+    groups: list[list[_Raw]] = []
+    for storey in sorted({r.storey for r in pieces}):
+        groups += _floor_groups([r for r in pieces if r.storey == storey], tops)
+    return groups
+
+
+def _slab_openings(part: Any, notches: list[NDArray[np.float64]], voids: list[tuple[str, str, Any]],
+                   guid: str, name: str) -> tuple[Hole, ...]:
+    """Rule 7's openings of one slab: interior rings and notches, after the void there if any."""
+    import shapely
+
+    rings = [_ring(h.coords)[:-1] for h in part.interiors] + list(notches)
+    outlines = [canonical_outline(h, "slab opening", tol=OUTLINE_TOL) for h in rings]
+    outlines.sort(key=lambda h: (h[0, 1], h[0, 0]))
+    holes = []
+    for j, h in enumerate(outlines):
+        at = shapely.Polygon(h).representative_point()
+        match = [v for v in voids if v[2].buffer(0.01).contains(at)]
+        if match:
+            holes.append(Hole(match[0][1], h, guid=match[0][0], source="void"))
+        else:
+            holes.append(Hole(f"{name} opening {j}", h, guid=f"{guid}/opening {j}", source="outline"))
+    return tuple(holes)
+
+
+def _slab_outline(group: list[_Raw], tops: dict[str, _Top]) -> list[tuple[tuple, Slab]]:
+    """Rule 7: the slab(s) of one group of floor pieces, one per part of their tops' union, keyed."""
+    import shapely
+
+    first = group[0]
+    if len(group) > 1:
+        union = shapely.union_all([tops[r.guid].polygon for r in group])
+        poly = _clean(union, PRECAST_JOINT / 2 + 1e-4)
+    else:
+        poly = tops[first.guid].polygon
+    parts = sorted(_parts(poly), key=lambda p: (p.bounds[1], p.bounds[0]))
+    guid = "+".join(r.guid for r in group)
+    name = " + ".join(r.name for r in group)
+    z_top = max(tops[r.guid].z for r in group)
+    z_bottom = min(r.zmin for r in group)
+    mesh = _mesh_of([r.tri for r in group])
+    voids = [v for r in group for v in r.voids]
+    out = []
+    for k, part in enumerate(parts):
+        pguid = guid if len(parts) == 1 else f"{guid}#{k}"
+        pname = name if len(parts) == 1 else f"{name} part {k}"
+        outer, notches = _fill_notches(_ring(part.exterior.coords)[:-1])
+        out.append(((1, first.storey, first.order, k), Slab(
+            guid=pguid, name=pname, storey=first.storey, outline=outer, z_bottom=z_bottom, z_top=z_top,
+            mesh=mesh, holes=_slab_openings(part, notches, voids, pguid, pname))))
+    return out
+
+
+def _floors(
+    groups: list[list[_Raw]], tops: dict[str, _Top], storeys: _Storeys
+) -> tuple[list[tuple[tuple, Element]], dict[int, list[str]], list[_Row]]:
+    """Rules 6-7 applied: the floor slabs (keyed), each storey's floor guids, the kept rows."""
+    elements: list[tuple[tuple, Element]] = []
+    floors: dict[int, list[str]] = {}
+    kept: list[_Row] = []
+    for group in groups:
+        first = group[0]
+        for key, slab in _slab_outline(group, tops):
+            elements.append((key, slab))
+            floors.setdefault(first.storey, []).append(slab.guid)
+        role = (f"floor of {storeys.name(first.storey)}" + (f", one slab with {len(group) - 1} more "
+                f"piece(s) at most {100 * PRECAST_JOINT:.0f} cm apart" if len(group) > 1 else ""))
+        kept += [(r.guid, r.ifc_class, r.name, role) for r in group]
+    return elements, floors, kept
+
+
+def _rendered_slabs(
+    rendered: list[tuple[_Raw, str]], footprints: _Footprints
+) -> tuple[list[tuple[tuple, Element]], list[_Row], list[_Row]]:
+    """Rules 4-5's slabs, kept for rendering (footprint outline, ``structural=False``); kept, dropped."""
+    elements: list[tuple[tuple, Element]] = []
+    kept: list[_Row] = []
+    dropped: list[_Row] = []
+    for r, why in rendered:
+        fp = footprints[r.guid]
+        if fp is None:
+            dropped.append((r.guid, r.ifc_class, r.name, "no plan footprint"))
+            continue
+        elements.append(((1, r.storey, r.order, 0), Slab(
+            guid=r.guid, name=r.name, storey=r.storey, outline=fp, z_bottom=r.zmin, z_top=r.zmax,
+            mesh=_mesh_of([r.tri]), structural=False)))
+        kept.append((r.guid, r.ifc_class, r.name, why))
+    return elements, kept, dropped
+
+
+def _columns_beams_walls(
+    unique: list[_Raw], footprints: _Footprints, storeys: _Storeys
+) -> tuple[list[tuple[tuple, Element]], list[_Row], list[_Row]]:
+    """Rule 8: columns (axis at the top face's centroid), beams and walls, keyed; kept, dropped."""
+    import shapely
+
+    elements: list[tuple[tuple, Element]] = []
+    kept: list[_Row] = []
+    dropped: list[_Row] = []
+    columns = 0
+    for r in unique:
+        if r.kind == "slab":
+            continue
+        fp = footprints[r.guid]
+        if fp is None or r.zmax - r.zmin <= 1e-6:
+            dropped.append((r.guid, r.ifc_class, r.name, "no plan footprint or no height"))
+            continue
+        extra: dict[str, Any] = {}
+        if r.kind == "column":
+            top = _slab_top(r)
+            c = (top.polygon if top.flat and not top.polygon.is_empty else shapely.Polygon(fp)).centroid
+            extra = {"axis": (c.x, c.y), "index": columns}
+            columns += 1
+        elements.append(((_KIND_ORDER[r.kind], r.storey, r.order, 0), _ELEMENT_CLASS[r.kind](
+            guid=r.guid, name=r.name, storey=r.storey, outline=fp, z_bottom=r.zmin, z_top=r.zmax,
+            mesh=_mesh_of([r.tri]), **extra)))
+        kept.append((r.guid, r.ifc_class, r.name, f"{r.kind} of {storeys.name(r.storey)}"))
+    return elements, kept, dropped
+
+
+# ----------------------------------------------------------------------------- the site
+def _in_order(keyed: list[tuple[tuple, Element]]) -> tuple[Element, ...]:
+    """The elements in element order (kind, storey, file order), names unique within a kind.
+
+    A name used twice in a kind gets its guid prefix.
+    """
+    ordered = [e for _, e in sorted(keyed, key=lambda t: t[0])]
+    name_counts = Counter((e.kind, e.name) for e in ordered)
+    return tuple(e if name_counts[(e.kind, e.name)] == 1
+                 else dataclasses.replace(e, name=f"{e.name} [{e.guid[:8]}]") for e in ordered)
+
+
+def _stages(
+    elements: tuple[Element, ...], floors: dict[int, list[str]], storeys: _Storeys
+) -> tuple[Stage, ...]:
+    """``"<storey>/slab"`` and ``"<storey>/columns"`` for each storey with a floor, in build order."""
+    stages: list[Stage] = []
+    for s in sorted(floors):
+        below = {e.guid for e in elements if e.storey < s}
+        slab_guids = {g for t in sorted(floors) if t <= s for g in floors[t]}
+        built = frozenset(below | slab_guids)
+        stages.append(Stage(f"{storeys.name(s)}/slab", built, tuple(floors[s])))
+        cols = {e.guid for e in elements if isinstance(e, Column) and e.storey == s}
+        if cols:
+            stages.append(Stage(f"{storeys.name(s)}/columns", built | cols, tuple(floors[s])))
+    return tuple(stages)
+
+
+def _no_floor(path: Path, by_kind: dict[str, list[Any]], dropped: list[_Row],
+              rendered: list[tuple[_Raw, str]]) -> IfcImportError:
+    """The error for a file without a flat-topped structural floor, naming what was left out and why."""
+    return IfcImportError(
+        f"{str(path)!r} has no flat-topped structural floor to build stages on: "
+        f"{len(by_kind['slab'])} IfcSlab, {len(by_kind['column'])} IfcColumn; dropped or not "
+        "landmark-bearing: " + "; ".join(f"{g} {n!r}: {why}" for g, _, n, why in dropped[:8])
+        + "; " + "; ".join(f"{r.guid} {r.name!r}: {why}" for r, why in rendered[:8])
+    )
+
+
+def _not_imported(products: list[Any], include: list[Any]) -> tuple[tuple[str, int, str], ...]:
+    """``(ifc class, count, reason)`` of the products not imported, by class."""
+    imported_ids = {e.id() for e in include}
+    counts: Counter[tuple[str, str]] = Counter()
+    for p in products:
+        if p.id() in imported_ids:
+            continue
+        reason = next((why for cls, why in _NOT_IMPORTED if p.is_a(cls)), "non-structural: not imported")
+        counts[(p.is_a(), reason)] += 1
+    return tuple(sorted(((c, n, why) for (c, why), n in counts.items()), key=lambda t: t[0]))
 
 
 @dataclass(frozen=True)
@@ -452,261 +822,40 @@ class _Parsed:
 
 
 def _parse(path: Path, transform: NDArray[np.float64]) -> _Parsed:
-    ios = _ifcopenshell()
-    import ifcopenshell.util.element as ue
-    import shapely
-
+    """The elements, storeys and stages of the IFC file ``path``: the rules of the module docstring."""
+    ios = require_ifcopenshell()
     f = _open(path)
     scale = float(ios.util.unit.calculate_unit_scale(f))
     products = f.by_type("IfcProduct")
-    counts = Counter(p.is_a() for p in products)
-    by_kind = {kind: f.by_type(cls) for cls, kind in IMPORTED_CLASSES.items()}
-    if not by_kind["slab"] and not by_kind["column"]:
-        found = ", ".join(f"{c} x{n}" for c, n in counts.most_common()) or "no products at all"
-        raise IfcImportError(
-            f"{str(path)!r} has no IfcSlab and no IfcColumn, so no structural landmarks: it contains "
-            f"{found}"
-        )
-
-    # Storeys, bottom up, their elevation in the project frame.
-    storey_entities = []
-    for s in f.by_type("IfcBuildingStorey"):
-        if s.ObjectPlacement is not None:
-            z = float(_matrix_m(s.ObjectPlacement, scale)[2, 3])
-        else:
-            z = float(s.Elevation or 0.0) * scale
-        storey_entities.append((z + transform[2, 3], s.id(), s))
-    storey_entities.sort(key=lambda t: (t[0], t[1]))
-    names = [s.Name or f"Storey {k}" for k, (_, _, s) in enumerate(storey_entities)]
-    seen: Counter[str] = Counter()
-    for k, n in enumerate(names):
-        seen[n] += 1
-        if seen[n] > 1:
-            names[k] = f"{n} ({seen[n]})"
-    storeys = [Storey(n, z) for n, (z, _, _) in zip(names, storey_entities, strict=True)]
-    storey_index = {sid: k for k, (_, sid, _) in enumerate(storey_entities)}
-    if not storeys:
-        storeys = [Storey("Building", 0.0)]
-
-    # Tessellate the imported classes in world coordinates (metres).
-    ios_geom = ios.geom
-    settings = ios_geom.settings()
+    by_kind = _imported_by_kind(f, products, path)
+    storeys = _storeys(f, scale, transform)
+    settings = ios.geom.settings()
     settings.set("use-world-coords", True)
     include = [e for kind in ("column", "slab", "beam", "wall") for e in by_kind[kind]]
-    shapes: dict[int, tuple[NDArray[np.float64], NDArray[np.int64]]] = {}
-    if include:
-        it = ios_geom.iterator(settings, f, 1, include=include)
-        if it.initialize():
-            while True:
-                sh = it.get()
-                g = sh.geometry
-                shapes[sh.id] = (np.asarray(g.verts, dtype=np.float64).reshape(-1, 3),
-                                 np.asarray(g.faces, dtype=np.int64).reshape(-1, 3))
-                if not it.next():
-                    break
-    rot, shift = transform[:3, :3], transform[:3, 3]
-
-    def world(verts: NDArray[np.float64]) -> NDArray[np.float64]:
-        return verts @ rot.T + shift
-
-    def storey_of(e: Any, zmin: float) -> int:
-        c = ue.get_container(e, ifc_class="IfcBuildingStorey")
-        if c is not None and c.id() in storey_index:
-            return storey_index[c.id()]
-        below = [k for k, s in enumerate(storeys) if s.elevation <= zmin + 0.1]
-        return below[-1] if below else 0
-
-    kept: list[tuple[str, str, str, str]] = []
-    dropped: list[tuple[str, str, str, str]] = []
-    raws: list[_Raw] = []
-    for order, e in enumerate(include):
-        name = e.Name or e.is_a()
-        if e.id() not in shapes or len(shapes[e.id()][1]) == 0:
-            dropped.append((e.GlobalId, e.is_a(), name, "no body geometry"))
-            continue
-        v, fc = shapes[e.id()]
-        tri = world(v)[fc]
-        kind = IMPORTED_CLASSES[next(c for c in IMPORTED_CLASSES if e.is_a(c))]
-        predefined = ue.get_predefined_type(e) if kind == "slab" else None
-        voids = []
-        if kind == "slab":
-            for rel in getattr(e, "HasOpenings", ()) or ():
-                op = rel.RelatedOpeningElement
-                try:
-                    osh = ios_geom.create_shape(settings, op)
-                except Exception:  # an opening without geometry: not matchable
-                    continue
-                ov = world(np.asarray(osh.geometry.verts, dtype=np.float64).reshape(-1, 3))
-                if len(ov) >= 3:
-                    hull = shapely.MultiPoint(ov[:, :2]).convex_hull
-                    voids.append((op.GlobalId, op.Name or "opening", hull))
-        raws.append(_Raw(order, e.GlobalId, e.is_a(), name, kind, storey_of(e, float(tri[:, :, 2].min())),
-                         predefined, tri, tuple(voids)))
-
-    # Rule 2: coincident duplicates (same kind, bounding box and footprint).
-    footprints: dict[str, NDArray[np.float64] | None] = {r.guid: _footprint(r.tri) for r in raws}
-    unique: list[_Raw] = []
-    for r in raws:
-        twin = None
-        for u in unique:
-            if u.kind != r.kind or np.max(np.abs(u.bbox() - r.bbox())) > DUPLICATE_TOL:
-                continue
-            fa, fb = footprints[u.guid], footprints[r.guid]
-            if fa is None or fb is None:
-                continue
-            pa, pb = shapely.Polygon(fa), shapely.Polygon(fb)
-            if pa.symmetric_difference(pb).area <= 0.01 * max(pa.area, 1e-9):
-                twin = u
-                break
-        if twin is not None:
-            why = f"coincident duplicate of {twin.guid} ({twin.name!r})"
-            dropped.append((r.guid, r.ifc_class, r.name, why))
-        else:
-            unique.append(r)
-
-    # Rules 3-5: slabs -> finish floors (dropped), non-floor and sloped slabs (kept, no landmarks).
+    shapes = _tessellate(ios.geom, settings, f, include)
+    tessellated, no_body = _no_body_geometry(include, shapes)
+    raws = [_raw(ios.geom, settings, k, e, shapes[e.id()], transform, storeys) for k, e in tessellated]
+    footprints = {r.guid: _footprint(r.tri) for r in raws}
+    unique, duplicates = _coincident_duplicates(raws, footprints)
     slabs = [r for r in unique if r.kind == "slab"]
     tops = {r.guid: _slab_top(r) for r in slabs}
-    thick = [r for r in slabs if r.zmax - r.zmin >= MIN_SLAB_THICKNESS]
-    floor_pieces: list[_Raw] = []
-    rendered_slabs: list[tuple[_Raw, str]] = []
-    for r in slabs:
-        t = r.zmax - r.zmin
-        if t < MIN_SLAB_THICKNESS:
-            fp = footprints[r.guid]
-            under = [s for s in thick if abs(s.zmax - r.zmin) <= SAME_LEVEL_TOL and fp is not None
-                     and footprints[s.guid] is not None
-                     and shapely.Polygon(footprints[s.guid]).intersects(shapely.Polygon(fp))]
-            why = (f"finish floor {1000 * t:.0f} mm thick lying on slab {under[0].guid} ({under[0].name!r})"
-                   if under else f"{1000 * t:.0f} mm thick, thinner than {1000 * MIN_SLAB_THICKNESS:.0f} mm: "
-                   "not a structural floor")
-            dropped.append((r.guid, r.ifc_class, r.name, why))
-        elif r.predefined not in FLOOR_TYPES:
-            rendered_slabs.append((r, f"slab of type {r.predefined}: rendered, bears no landmarks"))
-        elif not tops[r.guid].flat:
-            rendered_slabs.append((r, "sloped or stepped top (no flat top face): rendered, no landmarks"))
-        else:
-            floor_pieces.append(r)
-
-    # Rule 6: group floor pieces per storey (same level, touching or a precast joint apart).
-    groups: list[list[_Raw]] = []
-    for storey in sorted({r.storey for r in floor_pieces}):
-        groups += _floor_groups([r for r in floor_pieces if r.storey == storey], tops)
-
-    elements: list[tuple[tuple, Element]] = []
-    floors: dict[int, list[str]] = {}
-
-    def mesh_of(tris: list[NDArray[np.float64]]) -> TriangleMesh:
-        t = np.concatenate(tris)
-        return TriangleMesh(t.reshape(-1, 3), np.arange(3 * len(t)).reshape(-1, 3))
-
-    for group in groups:
-        first = group[0]
-        if len(group) > 1:
-            union = shapely.union_all([tops[r.guid].polygon for r in group])
-            poly = _clean(union, PRECAST_JOINT / 2 + 1e-4)
-        else:
-            poly = tops[first.guid].polygon
-        parts = sorted(_parts(poly), key=lambda p: (p.bounds[1], p.bounds[0]))
-        guid = "+".join(r.guid for r in group)
-        name = " + ".join(r.name for r in group)
-        z_top = max(tops[r.guid].z for r in group)
-        z_bottom = min(r.zmin for r in group)
-        mesh = mesh_of([r.tri for r in group])
-        voids = [v for r in group for v in r.voids]
-        for k, part in enumerate(parts):
-            pguid = guid if len(parts) == 1 else f"{guid}#{k}"
-            pname = name if len(parts) == 1 else f"{name} part {k}"
-            outer, notches = _fill_notches(_ring(part.exterior.coords)[:-1])
-            rings = [(_ring(h.coords)[:-1], True) for h in part.interiors] + [(n_, False) for n_ in notches]
-            holes = []
-            outlines = [canonical_outline(h, "slab opening", tol=OUTLINE_TOL) for h, _ in rings]
-            outlines.sort(key=lambda h: (h[0, 1], h[0, 0]))
-            for j, h in enumerate(outlines):
-                at = shapely.Polygon(h).representative_point()
-                match = [v for v in voids if v[2].buffer(0.01).contains(at)]
-                if match:
-                    holes.append(Hole(match[0][1], h, guid=match[0][0], source="void"))
-                else:
-                    holes.append(Hole(f"{pname} opening {j}", h, guid=f"{pguid}/opening {j}",
-                                      source="outline"))
-            elements.append(((1, first.storey, first.order, k), Slab(
-                guid=pguid, name=pname, storey=first.storey, outline=outer, z_bottom=z_bottom,
-                z_top=z_top, mesh=mesh, holes=tuple(holes))))
-            floors.setdefault(first.storey, []).append(pguid)
-        role = (f"floor of {storeys[first.storey].name}" + (f", one slab with {len(group) - 1} more "
-                f"piece(s) at most {100 * PRECAST_JOINT:.0f} cm apart" if len(group) > 1 else ""))
-        kept += [(r.guid, r.ifc_class, r.name, role) for r in group]
-    for r, why in rendered_slabs:
-        fp = footprints[r.guid]
-        if fp is None:
-            dropped.append((r.guid, r.ifc_class, r.name, "no plan footprint"))
-            continue
-        elements.append(((1, r.storey, r.order, 0), Slab(
-            guid=r.guid, name=r.name, storey=r.storey, outline=fp, z_bottom=r.zmin, z_top=r.zmax,
-            mesh=mesh_of([r.tri]), structural=False)))
-        kept.append((r.guid, r.ifc_class, r.name, why))
-
-    # Rule 8: columns, beams, walls.
-    for r in unique:
-        if r.kind == "slab":
-            continue
-        fp = footprints[r.guid]
-        if fp is None or r.zmax - r.zmin <= 1e-6:
-            dropped.append((r.guid, r.ifc_class, r.name, "no plan footprint or no height"))
-            continue
-        cls = _ELEMENT_CLASS[r.kind]
-        extra: dict[str, Any] = {}
-        if r.kind == "column":
-            top = _slab_top(r)
-            c = (top.polygon if top.flat and not top.polygon.is_empty else shapely.Polygon(fp)).centroid
-            extra = {"axis": (c.x, c.y), "index": sum(1 for k, e in elements if e.kind == "column")}
-        elements.append(((_KIND_ORDER[r.kind], r.storey, r.order, 0), cls(
-            guid=r.guid, name=r.name, storey=r.storey, outline=fp, z_bottom=r.zmin, z_top=r.zmax,
-            mesh=mesh_of([r.tri]), **extra)))
-        kept.append((r.guid, r.ifc_class, r.name, f"{r.kind} of {storeys[r.storey].name}"))
-
-    elements.sort(key=lambda t: t[0])
-    ordered = [e for _, e in elements]
-    # Unique names per kind: a name used twice gets its guid prefix.
-    name_counts = Counter((e.kind, e.name) for e in ordered)
-    ordered = [e if name_counts[(e.kind, e.name)] == 1
-               else dataclasses.replace(e, name=f"{e.name} [{e.guid[:8]}]") for e in ordered]
-
-    # Stages.
-    stages: list[Stage] = []
-    for s in sorted(floors):
-        below = {e.guid for e in ordered if e.storey < s}
-        slab_guids = {g for t in sorted(floors) if t <= s for g in floors[t]}
-        built = frozenset(below | slab_guids)
-        stages.append(Stage(f"{storeys[s].name}/slab", built, tuple(floors[s])))
-        cols = {e.guid for e in ordered if isinstance(e, Column) and e.storey == s}
-        if cols:
-            stages.append(Stage(f"{storeys[s].name}/columns", built | cols, tuple(floors[s])))
+    pieces, rendered, finish = _floor_pieces(slabs, tops, footprints)
+    floor_slabs, floors, floors_kept = _floors(_precast_pieces(pieces, tops), tops, storeys)
+    shown, shown_kept, no_footprint = _rendered_slabs(rendered, footprints)
+    others, others_kept, others_dropped = _columns_beams_walls(unique, footprints, storeys)
+    dropped = no_body + duplicates + finish + no_footprint + others_dropped
+    elements = _in_order(floor_slabs + shown + others)
+    stages = _stages(elements, floors, storeys)
     if not stages:
-        raise IfcImportError(
-            f"{str(path)!r} has no flat-topped structural floor to build stages on: "
-            f"{len(by_kind['slab'])} IfcSlab, {len(by_kind['column'])} IfcColumn; dropped or not "
-            "landmark-bearing: " + "; ".join(f"{g} {n!r}: {why}" for g, _, n, why in dropped[:8])
-            + "; " + "; ".join(f"{r.guid} {r.name!r}: {why}" for r, why in rendered_slabs[:8])
-        )
-
-    # What was not imported, by class.
-    imported_ids = {e.id() for e in include}
-    skipped_counts: Counter[tuple[str, str]] = Counter()
-    for p in products:
-        if p.id() in imported_ids:
-            continue
-        reason = next((why for cls, why in _NOT_IMPORTED if p.is_a(cls)), "non-structural: not imported")
-        skipped_counts[(p.is_a(), reason)] += 1
-    skipped = tuple(sorted(((c, n, why) for (c, why), n in skipped_counts.items()), key=lambda t: t[0]))
-    report = ImportReport(str(path), tuple(kept), tuple(dropped), skipped)
+        raise _no_floor(path, by_kind, dropped, rendered)
+    report = ImportReport(str(path), tuple(floors_kept + shown_kept + others_kept), tuple(dropped),
+                          _not_imported(products, include))
     source = {
         "format": "ifc", "path": str(path), "schema": f.schema,
         "units": {"length_unit_in_m": scale},
         "transform": transform.tolist(), **_georeference(f, scale), "report": report,
     }
-    return _Parsed(tuple(ordered), tuple(storeys), tuple(stages), report, source)
+    return _Parsed(elements, storeys.storeys, stages, report, source)
 
 
 @functools.lru_cache(maxsize=8)
@@ -717,7 +866,7 @@ def _parse_cached(path: str, mtime_ns: int, size: int, transform: bytes) -> _Par
 
 
 def _parsed(path: str | os.PathLike, transform: ArrayLike | None) -> _Parsed:
-    _ifcopenshell()
+    require_ifcopenshell()
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__}")
     p = Path(path).expanduser()
@@ -768,8 +917,6 @@ def load_ifc(
         ValueError: for a transform that is not 4x4 rigid keeping z up.
         ImportError: if ifcopenshell is not installed (names the ``ifc`` extra).
     """
-    from uav_struct_env.site.model import Site
-
     parsed = _parsed(path, transform)
     names = [n for st in parsed.stages for n in st.names]
     if stage is None:
@@ -789,119 +936,15 @@ def load_ifc(
     )
 
 
-# ----------------------------------------------------------------------------- export
-_GUID_NAMESPACE = uuid.UUID("6f1b7a52-3c1e-4f0e-9a55-2b8c8a4d7e10")
-
-
 def write_ifc(site: Site, path: str | os.PathLike) -> Path:
     """Write ``site``'s building (every element, all stages) as IFC4 in metres; returns the path.
 
-    See the module docstring (Export). Markers are not written.
+    See :mod:`uav_struct_env.site.ifc_export`. Markers are not written.
 
     Raises:
         TypeError: if ``site`` is not a Site.
         ImportError: if ifcopenshell is not installed (names the ``ifc`` extra).
     """
-    from uav_struct_env.site.model import Site
-
     if not isinstance(site, Site):
         raise TypeError(f"site must be a uav_struct_env.site.Site, got {type(site).__name__}")
-    ios = _ifcopenshell()
-    import ifcopenshell.api
-    import ifcopenshell.api.project
-    import ifcopenshell.guid
-
-    def api(usecase: str, *args: Any, **kwargs: Any) -> Any:
-        module, name = usecase.split(".")
-        return getattr(getattr(ifcopenshell.api, module), name)(*args, **kwargs)
-
-    for module in ("aggregate", "context", "feature", "geometry", "root", "spatial", "unit"):
-        __import__(f"ifcopenshell.api.{module}")
-    f = ifcopenshell.api.project.create_file(version="IFC4")
-
-    def gid(key: str) -> str:
-        return ifcopenshell.guid.compress(uuid.uuid5(_GUID_NAMESPACE, f"{site.name}/{key}").hex)
-
-    project = api("root.create_entity", f, ifc_class="IfcProject", name=site.name)
-    project.GlobalId = gid("project")
-    metre = api("unit.add_si_unit", f, unit_type="LENGTHUNIT")
-    api("unit.assign_unit", f, units=[metre])
-    model = api("context.add_context", f, context_type="Model")
-    body = api("context.add_context", f, context_type="Model", context_identifier="Body",
-               target_view="MODEL_VIEW", parent=model)
-    ifc_site = api("root.create_entity", f, ifc_class="IfcSite", name=site.name)
-    ifc_site.GlobalId = gid("site")
-    building = api("root.create_entity", f, ifc_class="IfcBuilding", name=site.name)
-    building.GlobalId = gid("building")
-    api("aggregate.assign_object", f, products=[ifc_site], relating_object=project)
-    api("aggregate.assign_object", f, products=[building], relating_object=ifc_site)
-    for product in (ifc_site, building):
-        api("geometry.edit_object_placement", f, product=product, matrix=np.eye(4))
-    storeys = []
-    for k, st in enumerate(site.storeys):
-        s = api("root.create_entity", f, ifc_class="IfcBuildingStorey", name=st.name)
-        s.GlobalId = gid(f"storey {k}")
-        s.Elevation = float(st.elevation)
-        api("aggregate.assign_object", f, products=[s], relating_object=building)
-        api("geometry.edit_object_placement", f, product=s, matrix=_translation(0.0, 0.0, st.elevation))
-        storeys.append(s)
-
-    ifc_class = {"column": "IfcColumn", "slab": "IfcSlab", "beam": "IfcBeam", "wall": "IfcWall"}
-    for e in site.elements:
-        product = api("root.create_entity", f, ifc_class=ifc_class[e.kind], name=e.name,
-                      predefined_type=("FLOOR" if getattr(e, "structural", True) else "NOTDEFINED")
-                      if e.kind == "slab" else None)
-        product.GlobalId = gid(e.guid)
-        product.Tag = e.guid
-        if storeys:
-            api("spatial.assign_container", f, products=[product],
-                relating_structure=storeys[min(e.storey, len(storeys) - 1)])
-        api("geometry.edit_object_placement", f, product=product, matrix=_translation(0.0, 0.0, e.z_bottom))
-        if e.mesh is not None:
-            item = _face_set(f, e.mesh.vertices - [0.0, 0.0, e.z_bottom], e.mesh.faces)
-            rep_type = "Tessellation"
-        else:
-            item = _extrusion(f, e.outline, 0.0, e.z_top - e.z_bottom)
-            rep_type = "SweptSolid"
-        rep = f.createIfcShapeRepresentation(body, "Body", rep_type, [item])
-        api("geometry.assign_representation", f, product=product, representation=rep)
-        if isinstance(e, Slab) and e.mesh is None:
-            for hole in e.holes:
-                op = api("root.create_entity", f, ifc_class="IfcOpeningElement", name=hole.name)
-                op.GlobalId = gid(f"{e.guid}/{hole.guid}")
-                op.Tag = hole.guid
-                api("geometry.edit_object_placement", f, product=op,
-                    matrix=_translation(0.0, 0.0, e.z_bottom - 0.1))
-                rep = f.createIfcShapeRepresentation(
-                    body, "Body", "SweptSolid", [_extrusion(f, hole.outline, 0.0, e.thickness + 0.2)])
-                api("geometry.assign_representation", f, product=op, representation=rep)
-                api("feature.add_feature", f, feature=op, element=product)
-    out = Path(path)
-    f.write(str(out))
-    del ios
-    return out
-
-
-def _translation(x: float, y: float, z: float) -> NDArray[np.float64]:
-    m = np.eye(4)
-    m[:3, 3] = (x, y, z)
-    return m
-
-
-def _extrusion(f: Any, outline: NDArray[np.float64], z0: float, depth: float) -> Any:
-    """An IfcExtrudedAreaSolid of a plan ``outline`` from ``z0`` up by ``depth`` (local frame)."""
-    pts = [f.createIfcCartesianPoint((float(x), float(y))) for x, y in outline]
-    profile = f.createIfcArbitraryClosedProfileDef("AREA", None, f.createIfcPolyline([*pts, pts[0]]))
-    position = f.createIfcAxis2Placement3D(f.createIfcCartesianPoint((0.0, 0.0, float(z0))), None, None)
-    up = f.createIfcDirection((0.0, 0.0, 1.0))
-    return f.createIfcExtrudedAreaSolid(profile, position, up, float(depth))
-
-
-def _face_set(f: Any, vertices: NDArray[np.float64], faces: NDArray[np.int64]) -> Any:
-    """An IfcTriangulatedFaceSet (IFC4) of a triangle mesh, vertices deduplicated."""
-    v, inverse = np.unique(np.round(vertices, 9), axis=0, return_inverse=True)
-    fc = inverse.reshape(-1)[faces]
-    fc = fc[(fc[:, 0] != fc[:, 1]) & (fc[:, 1] != fc[:, 2]) & (fc[:, 0] != fc[:, 2])]
-    points = f.createIfcCartesianPointList3D([tuple(map(float, p)) for p in v])
-    indices = [tuple(int(i) + 1 for i in t) for t in fc]  # 1-based
-    return f.createIfcTriangulatedFaceSet(points, None, None, indices, None)
+    return write_building(site.name, site.storeys, site.elements, path)

@@ -24,7 +24,8 @@ from pathlib import Path
 from typing import Any
 
 from uav_struct_env.errors import SiteGeometryError
-from uav_struct_env.site.model import ARUCO_DICTIONARY_SIZES, ArucoMarker, Site
+from uav_struct_env.site.markers import ARUCO_DICTIONARY_SIZES, ArucoMarker
+from uav_struct_env.site.model import Site
 from uav_struct_env.site.parametric import MAX_OPENINGS, Building, ColumnGrid, Opening, building_site
 
 __all__ = ["load_site", "save_site", "site_from_dict", "site_to_dict"]

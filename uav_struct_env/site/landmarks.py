@@ -24,18 +24,17 @@ belongs to.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from localization.checks import check_number
 from uav_struct_env.errors import SiteGeometryError
-from uav_struct_env.site.elements import Column, Element, Slab
-
-if TYPE_CHECKING:
-    from uav_struct_env.site.model import ArucoMarker, Site
+from uav_struct_env.site.elements import Column, Element, Slab, Stage
+from uav_struct_env.site.markers import ArucoMarker
 
 __all__ = [
     "COVER_GAP",
@@ -43,6 +42,7 @@ __all__ = [
     "STRUCTURAL_SETS",
     "LandmarkRegistry",
     "LandmarkSet",
+    "StagedSite",
     "check_landmarks",
     "exposed_landmarks",
 ]
@@ -153,7 +153,33 @@ class LandmarkRegistry:
         return LandmarkSet(name, ids, xyz, tuple(p[3] for p in points), tuple(p[1] for p in points))
 
 
-def check_landmarks(site: Site, name: str, minimum: int = 4) -> LandmarkSet:
+class StagedSite(Protocol):
+    """What :func:`check_landmarks` reads of a :class:`~uav_struct_env.site.Site`.
+
+    The landmarks sit below the site (the site derives its landmarks from here), so they name
+    what they read of it rather than import it.
+    """
+
+    @property
+    def name(self) -> str:
+        """The site's name."""
+
+    @property
+    def stage(self) -> str:
+        """The stage the site is at."""
+
+    @property
+    def stages(self) -> Sequence[Stage]:
+        """The construction stages in build order."""
+
+    def landmarks(self, name: str) -> LandmarkSet:
+        """The landmark set ``name`` exposed at this stage."""
+
+    def with_stage(self, stage: str) -> StagedSite:
+        """The same site at another stage."""
+
+
+def check_landmarks(site: StagedSite, name: str, minimum: int = 4) -> LandmarkSet:
     """The landmark set ``name`` exposed at the site's stage, if it has at least ``minimum``.
 
     A pose needs four correspondences: a stage that exposes fewer of the requested set (an

@@ -31,7 +31,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_number
 from uav_struct_env.site.elements import Column, Element, Slab
-from uav_struct_env.site.model import ArucoMarker, Site
+from uav_struct_env.site.markers import ArucoMarker
+from uav_struct_env.site.model import Site
 from uav_struct_env.site.polygons import is_axis_aligned_rectangle
 from uav_struct_env.site.textures import (
     aruco_texture,

@@ -15,9 +15,8 @@ which also documents the id allocation). Units are metres, the frame is the proj
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
-from collections.abc import Mapping
+from collections.abc import Hashable, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -26,102 +25,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from localization.checks import check_number
 from uav_struct_env.errors import SiteGeometryError
-from uav_struct_env.site.elements import Column, Element, Slab, Stage, Storey, check_length, check_points
-from uav_struct_env.site.landmarks import (
-    LANDMARK_SETS,
-    STRUCTURAL_SETS,
-    LandmarkRegistry,
-    LandmarkSet,
-    exposed_landmarks,
-)
-from uav_struct_env.site.parametric import STAGES, Building, ColumnGrid, Opening
+from uav_struct_env.site.elements import Column, Element, Slab, Stage, Storey, check_length
+from uav_struct_env.site.ifc_export import write_building
+from uav_struct_env.site.landmarks import STRUCTURAL_SETS, LandmarkRegistry, LandmarkSet, exposed_landmarks
+from uav_struct_env.site.markers import ArucoMarker
 
-__all__ = [
-    "ARUCO_DICTIONARY_SIZES",
-    "LANDMARK_SETS",
-    "STAGES",
-    "STRUCTURAL_SETS",
-    "ArucoMarker",
-    "Building",
-    "Column",
-    "ColumnGrid",
-    "LandmarkSet",
-    "Opening",
-    "Site",
-    "Slab",
-]
+__all__ = ["MAX_GROUND_SIZE", "Site"]
 
-#: Bounds of a marker's side (m), of its quiet zone (times the side) and of the ground (m).
-MAX_MARKER_SIDE = 10.0
-MAX_QUIET_ZONE = 10.0
+#: Bound on the side of the square textured ground, m.
 MAX_GROUND_SIZE = 20_000.0
-
-#: Number of markers in each supported OpenCV ArUco dictionary.
-ARUCO_DICTIONARY_SIZES = {"DICT_4X4_50": 50, "DICT_4X4_100": 100, "DICT_5X5_50": 50}
-
-
-@dataclass(frozen=True)
-class ArucoMarker:
-    """A printed ArUco marker lying flat on the ground, facing up.
-
-    The marker frame is OpenCV's: x right and y up on the printed face, z out of the face (world
-    +z here). ``yaw`` turns it about the world z axis. ``side`` is the black square's side length;
-    a white quiet zone of ``quiet_zone`` times the side surrounds it.
-    """
-
-    id: int
-    side: float
-    center: tuple[float, float, float]
-    yaw: float = 0.0
-    dictionary: str = "DICT_4X4_50"
-    quiet_zone: float = 0.25
-
-    def __post_init__(self) -> None:
-        check_length(f"marker {self.id} side", self.side, MAX_MARKER_SIDE)
-        if not isinstance(self.dictionary, str) or self.dictionary not in ARUCO_DICTIONARY_SIZES:
-            raise SiteGeometryError(
-                f"marker {self.id} dictionary must be one of {sorted(ARUCO_DICTIONARY_SIZES)}, "
-                f"got {self.dictionary!r}"
-            )
-        n = ARUCO_DICTIONARY_SIZES[self.dictionary]
-        if not isinstance(self.id, (int, np.integer)) or not 0 <= self.id < n:
-            raise SiteGeometryError(
-                f"marker id must be an int in [0, {n}) for {self.dictionary}, got {self.id!r}"
-            )
-        check_number(f"marker {self.id} quiet_zone", self.quiet_zone, 0.0, MAX_QUIET_ZONE,
-                     error=SiteGeometryError, type_error=SiteGeometryError)
-        check_number(f"marker {self.id} yaw (rad)", self.yaw, error=SiteGeometryError,
-                     type_error=SiteGeometryError)
-        object.__setattr__(self, "center", check_points(f"marker {self.id} center", self.center, 3))
-
-    @property
-    def world_from_marker(self) -> NDArray[np.float64]:
-        """4x4 pose of the marker frame in the project frame."""
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        out = np.eye(4)
-        out[:2, :2] = [[c, -s], [s, c]]
-        out[:3, 3] = self.center
-        return out
-
-    @property
-    def corners_marker(self) -> NDArray[np.float64]:
-        """(4, 3) corners in the marker frame, OpenCV order (TL, TR, BR, BL as printed)."""
-        h = self.side / 2
-        return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
-
-    @property
-    def corners_world(self) -> NDArray[np.float64]:
-        """(4, 3) corners in the project frame, OpenCV order."""
-        T = self.world_from_marker
-        return self.corners_marker @ T[:3, :3].T + T[:3, 3]
-
-    @property
-    def footprint_half_extent(self) -> float:
-        """Half side of the printed sheet including its quiet zone."""
-        return self.side * (0.5 + self.quiet_zone)
-
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,8 +49,9 @@ class Site:
         markers: ArUco markers on the ground.
         ground_size: side of the square textured ground, m.
         name: a readable name (``"paper"``, ``"random"``, the IFC file's stem, ...).
-        building: the parametric description the site was made from (site files save it), or
-            None for an imported site.
+        building: the parametric description the site was made from (a
+            :class:`~uav_struct_env.site.parametric.Building`, which site files save), or None for
+            an imported site. The site only keeps it: the producers of sites sit above the site.
         source: provenance (for an IFC site: the file, the import report, the transforms).
     """
 
@@ -148,7 +62,7 @@ class Site:
     markers: tuple[ArucoMarker, ...] = ()
     ground_size: float = 160.0
     name: str = "custom"
-    building: Building | None = None
+    building: Hashable | None = None
     source: Mapping[str, Any] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
@@ -156,6 +70,14 @@ class Site:
         object.__setattr__(self, "stages", tuple(self.stages))
         object.__setattr__(self, "storeys", tuple(self.storeys))
         object.__setattr__(self, "markers", tuple(self.markers))
+        self._check_elements_and_stages()
+        check_length("ground_size", self.ground_size, MAX_GROUND_SIZE, type_error=SiteGeometryError)
+        if not isinstance(self.name, str):
+            raise SiteGeometryError(f"site name must be a string, got {self.name!r}")
+        self._check_markers()
+
+    def _check_elements_and_stages(self) -> None:
+        """Elements of their type with unique guids; unique stage names naming only known elements."""
         if not self.elements:
             raise SiteGeometryError("a site needs at least one building element, got none")
         for e in self.elements:
@@ -177,9 +99,9 @@ class Site:
             missing = sorted((st.built | set(st.floor)) - known)
             if missing:
                 raise SiteGeometryError(f"stage {st.name!r} names unknown elements {missing[:5]}")
-        check_length("ground_size", self.ground_size, MAX_GROUND_SIZE, type_error=SiteGeometryError)
-        if not isinstance(self.name, str):
-            raise SiteGeometryError(f"site name must be a string, got {self.name!r}")
+
+    def _check_markers(self) -> None:
+        """Markers with unique ids, on the ground, clear of the building's footprint and of each other."""
         ids = [m.id for m in self.markers]
         dupes = sorted({i for i in ids if ids.count(i) > 1})
         if dupes:
@@ -300,10 +222,8 @@ class Site:
         return np.array([(xmin + xmax) / 2, (ymin + ymax) / 2, top / 2])
 
     def to_ifc(self, path: str | os.PathLike) -> Path:
-        """Write the building as IFC4 (:func:`uav_struct_env.site.ifc.write_ifc`; extra ``ifc``)."""
-        from uav_struct_env.site.ifc import write_ifc
-
-        return write_ifc(self, path)
+        """Write the building as IFC4 (:mod:`uav_struct_env.site.ifc_export`; extra ``ifc``)."""
+        return write_building(self.name, self.storeys, self.elements, path)
 
     # ----------------------------------------------------------------------------- landmarks
     @cached_property
@@ -316,7 +236,7 @@ class Site:
         return {}
 
     def landmarks(self, name: str) -> LandmarkSet:
-        """The landmark set ``name`` (one of :data:`LANDMARK_SETS`) exposed at this stage.
+        """The landmark set ``name`` exposed at this stage (``name``: one of ``LANDMARK_SETS``).
 
         ``all`` is the structural sets together (not the markers). A set with nothing exposed at
         this stage (``column_tops`` at stage ``slab``) is empty.

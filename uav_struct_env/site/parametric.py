@@ -32,6 +32,7 @@ from uav_struct_env.site.elements import (
     check_length,
     check_points,
 )
+from uav_struct_env.site.model import Site
 from uav_struct_env.site.polygons import rectangle
 
 __all__ = ["STAGES", "Building", "ColumnGrid", "Opening", "building_site"]
@@ -187,6 +188,11 @@ class Building:
                 f"slab_overhang = {self.slab_overhang} m must cover the columns' half section "
                 f"{max(sx, sy) / 2} m"
             )
+        self._check_openings()
+
+    def _check_openings(self) -> None:
+        """Openings inside the slab, clear of every column and of each other, with unique names."""
+        sx, sy = self.column_section
         xmin, ymin, xmax, ymax = self.slab_bounds
         for op in self.openings:
             oxmin, oymin, oxmax, oymax = op.bounds
@@ -288,10 +294,8 @@ def building_site(
     markers: Sequence = (),
     ground_size: float = 160.0,
     name: str = "custom",
-):
+) -> Site:
     """The :class:`~uav_struct_env.site.Site` of a parametric ``building`` at ``stage``."""
-    from uav_struct_env.site.model import Site
-
     if not isinstance(building, Building):
         raise TypeError(f"building must be a uav_struct_env.site.Building, got {type(building).__name__}")
     return Site(

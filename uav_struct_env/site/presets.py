@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from uav_struct_env.errors import ConfigError
-from uav_struct_env.site.model import ArucoMarker, Site
+from uav_struct_env.site.markers import ArucoMarker
+from uav_struct_env.site.model import Site
 from uav_struct_env.site.parametric import Building, ColumnGrid, Opening, building_site
 
 __all__ = ["PRESETS", "make_site", "markers_around", "paper_building", "paper_site", "random_site"]

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_number
-from uav_struct_env.site.model import ArucoMarker
+from uav_struct_env.site.markers import ArucoMarker
 
 __all__ = [
     "aruco_texture",
