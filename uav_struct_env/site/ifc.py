@@ -28,6 +28,9 @@ function of the same name: :func:`_no_body_geometry`, ... :func:`_columns_beams_
 5. **Sloped slabs**: a slab is flat-topped when its upward-facing horizontal triangles at its top
    elevation make at least :data:`FLAT_FRACTION` of its upward-facing plan area; otherwise it is
    kept for rendering (footprint outline, ``structural=False``) and bears no landmarks.
+   **Ground-bearing slabs** (:func:`_at_terrain`): a slab whose top lies at most
+   :data:`GROUND_TOL` above the terrain (z = 0 of the project frame, where the env lays its
+   ground) is kept for rendering and bears no landmarks: a camera sees only the ground there.
 6. **Precast pieces**: flat slabs of one storey whose tops lie within :data:`SAME_LEVEL_TOL` and
    whose top faces touch or are at most :data:`PRECAST_JOINT` apart become ONE slab: outline the
    union (joints closed), guid the pieces' GlobalIds joined by ``+``, mesh their triangles
@@ -44,6 +47,13 @@ function of the same name: :func:`_no_body_geometry`, ... :func:`_columns_beams_
    outline = the union of the plan projections of their triangles (its largest part, or the
    convex hull when the union falls apart into comparable parts). All keep their triangles as
    ``mesh``.
+
+**Damage** is never imported as a different building: a file larger than
+:func:`~uav_struct_env.site.ifc_file.max_file_bytes`, cut short (no ``END-ISO-10303-21;``) or with
+a point or direction that is not finite or absurdly far (:mod:`uav_struct_env.site.ifc_file`) is
+refused with the reason; an element whose geometry is degenerate (an outline without area at
+the tolerance, non-finite tessellation) is dropped and reported, never failing the file, and an
+opening too small to outline is dropped while its slab is kept.
 
 Storeys come from IfcBuildingStorey, in elevation order (its placement's z in metres); an element
 belongs to the storey that contains it (through aggregates), else the highest storey at or below
@@ -74,15 +84,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from uav_struct_env.errors import ConfigError, IfcImportError
+from uav_struct_env.errors import ConfigError, IfcImportError, SiteGeometryError
 from uav_struct_env.site.elements import Beam, Column, Element, Hole, Slab, Stage, Storey, TriangleMesh, Wall
 from uav_struct_env.site.ifc_export import require_ifcopenshell, write_building
+from uav_struct_env.site.ifc_file import check_complete, check_coordinates, check_size
 from uav_struct_env.site.model import Site
 from uav_struct_env.site.polygons import canonical_outline
 
 __all__ = [
     "DUPLICATE_TOL",
     "FLAT_FRACTION",
+    "GROUND_TOL",
     "IMPORTED_CLASSES",
     "MIN_SLAB_THICKNESS",
     "NOTCH_FRACTION",
@@ -116,6 +128,9 @@ OUTLINE_TOL = 0.001
 NOTCH_FRACTION = 0.2
 #: A slab is flat-topped when its top face makes at least this fraction of its upward area.
 FLAT_FRACTION = 0.9
+#: A slab whose top lies at most this high above the terrain (z = 0 of the project frame, where the
+#: env lays its ground) is ground-bearing: its corners are not seen as structure, m.
+GROUND_TOL = 0.3
 
 # Not imported, by class (subtypes included), with the reason the report gives.
 _NOT_IMPORTED = (
@@ -215,6 +230,19 @@ def _footprint(tri: NDArray[np.float64]) -> NDArray[np.float64] | None:
     if parts[0].area >= 0.99 * union.area:
         return np.asarray(parts[0].exterior.coords)[:-1]
     return np.asarray(union.convex_hull.exterior.coords)[:-1]
+
+
+def _safe_footprint(tri: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """:func:`_footprint`, None where the plan geometry is degenerate (the element is then dropped)."""
+    try:
+        return _footprint(tri)
+    except (SiteGeometryError, ValueError):
+        return None
+
+
+def _degenerate(r: _Raw, exc: Exception) -> _Row:
+    """The report row of element ``r`` dropped because its geometry cannot make an element."""
+    return (r.guid, r.ifc_class, r.name, f"degenerate geometry, dropped: {exc}")
 
 
 def _ring(points: Any) -> NDArray[np.float64]:
@@ -338,7 +366,8 @@ def _check_transform(transform: ArrayLike | None) -> NDArray[np.float64]:
     return t
 
 
-def _open(path: Path) -> Any:
+def _open(path: Path) -> tuple[Any, bytes]:
+    """The parsed file and its bytes, after the guards on size and completeness."""
     ios = require_ifcopenshell()
     if not path.exists():
         raise FileNotFoundError(f"IFC file not found: {str(path)!r}")
@@ -351,8 +380,11 @@ def _open(path: Path) -> Any:
             f"{str(path)!r} is not an IFC file: an IFC-SPF file starts with 'ISO-10303-21;', "
             f"this one with {head[:24]!r} (ifcXML and ifcZIP are not supported)"
         )
+    check_size(path)
+    text = path.read_bytes()
+    check_complete(path, text)
     try:
-        return ios.open(str(path))
+        return ios.open(str(path)), text
     except Exception as exc:  # ifcopenshell raises its own, untyped errors
         raise IfcImportError(f"{str(path)!r} is not a readable IFC file: {exc}") from exc
 
@@ -526,6 +558,8 @@ def _no_body_geometry(
     for order, e in enumerate(include):
         if e.id() not in shapes or len(shapes[e.id()][1]) == 0:
             dropped.append((e.GlobalId, e.is_a(), e.Name or e.is_a(), "no body geometry"))
+        elif not np.all(np.isfinite(shapes[e.id()][0])):
+            dropped.append((e.GlobalId, e.is_a(), e.Name or e.is_a(), "non-finite body geometry"))
         else:
             tessellated.append((order, e))
     return tessellated, dropped
@@ -590,6 +624,14 @@ def _sloped_slab(top: _Top) -> str | None:
     return None
 
 
+def _at_terrain(top: _Top) -> str | None:
+    """Rule 5b: why a slab with this top bears no landmarks (ground-bearing, at terrain level), or None."""
+    if top.z <= GROUND_TOL:
+        return (f"ground-bearing slab, top at z = {top.z:.2f} m, within {GROUND_TOL} m of the terrain: "
+                "rendered, no landmarks (a camera sees only the ground there)")
+    return None
+
+
 def _floor_pieces(
     slabs: list[_Raw], tops: dict[str, _Top], footprints: _Footprints
 ) -> tuple[list[_Raw], list[tuple[_Raw, str]], list[_Row]]:
@@ -606,7 +648,7 @@ def _floor_pieces(
         if finish is not None:
             dropped.append((r.guid, r.ifc_class, r.name, finish))
             continue
-        why = _not_a_floor(r) or _sloped_slab(tops[r.guid])
+        why = _not_a_floor(r) or _sloped_slab(tops[r.guid]) or _at_terrain(tops[r.guid])
         if why is not None:
             rendered.append((r, why))
         else:
@@ -648,12 +690,22 @@ def _precast_pieces(pieces: list[_Raw], tops: dict[str, _Top]) -> list[list[_Raw
 
 
 def _slab_openings(part: Any, notches: list[NDArray[np.float64]], voids: list[tuple[str, str, Any]],
-                   guid: str, name: str) -> tuple[Hole, ...]:
-    """Rule 7's openings of one slab: interior rings and notches, after the void there if any."""
+                   guid: str, name: str, failed: list[_Row]) -> tuple[Hole, ...]:
+    """Rule 7's openings of one slab: interior rings and notches, after the void there if any.
+
+    An opening too small to have an outline at OUTLINE_TOL is dropped, its row appended to ``failed``.
+    """
     import shapely
 
     rings = [_ring(h.coords)[:-1] for h in part.interiors] + list(notches)
-    outlines = [canonical_outline(h, "slab opening", tol=OUTLINE_TOL) for h in rings]
+    outlines = []
+    for ring in rings:
+        try:
+            outlines.append(canonical_outline(ring, "slab opening", tol=OUTLINE_TOL))
+        except SiteGeometryError as exc:
+            lo = ring.min(axis=0)
+            failed.append((f"{guid}/opening at ({lo[0]:.2f}, {lo[1]:.2f})", "IfcOpeningElement", name,
+                           f"degenerate opening, dropped (the slab is kept): {exc}"))
     outlines.sort(key=lambda h: (h[0, 1], h[0, 0]))
     holes = []
     for j, h in enumerate(outlines):
@@ -666,8 +718,11 @@ def _slab_openings(part: Any, notches: list[NDArray[np.float64]], voids: list[tu
     return tuple(holes)
 
 
-def _slab_outline(group: list[_Raw], tops: dict[str, _Top]) -> list[tuple[tuple, Slab]]:
-    """Rule 7: the slab(s) of one group of floor pieces, one per part of their tops' union, keyed."""
+def _slab_outline(group: list[_Raw], tops: dict[str, _Top]) -> tuple[list[tuple[tuple, Slab]], list[_Row]]:
+    """Rule 7: the slab(s) of one group of floor pieces, one per part of their tops' union, keyed.
+
+    A part whose outline or openings are degenerate is dropped (its row in the second list).
+    """
     import shapely
 
     first = group[0]
@@ -683,33 +738,44 @@ def _slab_outline(group: list[_Raw], tops: dict[str, _Top]) -> list[tuple[tuple,
     z_bottom = min(r.zmin for r in group)
     mesh = _mesh_of([r.tri for r in group])
     voids = [v for r in group for v in r.voids]
-    out = []
+    out: list[tuple[tuple, Slab]] = []
+    failed: list[_Row] = []
     for k, part in enumerate(parts):
         pguid = guid if len(parts) == 1 else f"{guid}#{k}"
         pname = name if len(parts) == 1 else f"{name} part {k}"
-        outer, notches = _fill_notches(_ring(part.exterior.coords)[:-1])
-        out.append(((1, first.storey, first.order, k), Slab(
-            guid=pguid, name=pname, storey=first.storey, outline=outer, z_bottom=z_bottom, z_top=z_top,
-            mesh=mesh, holes=_slab_openings(part, notches, voids, pguid, pname))))
-    return out
+        try:
+            outer, notches = _fill_notches(_ring(part.exterior.coords)[:-1])
+            holes = _slab_openings(part, notches, voids, pguid, pname, failed)
+            slab = Slab(guid=pguid, name=pname, storey=first.storey, outline=outer, z_bottom=z_bottom,
+                        z_top=z_top, mesh=mesh, holes=holes)
+        except (SiteGeometryError, ValueError) as exc:
+            failed.append((pguid, first.ifc_class, pname, f"degenerate geometry, dropped: {exc}"))
+            continue
+        out.append(((1, first.storey, first.order, k), slab))
+    return out, failed
 
 
 def _floors(
     groups: list[list[_Raw]], tops: dict[str, _Top], storeys: _Storeys
-) -> tuple[list[tuple[tuple, Element]], dict[int, list[str]], list[_Row]]:
-    """Rules 6-7 applied: the floor slabs (keyed), each storey's floor guids, the kept rows."""
+) -> tuple[list[tuple[tuple, Element]], dict[int, list[str]], list[_Row], list[_Row]]:
+    """Rules 6-7 applied: the floor slabs (keyed), each storey's floor guids, the kept and dropped rows."""
     elements: list[tuple[tuple, Element]] = []
     floors: dict[int, list[str]] = {}
     kept: list[_Row] = []
+    dropped: list[_Row] = []
     for group in groups:
         first = group[0]
-        for key, slab in _slab_outline(group, tops):
+        slabs, failed = _slab_outline(group, tops)
+        dropped += failed
+        if not slabs:
+            continue
+        for key, slab in slabs:
             elements.append((key, slab))
             floors.setdefault(first.storey, []).append(slab.guid)
         role = (f"floor of {storeys.name(first.storey)}" + (f", one slab with {len(group) - 1} more "
                 f"piece(s) at most {100 * PRECAST_JOINT:.0f} cm apart" if len(group) > 1 else ""))
         kept += [(r.guid, r.ifc_class, r.name, role) for r in group]
-    return elements, floors, kept
+    return elements, floors, kept, dropped
 
 
 def _rendered_slabs(
@@ -724,9 +790,13 @@ def _rendered_slabs(
         if fp is None:
             dropped.append((r.guid, r.ifc_class, r.name, "no plan footprint"))
             continue
-        elements.append(((1, r.storey, r.order, 0), Slab(
-            guid=r.guid, name=r.name, storey=r.storey, outline=fp, z_bottom=r.zmin, z_top=r.zmax,
-            mesh=_mesh_of([r.tri]), structural=False)))
+        try:
+            slab = Slab(guid=r.guid, name=r.name, storey=r.storey, outline=fp, z_bottom=r.zmin,
+                        z_top=r.zmax, mesh=_mesh_of([r.tri]), structural=False)
+        except (SiteGeometryError, ValueError) as exc:
+            dropped.append(_degenerate(r, exc))
+            continue
+        elements.append(((1, r.storey, r.order, 0), slab))
         kept.append((r.guid, r.ifc_class, r.name, why))
     return elements, kept, dropped
 
@@ -753,10 +823,15 @@ def _columns_beams_walls(
             top = _slab_top(r)
             c = (top.polygon if top.flat and not top.polygon.is_empty else shapely.Polygon(fp)).centroid
             extra = {"axis": (c.x, c.y), "index": columns}
+        try:
+            element = _ELEMENT_CLASS[r.kind](guid=r.guid, name=r.name, storey=r.storey, outline=fp,
+                                             z_bottom=r.zmin, z_top=r.zmax, mesh=_mesh_of([r.tri]), **extra)
+        except (SiteGeometryError, ValueError) as exc:
+            dropped.append(_degenerate(r, exc))
+            continue
+        if r.kind == "column":
             columns += 1
-        elements.append(((_KIND_ORDER[r.kind], r.storey, r.order, 0), _ELEMENT_CLASS[r.kind](
-            guid=r.guid, name=r.name, storey=r.storey, outline=fp, z_bottom=r.zmin, z_top=r.zmax,
-            mesh=_mesh_of([r.tri]), **extra)))
+        elements.append(((_KIND_ORDER[r.kind], r.storey, r.order, 0), element))
         kept.append((r.guid, r.ifc_class, r.name, f"{r.kind} of {storeys.name(r.storey)}"))
     return elements, kept, dropped
 
@@ -824,8 +899,9 @@ class _Parsed:
 def _parse(path: Path, transform: NDArray[np.float64]) -> _Parsed:
     """The elements, storeys and stages of the IFC file ``path``: the rules of the module docstring."""
     ios = require_ifcopenshell()
-    f = _open(path)
+    f, text = _open(path)
     scale = float(ios.util.unit.calculate_unit_scale(f))
+    check_coordinates(path, text, scale)
     products = f.by_type("IfcProduct")
     by_kind = _imported_by_kind(f, products, path)
     storeys = _storeys(f, scale, transform)
@@ -835,15 +911,15 @@ def _parse(path: Path, transform: NDArray[np.float64]) -> _Parsed:
     shapes = _tessellate(ios.geom, settings, f, include)
     tessellated, no_body = _no_body_geometry(include, shapes)
     raws = [_raw(ios.geom, settings, k, e, shapes[e.id()], transform, storeys) for k, e in tessellated]
-    footprints = {r.guid: _footprint(r.tri) for r in raws}
+    footprints = {r.guid: _safe_footprint(r.tri) for r in raws}
     unique, duplicates = _coincident_duplicates(raws, footprints)
     slabs = [r for r in unique if r.kind == "slab"]
     tops = {r.guid: _slab_top(r) for r in slabs}
     pieces, rendered, finish = _floor_pieces(slabs, tops, footprints)
-    floor_slabs, floors, floors_kept = _floors(_precast_pieces(pieces, tops), tops, storeys)
+    floor_slabs, floors, floors_kept, floors_dropped = _floors(_precast_pieces(pieces, tops), tops, storeys)
     shown, shown_kept, no_footprint = _rendered_slabs(rendered, footprints)
     others, others_kept, others_dropped = _columns_beams_walls(unique, footprints, storeys)
-    dropped = no_body + duplicates + finish + no_footprint + others_dropped
+    dropped = no_body + duplicates + finish + floors_dropped + no_footprint + others_dropped
     elements = _in_order(floor_slabs + shown + others)
     stages = _stages(elements, floors, storeys)
     if not stages:
