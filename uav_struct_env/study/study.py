@@ -133,10 +133,9 @@ def _parser() -> CommandParser:
     p.add_argument(
         "--detector",
         default="learned",
-        help=f"landmark detector: {', '.join(DETECTORS)} or learned:NAME with NAME one of "
-        f"{', '.join(WEIGHT_NAMES)} (default learned: the method from the rendered pixels, with the "
-        "default weights landmarks_v1; learned:active: the active-site weights; projection: ground "
-        "truth + noise, an ablation isolating association and pose)",
+        help=f"landmark detector: {', '.join(DETECTORS)}, learned:NAME ({', '.join(WEIGHT_NAMES)}; "
+        "default learned: the method from the rendered pixels with the default weights; projection: "
+        "ground truth + noise, an ablation isolating association and pose)",
     )
     p.add_argument("--association", default="robust", choices=ASSOCIATIONS)
     p.add_argument("--noise", default="paper", choices=NOISES, help="onboard prior model")
@@ -206,15 +205,13 @@ def _parser() -> CommandParser:
         "--detector-model",
         default=None,
         metavar="ONNX",
-        help="with --detector learned[:NAME]: keypoint-network weights (default: those of NAME, or "
-        "the default weights)",
+        help="with --detector learned[:NAME]: keypoint-network weights (default: those of NAME)",
     )
     p.add_argument(
         "--refiner-model",
         default=None,
         metavar="ONNX",
-        help="with --detector learned[:NAME]: patch-refiner weights (default: those of NAME, or the "
-        "default weights)",
+        help="with --detector learned[:NAME]: patch-refiner weights (default: those of NAME)",
     )
     p.add_argument(
         "--track-workers",
