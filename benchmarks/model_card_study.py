@@ -24,7 +24,7 @@ from generated import END, begin, update_file
 from uav_struct_env.study import StudyConfig, run_study
 from uav_struct_env.study.report import settings_line
 
-CARD = Path(__file__).resolve().parents[1] / "localization" / "models" / "MODEL_CARD.md"
+CARD = Path(__file__).resolve().parents[1] / "localization" / "detect" / "models" / "MODEL_CARD.md"
 COMMAND = "python benchmarks/model_card_study.py"
 BEGIN = begin(COMMAND)
 METHODS = ("slab_corners", "opening_corners", "column_tops")
