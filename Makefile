@@ -60,7 +60,9 @@ bench: $(STAMP)  # every benchmark, on demand (minutes); figures are quoted in d
 # the duplex IFC building (tests/data/ifc/duplex.ifc, at its stages). The default weights
 # landmarks_v1 were trained with the same commands on bare sites through the pinhole
 # (DATASET without --activity/--camera, 200x15 + 6x10 and 150x10 + 6x10 images, no IFC sets) and a
-# 15-minute refiner budget (--minutes 15, no --max-steps), as the active pairs v1 and v2.
+# 15-minute refiner budget (--minutes 15, no --max-steps), as the active pairs v1 and v2, whose
+# files no longer ship: MODEL_CARD.md ("Rebuilding the superseded weights") gives their commands,
+# and v3's refiner is the first member of the committed v4 refiner (ensemble --split).
 # Evaluate the result with benchmarks/detector.py --model/--refiner and uav-struct study
 # --detector learned --detector-model/--refiner-model (docs/study.md, "Evaluating retrained detector weights").
 # make reruns a step only when its output is missing or older than its inputs, so each step

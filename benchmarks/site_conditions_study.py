@@ -22,10 +22,11 @@ view with at least four detected and correctly assigned, nothing assigned in the
 posing a view with three visible landmarks through a detection of a fourth that the ground truth
 calls hidden (an occluder covers its point; the detector infers it a few pixels off): the three
 visible pairs then count, and the pose is as far off as that displaced point makes it.
-``--detector-model`` / ``--refiner-model`` evaluate other weights than the committed ones;
-``--keep DIR`` keeps every run's outputs.
+``--detector learned:NAME`` evaluates a named weight set (``learned:active``: the active-site
+set), ``--detector-model`` / ``--refiner-model`` other files; ``--keep DIR`` keeps every run's outputs.
 
     .venv/bin/python benchmarks/site_conditions_study.py                  # ~2-3 min on 2 cores (2026-11-27)
+    .venv/bin/python benchmarks/site_conditions_study.py --detector learned:active
     .venv/bin/python benchmarks/site_conditions_study.py --detector-model kp.onnx --refiner-model ref.onnx
 """
 
@@ -83,7 +84,7 @@ def exact_f1(rows: list[dict], method: str, at_least: int = 4) -> float:
 
 
 def run_all(workers: int, keep: Path | None, detector_model: str | None,
-            refiner_model: str | None) -> list[dict]:
+            refiner_model: str | None, detector: str = "learned") -> list[dict]:
     """Every (activity, imaging) run: dicts with the settings, results.json and the posed counts."""
     from tqdm import tqdm
 
@@ -93,7 +94,7 @@ def run_all(workers: int, keep: Path | None, detector_model: str | None,
         for activity, imaging in tqdm(cells, unit="study", desc="site conditions"):
             camera, effects = IMAGING[imaging]
             out = (keep or Path(tmp)) / f"{activity}-{imaging}"
-            config = StudyConfig(detector="learned", activity=activity, camera=camera, imaging=effects,
+            config = StudyConfig(detector=detector, activity=activity, camera=camera, imaging=effects,
                                  workers=workers, methods=METHODS, detector_model=detector_model,
                                  refiner_model=refiner_model)
             results = run_study(config, out, progress=False, figures=keep is not None, overwrite=True)
@@ -158,8 +159,8 @@ def summary_block(runs: list[dict]) -> str:
 
 
 def main(workers: int = 2, keep: str | None = None, detector_model: str | None = None,
-         refiner_model: str | None = None) -> int:
-    runs = run_all(workers, Path(keep) if keep else None, detector_model, refiner_model)
+         refiner_model: str | None = None, detector: str = "learned") -> int:
+    runs = run_all(workers, Path(keep) if keep else None, detector_model, refiner_model, detector)
     print(full_block(runs))
     print()
     print(summary_block(runs))
@@ -170,6 +171,8 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=2, help="study processes (default 2)")
     ap.add_argument("--keep", default=None, help="also keep every run's outputs in this folder")
+    ap.add_argument("--detector", default="learned",
+                    help="learned (the default weights) or learned:NAME, a named weight set (learned:active)")
     ap.add_argument("--detector-model", default=None, help="keypoint-network weights to evaluate")
     ap.add_argument("--refiner-model", default=None, help="patch-refiner weights to evaluate")
     sys.exit(main(**vars(ap.parse_args())))

@@ -1,8 +1,9 @@
 """Stage 1, detection with a learned network: the real-time structural-landmark detector.
 
 :class:`LearnedDetector` runs a small fully-convolutional keypoint network (trained on simulator
-renders by :mod:`uav_struct_env.training.train_detector`; weights and their figures in
-``localization/detect/models/``) with ONNX Runtime (:mod:`localization.detect.onnx_net`) -- no PyTorch at
+renders by :mod:`uav_struct_env.training.train_detector`; named weight sets in
+:mod:`localization.detect.weights`, their figures in ``localization/detect/models/MODEL_CARD.md``)
+with ONNX Runtime (:mod:`localization.detect.onnx_net`) -- no PyTorch at
 inference -- and decodes its output into anonymous sub-pixel detections with scores, following
 the :class:`Detector` protocol of :mod:`localization.detect`, so the localizer takes it in place
 of the projection detector.
@@ -51,6 +52,7 @@ from localization.checks import check_number
 from localization.detect.interface import Detections
 from localization.detect.onnx_net import OnnxNet
 from localization.detect.refiner import PatchRefiner
+from localization.detect.weights import weight_set
 from localization.geometry.transforms import as_points
 
 __all__ = [
@@ -71,8 +73,8 @@ __all__ = [
 LANDMARK_TYPES = ("column_tops", "slab_corners", "opening_corners")
 
 
-#: The committed model (see ``localization/detect/models/MODEL_CARD.md``).
-DEFAULT_MODEL = Path(__file__).with_name("models") / "landmarks_v1.onnx"
+#: The default weights' keypoint network (:data:`localization.detect.weights.DEFAULT_WEIGHTS`).
+DEFAULT_MODEL = weight_set().model
 
 
 STRIDE = 4
@@ -86,13 +88,12 @@ TRAINED_WIDTH = 640
 
 
 #: Operating points ``(keypoint-network score threshold, refiner score threshold)``, chosen on
-#: validation data never used for the reported figures. ``"balanced"`` maximizes the detector's
-#: own F1 at 3 px (validation renders, dataset seed 1). ``"recall"`` keeps weaker candidates for
-#: a localizer that rejects false positives itself (``robust`` association): it maximized the
-#: association F1 and the successful poses of studies on random sites (seeds 11, 12, 14) --
-#: lower thresholds gained nothing more there. For the ``paper`` association, which assigns every
-#: detection, use ``"balanced"``. Votes use the keypoint threshold: higher vote thresholds (0.5 at
-#: ``"balanced"``; 0.2, 0.3 at ``"recall"``) did worse on the same data.
+#: validation data never used for the reported figures (the model card says which).
+#: ``"balanced"`` maximizes the detector's own F1 at 3 px. ``"recall"`` keeps weaker candidates
+#: for a localizer that rejects false positives itself (``robust`` association): it maximized the
+#: association F1 and the successful poses of validation studies. For the ``paper`` association,
+#: which assigns every detection, use ``"balanced"``. Votes use the keypoint threshold, which
+#: did better than higher vote thresholds.
 OPERATING_POINTS = {"balanced": (0.3, 0.5), "recall": (0.15, 0.05)}
 
 
@@ -261,7 +262,7 @@ class LearnedDetector:
         landmarks: which types to return: a name of :data:`LANDMARK_TYPES`, ``"all"`` (the three
             together), or a sequence of names. It is also the set looked up in
             ``context["landmarks"]`` for the ground-truth bookkeeping (``true_ids``).
-        model: path of the ONNX model (default :data:`DEFAULT_MODEL`).
+        model: path of the keypoint network's ONNX model (default: that of ``weights``).
         score_threshold: minimum heatmap score of a candidate (None: from ``operating_point``).
         nms_px: detections of one type closer than this (full-resolution px) keep only the best.
         scale: downscale factor applied before the network (the model is trained at 0.5).
@@ -271,8 +272,8 @@ class LearnedDetector:
             corners at full resolution; 0 disables the refinement.
         corner_max_shift: largest accepted refinement shift, px.
         refiner: full-resolution patch refinement of every candidate
-            (:class:`localization.detect.refiner.PatchRefiner`): True for the committed refiner, a path
-            for another ONNX refiner, False for none (then ``corner_window`` applies).
+            (:class:`localization.detect.refiner.PatchRefiner`): True for the refiner of ``weights``,
+            a path for another ONNX refiner, False for none (then ``corner_window`` applies).
         refine_iterations: refinement passes.
         refine_threshold: candidates whose refiner score is below this are dropped (None: from
             ``operating_point``).
@@ -282,10 +283,14 @@ class LearnedDetector:
         vote_threshold: minimum heatmap score of such a cell (None: ``score_threshold``).
         threads: ONNX Runtime threads of each network (:class:`localization.detect.onnx_net.OnnxNet`;
             1: the latency figures are per core).
+        weights: the named weight set whose files ``model=None`` and ``refiner=True`` take
+            (:mod:`localization.detect.weights`): ``"landmarks_v1"`` (None: this default, trained
+            on bare sites), ``"landmarks_active_v4"`` or its alias ``"active"`` (active sites
+            through a real camera). The operating points suit both.
 
     Raises:
-        ValueError: for an unknown landmark type or bad numbers; FileNotFoundError for a
-            missing model file.
+        ValueError: for an unknown landmark type or weight-set name, or bad numbers;
+            FileNotFoundError for a missing model file.
     """
 
     def __init__(
@@ -306,7 +311,9 @@ class LearnedDetector:
         votes: bool = True,
         vote_threshold: float | None = None,
         threads: int = 1,
+        weights: str | None = None,
     ) -> None:
+        named = weight_set(weights)
         if operating_point not in OPERATING_POINTS:
             raise ValueError(
                 f"operating_point must be one of {sorted(OPERATING_POINTS)}, got {operating_point!r}"
@@ -329,7 +336,7 @@ class LearnedDetector:
             check_number(name, value, lo, hi, lo_open=True, type_error=ValueError)
         for name, value in (("nms_px", nms_px), ("match_px", match_px)):
             check_number(name, value, 0.0, lo_open=True, type_error=ValueError)
-        path = Path(DEFAULT_MODEL if model is None else model)
+        path = Path(named.model if model is None else model)
         if not path.is_file():
             raise FileNotFoundError(f"learned detector model not found: {path}")
         self.landmarks = landmarks if isinstance(landmarks, str) else tuple(landmarks)
@@ -357,23 +364,25 @@ class LearnedDetector:
         if refiner is False:
             self.refiner = None
         else:
-            self.refiner = PatchRefiner(None if refiner is True else refiner, refine_iterations,
+            self.refiner = PatchRefiner(named.refiner if refiner is True else refiner, refine_iterations,
                                         threads=threads)
 
     @classmethod
     def for_localizer(cls, landmarks: str | Sequence[str], image_width: int, association: str,
                       model: str | Path | None = None,
-                      refiner: bool | str | Path = True) -> LearnedDetector:
+                      refiner: bool | str | Path = True,
+                      weights: str | None = None) -> LearnedDetector:
         """The detector for images ``image_width`` px wide and a localizer of ``association``.
 
         Downscales to the training width (:data:`TRAINED_WIDTH`, never up) and takes the
         operating point of :func:`operating_point_for`; the study and the LocalizationWrapper
-        build theirs this way. ``model`` and ``refiner`` select other weights (for example
-        networks retrained with :mod:`uav_struct_env.training.train_detector` and
+        build theirs this way. ``weights`` names a committed set, ``model`` and ``refiner`` select
+        other files (for example networks retrained with
+        :mod:`uav_struct_env.training.train_detector` and
         :mod:`uav_struct_env.training.train_refiner`), as in the constructor; the operating point's
         thresholds were chosen for the committed weights.
         """
-        return cls(landmarks, model=model, refiner=refiner,
+        return cls(landmarks, model=model, refiner=refiner, weights=weights,
                    scale=min(1.0, TRAINED_WIDTH / image_width),
                    operating_point=operating_point_for(association))
 

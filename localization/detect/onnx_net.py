@@ -1,10 +1,9 @@
 """ONNX inference for the learned detector's networks, with ONNX Runtime on the CPU.
 
-:class:`OnnxNet` runs one exported network (no PyTorch needed). ONNX Runtime runs both committed
-networks faster than OpenCV's DNN module on this project's 2-core machine, one thread each:
-the keypoint network at 640 x 368 in 15.0 instead of 22.6 ms, the refiner on 24 patches in 4.6
-instead of 12.9 ms. One thread by default: the detector's latency is quoted per core, and study
-workers and parallel environments each hold their own detector.
+:class:`OnnxNet` runs one exported network (no PyTorch needed). ONNX Runtime rather than
+OpenCV's DNN module: it runs both networks faster on the CPU (docs/benchmarks.md). One thread by
+default: the detector's latency is quoted per core, and study workers and parallel environments
+each hold their own detector.
 """
 
 from __future__ import annotations

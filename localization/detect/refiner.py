@@ -5,9 +5,10 @@ places a landmark with a stride-4 heatmap: most candidates land within a few pix
 landmark, but the tail (3-8 px off at full resolution, mostly stair-opening corners whose top
 surface meets the opening's inner face with little contrast) is too coarse for a 3-pixel
 tolerance. :class:`PatchRefiner` looks again, at full resolution, at a small patch around
-every candidate: a small CNN (trained by :mod:`uav_struct_env.training.train_refiner`; weights in
-``localization/detect/models/``) returns, per landmark type, the probability that a landmark of that
-type lies within :data:`POSITIVE_RADIUS` px of the patch centre and its offset from the centre.
+every candidate: a small CNN (trained by :mod:`uav_struct_env.training.train_refiner`; each named
+weight set of :mod:`localization.detect.weights` has one) returns, per landmark type, the
+probability that a landmark of that type lies within :data:`POSITIVE_RADIUS` px of the patch
+centre and its offset from the centre.
 Refinement is iterated (the patch is re-centred on the previous estimate), and the score of the
 last pass lets the detector drop candidates that are not landmarks.
 
@@ -26,6 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_number
 from localization.detect.onnx_net import OnnxNet
+from localization.detect.weights import weight_set
 from localization.geometry.transforms import as_points
 
 __all__ = ["DEFAULT_REFINER", "HALF", "PATCH", "POSITIVE_RADIUS", "PatchRefiner", "extract_patches"]
@@ -42,8 +44,8 @@ HALF = PATCH // 2
 POSITIVE_RADIUS = 10.0
 
 
-#: The committed refiner (see ``localization/detect/models/MODEL_CARD.md``).
-DEFAULT_REFINER = Path(__file__).with_name("models") / "landmarks_v1_refiner.onnx"
+#: The default weights' refiner (:data:`localization.detect.weights.DEFAULT_WEIGHTS`).
+DEFAULT_REFINER = weight_set().refiner
 
 
 def extract_patches(

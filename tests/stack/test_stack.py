@@ -69,6 +69,31 @@ def test_spec_takes_detector_objects_and_rejects_bad_values():
         build_stack(StackSpec(), PAPER_K, (1280, 720), model_xyz=np.zeros((3, 3)))
 
 
+def test_learned_weights_by_name():
+    """``learned:NAME`` is ``learned`` with the named set's two files; explicit files override."""
+    from localization.detect.weights import weight_set
+
+    active = weight_set("landmarks_active_v4")
+    spec = StackSpec(detector="learned:active")
+    assert (spec.detector, spec.detector_model) == ("learned", active.model)
+    assert spec.refiner_model == active.refiner
+    assert spec == StackSpec(detector="learned", detector_model=active.model, refiner_model=active.refiner)
+    assert StackSpec(detector="learned:landmarks_active_v4") == spec
+    v1 = weight_set("landmarks_v1")
+    mixed = StackSpec(detector="learned:active", refiner_model=v1.refiner)
+    assert (mixed.detector_model, mixed.refiner_model) == (active.model, v1.refiner)
+    det = build_stack(spec, PAPER_K, (1280, 720), model_xyz=np.eye(4, 3) * 3).detector
+    assert (det.model_path, det.refiner.model_path) == (active.model, active.refiner)
+    plain = StackSpec(detector="learned")  # the default weights, left to the detector
+    assert (plain.detector_model, plain.refiner_model) == (None, None)
+    with pytest.raises(ConfigError, match=r"detector 'learned:landmarks_active_v3' names unknown weights "
+                                          r"'landmarks_active_v3'; 'learned:NAME' takes NAME one of "
+                                          r"\('landmarks_v1', 'landmarks_active_v4', 'active'\)"):
+        StackSpec(detector="learned:landmarks_active_v3")
+    with pytest.raises(ConfigError, match="detects structural landmarks, not 'aruco'"):
+        StackSpec(landmarks="aruco", detector="learned:active")
+
+
 def test_same_spec_and_frame_give_the_same_estimate_through_study_and_wrapper():
     config = protocol.StudyConfig(
         methods=("column_tops",), n_viewpoints=1, image_size=(320, 180), pixel_sigma=0.0

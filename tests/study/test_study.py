@@ -157,11 +157,33 @@ def test_learned_detector_weights_by_path(tmp_path, monkeypatch):
     assert det.landmarks == "slab_corners" and det.scale == 0.5
 
 
+def test_learned_detector_weights_by_name():
+    from localization.detect.weights import weight_set
+    from uav_struct_env.study.study import _parser, study_config
+
+    active = weight_set("active")
+    by_name = StudyConfig(detector="learned:active")
+    by_path = StudyConfig(detector="learned", detector_model=str(active.model),
+                          refiner_model=str(active.refiner))
+    assert by_name == by_path and by_name.detector == "learned"  # the same results.json config
+    assert by_name.refiner_model == str(active.refiner.resolve())
+    args = _parser().parse_args(["--detector", "learned:active", "--quick"])
+    config = study_config(args)
+    assert (config.detector, config.detector_model, config.refiner_model) == (
+        "learned", by_name.detector_model, by_name.refiner_model)
+    with pytest.raises(ConfigError, match=r"detector 'learned:v9' names unknown weights 'v9'; 'learned:NAME' "
+                                          r"takes NAME one of \('landmarks_v1', 'landmarks_active_v4', "
+                                          r"'active'\)"):
+        StudyConfig(detector="learned:v9")
+
+
 def test_cli_reports_bad_options_without_a_traceback(capsys):
     assert main(["--detector", "magic", "--out", "unused"]) == 2
     assert "detector must be one of ('projection', 'learned'), got 'magic'" in capsys.readouterr().err
     assert main(["--detector", "projection", "--detector-model", "kp.onnx", "--out", "unused"]) == 2
     assert "detector_model applies to detector='learned' only" in capsys.readouterr().err
+    assert main(["--detector", "learned:magic", "--out", "unused"]) == 2
+    assert "names unknown weights 'magic'" in capsys.readouterr().err
 
 
 @pytest.mark.slow

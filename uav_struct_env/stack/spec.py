@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from localization import ASSOCIATION_METHODS, Detector, Localizer, PriorSigmas, ProjectionDetector
 from localization.checks import check_choice, check_number
+from localization.detect.weights import WEIGHT_NAMES, weight_set
 from localization.geometry.camera import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.site import LANDMARK_SETS
@@ -47,6 +48,7 @@ __all__ = [
     "StackSpec",
     "build_stack",
     "check_weights",
+    "resolve_learned",
 ]
 
 #: Detectors of structural landmarks, by name (any :class:`localization.Detector` object works too).
@@ -59,6 +61,35 @@ ASSOCIATIONS: tuple[str, ...] = tuple(ASSOCIATION_METHODS)
 PAPER_WIDTH_PX: int = PAPER_IMAGE_SIZE[0]
 #: ArUco pose modes of :class:`localization.aruco.ArucoLocalizer`.
 _ARUCO_MODES = ("average", "joint")
+#: ``"learned:NAME"`` runs the learned detector with the weight set ``NAME``.
+_LEARNED_PREFIX = "learned:"
+
+
+def resolve_learned(detector: Any, detector_model: Any, refiner_model: Any) -> tuple[Any, Any, Any]:
+    """``(detector, detector_model, refiner_model)`` with a ``"learned:NAME"`` detector resolved.
+
+    ``"learned:NAME"`` names a weight set of :mod:`localization.detect.weights`
+    (``learned:landmarks_v1``, ``learned:landmarks_active_v4`` or ``learned:active``): it becomes
+    ``"learned"`` with that set's keypoint network and refiner files, each unless given explicitly.
+    Any other detector is returned unchanged with the two files.
+
+    Raises:
+        ConfigError: for an unknown weight-set name, listing the known ones.
+    """
+    if not (isinstance(detector, str) and detector.startswith(_LEARNED_PREFIX)):
+        return detector, detector_model, refiner_model
+    name = detector[len(_LEARNED_PREFIX):]
+    if name not in WEIGHT_NAMES:
+        raise ConfigError(
+            f"detector {detector!r} names unknown weights {name!r}; 'learned:NAME' takes NAME one of "
+            f"{WEIGHT_NAMES}"
+        )
+    named = weight_set(name)
+    return (
+        "learned",
+        named.model if detector_model is None else detector_model,
+        named.refiner if refiner_model is None else refiner_model,
+    )
 
 
 def check_weights(name: str, path: Any, detector: Any) -> str | Path | None:
@@ -84,7 +115,10 @@ class StackSpec:
         landmarks: landmark set: ``slab_corners``, ``opening_corners``, ``column_tops``,
             ``aruco`` or ``all``.
         detector: ``"projection"`` (true projections + noise, misses, clutter),
-            ``"learned"`` (:class:`localization.detect.learned.LearnedDetector` on the image),
+            ``"learned"`` (:class:`localization.detect.learned.LearnedDetector` on the image, with
+            the default weights), ``"learned:NAME"`` (the same with the weight set ``NAME`` of
+            :mod:`localization.detect.weights`, e.g. ``"learned:active"``; stored as
+            ``"learned"`` with that set's two files in ``detector_model`` and ``refiner_model``),
             ``"aruco"`` (OpenCV markers; needs ``landmarks="aruco"``), or any object with
             ``detect(image, context) -> Detections`` (used as given).
         association: ``"robust"`` or ``"paper"``.
@@ -94,8 +128,8 @@ class StackSpec:
         scale_gates: scale the robust gates with the image width (module docstring).
         miss_rate: projection detector: probability of missing a visible landmark.
         false_positives: projection detector: mean clutter detections per image.
-        detector_model: learned detector: keypoint-network ONNX file (None: the committed one).
-        refiner_model: learned detector: patch-refiner ONNX file (None: the committed one).
+        detector_model: learned detector: keypoint-network ONNX file (None: the default weights').
+        refiner_model: learned detector: patch-refiner ONNX file (None: the default weights').
         prior_sigmas: the onboard prior's sigmas for the localizer (None: 3 m, 2/2/5 deg).
         aruco_mode: ``"joint"`` (one PnP over all corners) or ``"average"`` (the paper's).
         aruco_prior: the prior chooses each marker's IPPE solution (False: the lowest
@@ -126,6 +160,9 @@ class StackSpec:
 
     def __post_init__(self) -> None:
         check_choice("landmarks", self.landmarks, LANDMARK_SETS, error=ConfigError)
+        resolved = resolve_learned(self.detector, self.detector_model, self.refiner_model)
+        for name, value in zip(("detector", "detector_model", "refiner_model"), resolved, strict=True):
+            object.__setattr__(self, name, value)
         if isinstance(self.detector, str):
             check_choice("detector", self.detector, DETECTORS, error=ConfigError)
         elif not isinstance(self.detector, Detector):

@@ -22,6 +22,7 @@ from uav_struct_env.site import make_site
 from uav_struct_env.site.activity import ACTIVITY_PRESETS
 from uav_struct_env.site.as_built import MAX_SCALE, TOLERANCE_MODELS, AsBuilt
 from uav_struct_env.stack import ASSOCIATIONS, STRUCTURAL_DETECTORS, check_weights
+from uav_struct_env.stack.spec import resolve_learned
 from uav_struct_env.study.tracking import TRACKING_ACTIVITY
 from uav_struct_env.tracking_sim import DEFAULT_WORKER_SIGMA_PX
 
@@ -157,7 +158,10 @@ class StudyConfig:
         detector: ``"projection"`` (ground-truth projections + pixel noise, as the paper isolated
             association and pose from its vision model) or ``"learned"`` (the trained keypoint
             network of :mod:`localization.detect.learned` on the rendered image; ``pixel_sigma``,
-            ``miss_rate`` and ``false_positives`` then only set the localizer's noise model).
+            ``miss_rate`` and ``false_positives`` then only set the localizer's noise model), or
+            ``"learned:NAME"`` with a weight set of :mod:`localization.detect.weights`
+            (``"learned:active"``: the active-site set), stored as ``"learned"`` with the set's
+            two files in ``detector_model`` and ``refiner_model``.
         association: ``"robust"`` or ``"paper"`` (plain linear assignment).
         noise: onboard prior model, ``"paper"`` (3 m, 2/2/5 deg, alternating signs) or
             ``"gnss_ins"``.
@@ -176,10 +180,11 @@ class StudyConfig:
         workers: processes rendering and localizing in parallel.
         methods: keys of :data:`METHODS` to run (default all).
         detector_model: with ``detector="learned"``, the keypoint network's ONNX file (None:
-            the committed ``localization/detect/models/landmarks_v1.onnx``), e.g. one retrained with
-            ``python -m uav_struct_env.training.train_detector``; stored resolved to an absolute path.
+            the default weights' ``localization/detect/models/landmarks_v1.onnx``), e.g. one
+            retrained with ``python -m uav_struct_env.training.train_detector``; stored resolved to
+            an absolute path. It replaces the keypoint network of a ``"learned:NAME"`` set.
         refiner_model: with ``detector="learned"``, the patch refiner's ONNX file (None: the
-            committed one), e.g. from ``python -m uav_struct_env.training.train_refiner``.
+            default weights' refiner), e.g. from ``python -m uav_struct_env.training.train_refiner``.
         stage: the floor to evaluate, by any of its stage names (``"Level 2/slab"``): the slab
             methods run at the floor's slab stage, column tops at its columns stage. None: the
             paper's first floor (``"slab"`` / ``"columns"``), or an IFC file's last floor.
@@ -236,6 +241,9 @@ class StudyConfig:
     camera: str = "paper"
 
     def __post_init__(self) -> None:
+        resolved = resolve_learned(self.detector, self.detector_model, self.refiner_model)
+        for name, value in zip(("detector", "detector_model", "refiner_model"), resolved, strict=True):
+            object.__setattr__(self, name, value)
         for name, options in (
             ("detector", DETECTORS),
             ("imaging", ("ideal", "camera")),

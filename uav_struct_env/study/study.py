@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from localization.detect.weights import WEIGHT_NAMES
 from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.outputs import OutputExistsError, StagedOutput
 from uav_struct_env.processes import WorkerDied
@@ -132,9 +133,9 @@ def _parser() -> CommandParser:
     p.add_argument(
         "--detector",
         default="learned",
-        help=f"landmark detector: {', '.join(DETECTORS)} (default learned: the method from the "
-        "rendered pixels; projection: ground truth + noise, an ablation isolating association "
-        "and pose)",
+        help=f"landmark detector: {', '.join(DETECTORS)}, learned:NAME ({', '.join(WEIGHT_NAMES)}; "
+        "default learned: the method from the rendered pixels with the default weights; projection: "
+        "ground truth + noise, an ablation isolating association and pose)",
     )
     p.add_argument("--association", default="robust", choices=ASSOCIATIONS)
     p.add_argument("--noise", default="paper", choices=NOISES, help="onboard prior model")
@@ -204,13 +205,13 @@ def _parser() -> CommandParser:
         "--detector-model",
         default=None,
         metavar="ONNX",
-        help="with --detector learned: keypoint-network weights (default: the committed model)",
+        help="with --detector learned[:NAME]: keypoint-network weights (default: those of NAME)",
     )
     p.add_argument(
         "--refiner-model",
         default=None,
         metavar="ONNX",
-        help="with --detector learned: patch-refiner weights (default: the committed refiner)",
+        help="with --detector learned[:NAME]: patch-refiner weights (default: those of NAME)",
     )
     p.add_argument(
         "--track-workers",

@@ -47,8 +47,9 @@ class LocalizationWrapper(ParallelWrapper):
             ``"aruco"`` (OpenCV markers; only with ``landmarks="aruco"``), ``"learned"`` (the
             trained detector of :mod:`localization.detect.learned` on the image, at the operating
             point that suits ``mode``; its ``true_ids`` -- for the association scores only --
-            come from matching to the env's truth within 3 px), or any object following
-            :class:`localization.Detector`.
+            come from matching to the env's truth within 3 px), ``"learned:NAME"`` (the same with
+            the weight set ``NAME`` of :mod:`localization.detect.weights`, e.g.
+            ``"learned:active"``), or any object following :class:`localization.Detector`.
         mode: association, ``"robust"`` or ``"paper"``.
         reward: ``"error"``, ``"uncertainty"`` (:mod:`~uav_struct_env.wrappers.rewards`) or a
             reward object with ``terms(frame, crashed)``.

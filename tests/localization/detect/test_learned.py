@@ -14,6 +14,8 @@ from localization.detect.learned import (
     operating_point_for,
     subpixel_parabola,
 )
+from localization.detect.refiner import DEFAULT_REFINER
+from localization.detect.weights import WEIGHT_NAMES, weight_set
 
 
 def _gauss(h, w, centres, sigma=1.0, peak=1.0):
@@ -232,18 +234,28 @@ def test_truth_bookkeeping_with_no_visible_landmark():
     assert out.true_ids.tolist() == [3, -1]
 
 
-@pytest.mark.parametrize("model, refiner", [
-    ("landmarks_active_v1.onnx", "landmarks_active_v1_refiner.onnx"),
-    ("landmarks_active_v2.onnx", "landmarks_active_v2_refiner.onnx"),
-    ("landmarks_active_v2.onnx", "landmarks_active_v3_refiner.onnx"),  # the pair landmarks_active_v3
-    ("landmarks_active_v2.onnx", "landmarks_active_v4_refiner.onnx"),  # landmarks_active_v4 (ensemble)
-])
-def test_the_opt_in_active_site_weights_ship_and_run(model, refiner):
-    from pathlib import Path
-
-    models = Path(__file__).resolve().parents[3] / "localization" / "detect" / "models"
-    det = LearnedDetector("all", model=models / model, refiner=models / refiner)
-    assert model in repr(det) and refiner in repr(det)
+@pytest.mark.parametrize("name", WEIGHT_NAMES)
+def test_every_named_weight_set_ships_and_runs(name):
+    named = weight_set(name)
+    det = LearnedDetector("all", weights=name)
+    assert (det.model_path, det.refiner.model_path) == (named.model, named.refiner)
+    assert named.model.name in repr(det) and named.refiner.name in repr(det)
     uv, scores, kinds = det.detect_all(np.full((720, 1280, 3), 128, np.uint8))
     assert uv.shape == (len(scores), 2) and len(kinds) == len(scores)  # a flat image: nothing there
     assert len(scores) == 0
+
+
+def test_a_named_set_is_its_two_files_and_explicit_files_override_it():
+    image = np.random.default_rng(3).integers(0, 256, (720, 1280, 3), dtype=np.uint8)
+    active = weight_set("landmarks_active_v4")
+    by_name = LearnedDetector.for_localizer("all", 1280, "robust", weights="active")
+    by_path = LearnedDetector.for_localizer("all", 1280, "robust", model=active.model, refiner=active.refiner)
+    for a, b in zip(by_name.detect_all(image), by_path.detect_all(image), strict=True):
+        np.testing.assert_array_equal(a, b)
+    mixed = LearnedDetector("all", weights="active", refiner=weight_set().refiner)
+    assert (mixed.model_path, mixed.refiner.model_path) == (active.model, weight_set().refiner)
+    default = LearnedDetector("all")
+    assert (default.model_path, default.refiner.model_path) == (DEFAULT_MODEL, DEFAULT_REFINER)
+    with pytest.raises(ValueError, match=r"weights must be one of \('landmarks_v1', 'landmarks_active_v4', "
+                                         r"'active'\), got 'landmarks_active_v3'"):
+        LearnedDetector("all", weights="landmarks_active_v3")
