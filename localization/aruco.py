@@ -59,6 +59,33 @@ class MarkerSpec:
     world_from_marker: NDArray[np.float64]
 
 
+@dataclass(frozen=True)
+class _Failure:
+    """Why no pose: the code for grouping, the reason for people."""
+
+    code: FailureCode
+    reason: str
+
+
+def _failed(
+    failure: _Failure,
+    fallback: NDArray[np.float64],
+    assignment: NDArray[np.int64],
+    timings: dict[str, float],
+    t0: float,
+) -> PoseEstimate:
+    """The failed estimate: ``fallback`` as the pose, ``timings`` closed with the total since ``t0``."""
+    timings["total"] = time.perf_counter() - t0
+    return PoseEstimate(
+        success=False,
+        cam_from_world=fallback.copy(),
+        assignment=assignment,
+        failure_reason=failure.reason,
+        failure_code=failure.code,
+        timings=timings,
+    )
+
+
 def marker_corners(side: float) -> NDArray[np.float64]:
     """(4, 3) corners of a marker of side ``side`` in its own frame, in OpenCV's order.
 
@@ -208,69 +235,31 @@ class ArucoLocalizer:
             -1 for corners of markers not in the map.
         """
         t0 = time.perf_counter()
-        ids = np.asarray(ids).astype(np.int64).reshape(-1)
-        c = np.asarray(corners, dtype=np.float64)
-        if c.size == 0:
-            c = c.reshape(0, 4, 2)
-        if c.ndim != 3 or c.shape[1:] != (4, 2) or c.shape[0] != ids.shape[0]:
-            raise ValueError(f"corners must have shape ({ids.shape[0]}, 4, 2), got {c.shape}")
-        if self.dist_coeffs is not None:  # pinhole pixels from here on
-            c = undistort_points(c.reshape(-1, 2), self.K, self.dist_coeffs).reshape(c.shape)
+        ids, c = self._check_corners(ids, corners)
         prior = (
             None
             if prior_cam_from_world is None
             else check_transform("prior_cam_from_world", prior_cam_from_world)
         )
         fallback = prior if prior is not None else np.eye(4)
-        assignment = np.full(4 * ids.shape[0], -1, dtype=np.int64)
-        known = []
-        for k, mid in enumerate(ids):
-            i = self._index.get(int(mid))
-            if i is not None and np.all(np.isfinite(c[k])):
-                assignment[4 * k : 4 * k + 4] = 4 * i + np.arange(4)
-                known.append((k, i))
+        assignment, known = self._assign(ids, c)
         timings = {"associate": time.perf_counter() - t0}
-
-        def fail(code: FailureCode, reason: str) -> PoseEstimate:
-            timings["total"] = time.perf_counter() - t0
-            return PoseEstimate(
-                success=False,
-                cam_from_world=fallback.copy(),
-                assignment=assignment,
-                failure_reason=reason,
-                failure_code=code,
-                timings=timings,
-            )
-
         if not known:
-            return fail(FailureCode.NO_MARKERS, f"no known marker detected (ids seen: {ids.tolist()})")
+            failure = _Failure(FailureCode.NO_MARKERS, f"no known marker detected (ids seen: {ids.tolist()})")
+            return _failed(failure, fallback, assignment, timings, t0)
         m = assignment >= 0
         X = self.corners_world[assignment[m]]
         uv = c.reshape(-1, 2)[m]
         t1 = time.perf_counter()
-        if self.mode == "joint":
-            res = solve_pnp(
-                X,
-                uv,
-                self.K,
-                prior,
-                rule="prior" if prior is not None else "paper",
-                pixel_sigma=self.pixel_sigma,
-                prior_sigmas=self.prior_sigmas,
-            )
-            if not res.success:
-                timings["pnp"] = time.perf_counter() - t1
-                return fail(res.failure_code or FailureCode.PNP_FAILED, res.failure_reason or "PnP failed")
-            T = res.cam_from_world
-        else:
-            T = self._average(known, c, prior)
-            if T is None:
-                timings["pnp"] = time.perf_counter() - t1
-                return fail(FailureCode.BEHIND_CAMERA, "every marker pose puts the marker behind the camera")
+        T = self._pose(known, c, X, uv, prior)
+        if isinstance(T, _Failure):
+            timings["pnp"] = time.perf_counter() - t1
+            return _failed(T, fallback, assignment, timings, t0)
         res_px, depth = reprojection_residuals(self.K, T, X, uv)
         timings["pnp"] = time.perf_counter() - t1
         if not np.all(depth > 0):
-            return fail(FailureCode.BEHIND_CAMERA, "the pose puts marker corners behind the camera")
+            failure = _Failure(FailureCode.BEHIND_CAMERA, "the pose puts marker corners behind the camera")
+            return _failed(failure, fallback, assignment, timings, t0)
         t2 = time.perf_counter()
         cov = pose_covariance(self.K, T, X, self.pixel_sigma)
         timings["covariance"] = time.perf_counter() - t2
@@ -289,6 +278,70 @@ class ArucoLocalizer:
             ),
             n_hypotheses=len(known),
         )
+
+    def _check_corners(
+        self, ids: ArrayLike, corners: ArrayLike
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """``(ids (K,), corners (K, 4, 2))`` checked, the corners undistorted to pinhole pixels."""
+        ids = np.asarray(ids).astype(np.int64).reshape(-1)
+        c = np.asarray(corners, dtype=np.float64)
+        if c.size == 0:
+            c = c.reshape(0, 4, 2)
+        if c.ndim != 3 or c.shape[1:] != (4, 2) or c.shape[0] != ids.shape[0]:
+            raise ValueError(f"corners must have shape ({ids.shape[0]}, 4, 2), got {c.shape}")
+        if self.dist_coeffs is not None:  # pinhole pixels from here on
+            c = undistort_points(c.reshape(-1, 2), self.K, self.dist_coeffs).reshape(c.shape)
+        return ids, c
+
+    def _assign(
+        self, ids: NDArray[np.int64], corners: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], list[tuple[int, int]]]:
+        """Each corner's row of :attr:`corners_world` (-1: not in the map, or not finite).
+
+        Returns ``(assignment (4 K,), known)``, ``known`` the ``(detection k, marker index i)``
+        of every marker of the map seen with finite corners.
+        """
+        assignment = np.full(4 * ids.shape[0], -1, dtype=np.int64)
+        known = []
+        for k, mid in enumerate(ids):
+            i = self._index.get(int(mid))
+            if i is not None and np.all(np.isfinite(corners[k])):
+                assignment[4 * k : 4 * k + 4] = 4 * i + np.arange(4)
+                known.append((k, i))
+        return assignment, known
+
+    def _pose(
+        self,
+        known: list[tuple[int, int]],
+        corners: NDArray[np.float64],
+        X: NDArray[np.float64],
+        uv: NDArray[np.float64],
+        prior: NDArray[np.float64] | None,
+    ) -> NDArray[np.float64] | _Failure:
+        """The mode's ``cam_from_world`` from the known markers, or why there is none.
+
+        ``joint``: one PnP over the corners ``X`` (world) <-> ``uv``; ``average``: the mean of the
+        markers' own poses (:meth:`_average`).
+        """
+        if self.mode == "joint":
+            res = solve_pnp(
+                X,
+                uv,
+                self.K,
+                prior,
+                rule="prior" if prior is not None else "paper",
+                pixel_sigma=self.pixel_sigma,
+                prior_sigmas=self.prior_sigmas,
+            )
+            if not res.success:
+                return _Failure(
+                    res.failure_code or FailureCode.PNP_FAILED, res.failure_reason or "PnP failed"
+                )
+            return res.cam_from_world
+        T = self._average(known, corners, prior)
+        if T is None:
+            return _Failure(FailureCode.BEHIND_CAMERA, "every marker pose puts the marker behind the camera")
+        return T
 
     def marker_pose_candidates(
         self, marker_index: int, corners_uv: ArrayLike

@@ -31,7 +31,7 @@ from localization.geometry.transforms import (
     invert,
 )
 from localization.pose.covariance import PriorSigmas, pose_covariance, prior_mahalanobis_sq
-from localization.pose.finish import finish_pose
+from localization.pose.finish import FinishInputs, finish_pose
 from localization.pose.pnp import is_coplanar, solve_pnp
 
 __all__ = ["ASSOCIATION_METHODS", "Localizer", "PoseEstimate", "image_size_from_K"]
@@ -96,6 +96,66 @@ class PoseEstimate:
     def pose_std(self) -> NDArray[np.float64]:
         """(6,) standard deviations from ``covariance``: position x, y, z [m], rotation [rad]."""
         return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
+
+
+@dataclass(frozen=True, eq=False)
+class _Frame:
+    """One frame's validated inputs to :meth:`Localizer.localize`.
+
+    Attributes:
+        detections_uv: (N, 2) the detections, pinhole pixels.
+        prior: (4, 4) the prior ``cam_from_world``.
+        prior_sigmas: the prior's uncertainty for this frame.
+        scores: (N,) the detections' probabilities of being landmarks, or None.
+        warm_start: (4, 4) the predicted ``cam_from_world`` to try first, or None.
+    """
+
+    detections_uv: NDArray[np.float64]
+    prior: NDArray[np.float64]
+    prior_sigmas: PriorSigmas
+    scores: NDArray[np.float64] | None
+    warm_start: NDArray[np.float64] | None
+
+
+@dataclass(frozen=True, eq=False)
+class _Pose:
+    """A pose finished on the association's pairs, before the checks both modes share.
+
+    Attributes:
+        cam_from_world: (4, 4) the pose.
+        assignment: (N,) model landmark of each detection, -1 if unassigned or an outlier.
+        n_inliers: correspondences in the pose.
+        rmse_px: reprojection RMSE of the inliers, px.
+        covariance: (6, 6) in ``(C [m], dtheta [rad])``.
+        spread_px: RMS distance of the inlier detections from their best-fit line, px.
+        prior_mahalanobis_sq: squared Mahalanobis distance from the prior when already
+            computed, else None (computed for the estimate).
+    """
+
+    cam_from_world: NDArray[np.float64]
+    assignment: NDArray[np.int64]
+    n_inliers: int
+    rmse_px: float
+    covariance: NDArray[np.float64]
+    spread_px: float
+    prior_mahalanobis_sq: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class _Failure:
+    """Why a step of :meth:`Localizer.localize` ends the frame without a pose.
+
+    Attributes:
+        code: for grouping.
+        reason: for people, with the numbers of the case.
+        assignment: (N,) the assignment so far, or None (all -1).
+        n_hypotheses: association hypotheses evaluated.
+    """
+
+    code: FailureCode
+    reason: str
+    assignment: NDArray[np.int64] | None = None
+    n_hypotheses: int = 0
 
 
 class Localizer:
@@ -306,6 +366,11 @@ class Localizer:
     ) -> PoseEstimate:
         """Estimate ``cam_from_world`` from anonymous detections and a rough prior pose.
 
+        One sequence for both association modes: validate the inputs, check the detections can
+        give a pose, associate them with the landmarks (:meth:`associate`), finish a pose on the
+        association's pairs (the mode's way: PnP on them for ``paper``, the refinement of the
+        association's own pose for ``robust``), check that pose, build the estimate.
+
         Args:
             detections_uv: (N, 2) pixel detections (or a :class:`Detections`); rows with NaN are
                 ignored (assignment -1).
@@ -329,7 +394,57 @@ class Localizer:
                 4x4 rigid transform.
         """
         t0 = time.perf_counter()
-        timings: dict[str, float] = {}
+        frame = self._frame(detections_uv, prior_cam_from_world, prior_sigmas, warm_start)
+        t1 = time.perf_counter()
+        timings = {"validate": t1 - t0}
+        failure = self._check_detections(frame.detections_uv)
+        if failure is not None:  # no association can help: fail before trying any
+            return self._failed(frame, failure, timings, t0)
+        assoc = self.associate(
+            frame.detections_uv, frame.prior, frame.prior_sigmas, frame.scores, frame.warm_start
+        )
+        t2 = time.perf_counter()
+        timings["associate"] = t2 - t1
+        failure = self._check_association(assoc)
+        if failure is not None:
+            return self._failed(frame, failure, timings, t0)
+        finish = self._finish_paper if self.association == "paper" else self._finish_robust
+        pose = finish(frame, assoc, timings, t2)
+        if isinstance(pose, _Failure):
+            return self._failed(frame, pose, timings, t0)
+        failure = self._check_pose(pose, assoc.n_hypotheses)
+        if failure is not None:
+            return self._failed(frame, failure, timings, t0)
+        timings["total"] = time.perf_counter() - t0
+        q = pose.prior_mahalanobis_sq
+        return PoseEstimate(
+            success=True,
+            cam_from_world=pose.cam_from_world,
+            assignment=pose.assignment,
+            reprojection_rmse_px=float(pose.rmse_px),
+            n_inliers=pose.n_inliers,
+            covariance=pose.covariance,
+            failure_reason=None,
+            timings=timings,
+            prior_mahalanobis_sq=(
+                prior_mahalanobis_sq(pose.cam_from_world, frame.prior, frame.prior_sigmas)
+                if q is None
+                else float(q)
+            ),
+            n_hypotheses=assoc.n_hypotheses,
+            warm_started=assoc.warm_started,
+        )
+
+    # ---------------------------------------------------------------- the steps of localize
+
+    def _frame(
+        self,
+        detections_uv: ArrayLike | Detections,
+        prior_cam_from_world: ArrayLike,
+        prior_sigmas: PriorSigmas | tuple | None,
+        warm_start: ArrayLike | None,
+    ) -> _Frame:
+        """:meth:`localize`'s arguments validated, the detections undistorted to pinhole pixels."""
         scores = None
         if isinstance(detections_uv, Detections):
             if self.use_scores and self.association == "robust" and detections_uv.scores is not None:
@@ -342,142 +457,159 @@ class Localizer:
         if warm_start is not None:
             warm_start = check_transform("warm_start", warm_start)
         sigmas = self.prior_sigmas if prior_sigmas is None else self._prior_sigmas(prior_sigmas)
+        return _Frame(det, prior, sigmas, scores, warm_start)
+
+    def _check_detections(self, det: NDArray[np.float64]) -> _Failure | None:
+        """Why these detections cannot give a pose (too few usable, on one line), else None."""
         n = det.shape[0]
-        t1 = time.perf_counter()
-        timings["validate"] = t1 - t0
-
-        def fail(
-            code: FailureCode,
-            reason: str,
-            assignment: NDArray[np.int64] | None = None,
-            n_hyp: int = 0,
-        ) -> PoseEstimate:
-            timings["total"] = time.perf_counter() - t0
-            return PoseEstimate(
-                success=False,
-                cam_from_world=prior.copy(),
-                assignment=np.full(n, -1, dtype=np.int64) if assignment is None else assignment,
-                failure_reason=reason,
-                failure_code=code,
-                timings=timings,
-                prior_mahalanobis_sq=0.0,
-                n_hypotheses=n_hyp,
-            )
-
         usable = np.isfinite(det).all(axis=1)
         n_usable = int(np.count_nonzero(usable))
         need = self.min_correspondences
         if n_usable < need:
-            timings.update(associate=0.0, pnp=0.0, covariance=0.0)
             what = "no detections" if n == 0 else f"{n_usable} usable (finite) detections"
-            return fail(FailureCode.TOO_FEW_DETECTIONS, f"too few detections: {what}, need {need}")
-
+            return _Failure(FailureCode.TOO_FEW_DETECTIONS, f"too few detections: {what}, need {need}")
         edge_on = self._edge_on("detections", det if n_usable == n else det[usable])
-        if edge_on is not None:  # no association can help: fail before trying any
-            timings.update(associate=0.0, pnp=0.0, covariance=0.0)
-            return fail(FailureCode.DEGENERATE_GEOMETRY, edge_on)
+        if edge_on is not None:
+            return _Failure(FailureCode.DEGENERATE_GEOMETRY, edge_on)
+        return None
 
-        assoc = self.associate(det, prior, sigmas, scores, warm_start)
-        t2 = time.perf_counter()
-        timings["associate"] = t2 - t1
+    def _check_association(self, assoc: Association) -> _Failure | None:
+        """Why this association cannot give a pose (it failed, too few pairs), else None."""
         if assoc.failure_reason is not None:
-            timings.update(pnp=0.0, covariance=0.0)
-            return fail(
-                assoc.failure_code or FailureCode.UNKNOWN,
-                assoc.failure_reason,
-                n_hyp=assoc.n_hypotheses,
+            return _Failure(
+                assoc.failure_code or FailureCode.UNKNOWN, assoc.failure_reason, None, assoc.n_hypotheses
             )
-        a = assoc.assignment.copy()
-        m = a >= 0
-        n_pairs = int(np.count_nonzero(m))
+        n_pairs = int(np.count_nonzero(assoc.assignment >= 0))
+        need = self.min_correspondences
         if n_pairs < need:
-            timings.update(pnp=0.0, covariance=0.0)
-            return fail(
+            return _Failure(
                 FailureCode.TOO_FEW_CORRESPONDENCES,
                 f"too few correspondences: {n_pairs} assigned, need {need}",
+                assoc.assignment.copy(),
+                assoc.n_hypotheses,
+            )
+        return None
+
+    def _finish_paper(
+        self, frame: _Frame, assoc: Association, timings: dict[str, float], t_start: float
+    ) -> _Pose | _Failure:
+        """The paper's pose: PnP on the association's pairs (RANSAC if asked), its inliers kept.
+
+        Records the ``pnp`` and ``covariance`` timings from ``t_start``.
+        """
+        det = frame.detections_uv
+        a = assoc.assignment.copy()
+        m = a >= 0
+        res = solve_pnp(
+            self.landmarks_xyz[a[m]],
+            det[m],
+            self.K,
+            frame.prior,
+            rule="paper",
+            min_points=self.min_correspondences,
+            pixel_sigma=self.pixel_sigma,
+            ransac=self.ransac,
+            ransac_threshold_px=self.ransac_threshold_px,
+        )
+        if not res.success:
+            timings["pnp"] = time.perf_counter() - t_start
+            return _Failure(
+                res.failure_code or FailureCode.PNP_FAILED,
+                res.failure_reason or "PnP failed",
                 a,
                 assoc.n_hypotheses,
             )
+        a[np.flatnonzero(m)[~res.inliers]] = -1
+        m = a >= 0
+        t_pnp = time.perf_counter()
+        timings["pnp"] = t_pnp - t_start
+        cov = pose_covariance(self.K, res.cam_from_world, self.landmarks_xyz[a[m]], self.pixel_sigma)
+        timings["covariance"] = time.perf_counter() - t_pnp
+        return _Pose(
+            res.cam_from_world, a, int(np.count_nonzero(m)), res.rmse_px, cov, _minor_spread_px(det[m])
+        )
 
-        if self.association == "paper":
-            X, u = self.landmarks_xyz[a[m]], det[m]
-            res = solve_pnp(
-                X,
-                u,
-                self.K,
-                prior,
-                rule="paper",
-                min_points=need,
+    def _finish_robust(
+        self, frame: _Frame, assoc: Association, timings: dict[str, float], t_start: float
+    ) -> _Pose | _Failure:
+        """The robust association's pose refined on its pairs, measured in one compiled call.
+
+        :func:`~localization.pose.finish.finish_pose`: the refinement, the depth check, the
+        covariance, the edge-on spread and the distance from the prior. Records the ``pnp``
+        timing from ``t_start`` (the covariance is in it: ``covariance`` is 0).
+        """
+        a = assoc.assignment.copy()
+        done = finish_pose(
+            FinishInputs(
+                K=self.K,
+                start_cam_from_world=assoc.cam_from_world,
+                landmarks_xyz=self.landmarks_xyz,
+                detections_uv=frame.detections_uv,
+                assignment=a,
                 pixel_sigma=self.pixel_sigma,
-                ransac=self.ransac,
-                ransac_threshold_px=self.ransac_threshold_px,
+                prior_cam_from_world=frame.prior,
+                prior_sigmas=frame.prior_sigmas,
             )
-            if not res.success:
-                timings.update(pnp=time.perf_counter() - t2, covariance=0.0)
-                return fail(
-                    res.failure_code or FailureCode.PNP_FAILED,
-                    res.failure_reason or "PnP failed",
-                    a,
-                    assoc.n_hypotheses,
-                )
-            T = res.cam_from_world
-            idx_m = np.flatnonzero(m)
-            a[idx_m[~res.inliers]] = -1
-            m = a >= 0
-            n_pairs = int(np.count_nonzero(m))
-            rmse = res.rmse_px
-            t3 = time.perf_counter()
-            timings["pnp"] = t3 - t2
-            cov = pose_covariance(self.K, T, self.landmarks_xyz[a[m]], self.pixel_sigma)
-            timings["covariance"] = time.perf_counter() - t3
-            spread, q = _minor_spread_px(det[m]), None
-        else:
-            # refine_pose (10 x 20 LM steps, tol 1e-8) on the pairs in detection order, the depth
-            # check, pose_covariance, the edge-on spread and prior_mahalanobis_sq in one compiled
-            # call (their kernels)
-            T, rmse, in_front, cov, q, far, spread = finish_pose(
-                self.K, assoc.cam_from_world, self.landmarks_xyz, det, a, self.pixel_sigma,
-                np.ascontiguousarray(prior[:3, :3]), camera_center(prior), sigmas.as_array(), 200, 1e-8,
+        )
+        timings.update(pnp=time.perf_counter() - t_start, covariance=0.0)
+        if not done.in_front:
+            return _Failure(
+                FailureCode.BEHIND_CAMERA,
+                "refined pose puts landmarks behind the camera",
+                a,
+                assoc.n_hypotheses,
             )
-            if far:
-                q = prior_mahalanobis_sq(T, prior, sigmas)
-            t3 = time.perf_counter()
-            timings.update(pnp=t3 - t2, covariance=0.0)  # the covariance is in the refinement's call
-            if not in_front:
-                return fail(
-                    FailureCode.BEHIND_CAMERA,
-                    "refined pose puts landmarks behind the camera",
-                    a,
-                    assoc.n_hypotheses,
-                )
-        if not np.isfinite(T).all():
-            return fail(FailureCode.PNP_FAILED, "PnP returned a non-finite pose", a, assoc.n_hypotheses)
-        edge_on = self._edge_on("inlier detections", spread=spread)
+        return _Pose(
+            done.cam_from_world,
+            a,
+            int(np.count_nonzero(a >= 0)),
+            done.rmse_px,
+            done.covariance,
+            done.spread_px,
+            done.prior_mahalanobis_sq,
+        )
+
+    def _check_pose(self, pose: _Pose, n_hypotheses: int) -> _Failure | None:
+        """Why this pose is not an answer (not finite, seen edge-on, ill-conditioned), else None."""
+        a = pose.assignment
+        if not np.isfinite(pose.cam_from_world).all():
+            return _Failure(FailureCode.PNP_FAILED, "PnP returned a non-finite pose", a, n_hypotheses)
+        edge_on = self._edge_on("inlier detections", spread=pose.spread_px)
         if edge_on is not None:
-            return fail(FailureCode.DEGENERATE_GEOMETRY, edge_on, a, assoc.n_hypotheses)
+            return _Failure(FailureCode.DEGENERATE_GEOMETRY, edge_on, a, n_hypotheses)
         if self.max_position_std_m is not None:
+            cov = pose.covariance
             std = float(np.sqrt(np.max(np.diag(cov)[:3]))) if np.all(np.isfinite(cov)) else np.inf
             if std > self.max_position_std_m:
-                return fail(
+                return _Failure(
                     FailureCode.ILL_CONDITIONED,
                     f"ill-conditioned geometry: position std {std:.3g} m > "
                     f"max_position_std_m={self.max_position_std_m}",
                     a,
-                    assoc.n_hypotheses,
+                    n_hypotheses,
                 )
+        return None
+
+    @staticmethod
+    def _failed(
+        frame: _Frame, failure: _Failure, timings: dict[str, float], t0: float
+    ) -> PoseEstimate:
+        """The failed estimate: the prior as the pose, the stages not reached timed at 0."""
+        for stage in ("associate", "pnp", "covariance"):
+            timings.setdefault(stage, 0.0)
         timings["total"] = time.perf_counter() - t0
+        n = frame.detections_uv.shape[0]
         return PoseEstimate(
-            success=True,
-            cam_from_world=T,
-            assignment=a,
-            reprojection_rmse_px=float(rmse),
-            n_inliers=n_pairs,
-            covariance=cov,
-            failure_reason=None,
+            success=False,
+            cam_from_world=frame.prior.copy(),
+            assignment=(
+                np.full(n, -1, dtype=np.int64) if failure.assignment is None else failure.assignment
+            ),
+            failure_reason=failure.reason,
+            failure_code=failure.code,
             timings=timings,
-            prior_mahalanobis_sq=prior_mahalanobis_sq(T, prior, sigmas) if q is None else float(q),
-            n_hypotheses=assoc.n_hypotheses,
-            warm_started=assoc.warm_started,
+            prior_mahalanobis_sq=0.0,
+            n_hypotheses=failure.n_hypotheses,
         )
 
 
@@ -509,9 +641,9 @@ def _minor_spread_px(uv: NDArray[np.float64]) -> float:
 
     The smaller singular value of the centred points over ``sqrt(N)``, from the smaller
     eigenvalue of their 2 x 2 scatter matrix in closed form, compiled
-    (:func:`localization.geometry.kernels.minor_spread`; an SVD per frame cost 30 us, numpy's
-    closed form 8 us). The closed form loses about 1e-5 px to cancellation on exactly collinear
-    points, far below the 1-2 px threshold it is compared with.
+    (:func:`localization.geometry.kernels.minor_spread`): an SVD or numpy's calls would cost
+    more than the arithmetic, on every frame. The closed form loses about 1e-5 px to
+    cancellation on exactly collinear points, far below the 1-2 px threshold it is compared with.
     """
     return float(minor_spread(np.ascontiguousarray(uv, dtype=np.float64)))
 

@@ -121,7 +121,7 @@ def minor_spread(uv: NDArray) -> float:
     """RMS distance of points ``uv`` (N, 2) from their best-fit line (0 for fewer than 3).
 
     The smaller eigenvalue of the centred points' 2 x 2 scatter matrix, in closed form, over N
-    (``localization.pipeline._minor_spread_px``).
+    (the localizer's edge-on test, :meth:`localization.Localizer.localize`).
     """
     n = uv.shape[0]
     if n < 3:

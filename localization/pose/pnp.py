@@ -311,63 +311,79 @@ def solve_pnp(
     fallback = prior if prior is not None else np.eye(4)
     n = X.shape[0]
     inliers = np.ones(n, dtype=bool)
-
-    def fail(code: FailureCode, reason: str) -> PnPResult:
-        return PnPResult(False, fallback.copy(), np.inf, np.zeros(n, dtype=bool), reason, failure_code=code)
-
-    finite = np.isfinite(X).all(axis=1) & np.isfinite(u).all(axis=1)
-    inliers &= finite
-    if inliers.sum() < max(min_points, 3):
-        return fail(
+    inliers &= np.isfinite(X).all(axis=1) & np.isfinite(u).all(axis=1)
+    need = max(min_points, 3)
+    if inliers.sum() < need:
+        return _failed(
+            fallback,
+            n,
             FailureCode.TOO_FEW_CORRESPONDENCES,
-            f"too few correspondences: {int(inliers.sum())} usable, need {max(min_points, 3)}"
+            f"too few correspondences: {int(inliers.sum())} usable, need {need}",
         )
     if ransac and inliers.sum() >= 6:
-        idx = np.flatnonzero(inliers)
-        try:
-            ok, rvec, tvec, ransac_in = cv2.solvePnPRansac(
-                _as_cv(X[idx]),
-                _as_cv(u[idx]),
-                K,
-                None,
-                reprojectionError=float(ransac_threshold_px),
-                iterationsCount=100,
-                flags=cv2.SOLVEPNP_AP3P,
-            )
-        except cv2.error:
-            ok, ransac_in = False, None
-        if ok and ransac_in is not None and len(ransac_in) >= max(min_points, 3):
-            keep = np.zeros(n, dtype=bool)
-            keep[idx[np.asarray(ransac_in).reshape(-1)]] = True
-            inliers = keep
+        inliers = _ransac_inliers(X, u, K, inliers, need, ransac_threshold_px)
     Xi, ui = X[inliers], u[inliers]
     if is_collinear(Xi):
-        return fail(
+        return _failed(
+            fallback,
+            n,
             FailureCode.DEGENERATE_GEOMETRY,
             f"degenerate geometry: the {Xi.shape[0]} landmarks lie on a line, so any rotation "
             "about it fits them",
         )
-    coplanar = is_coplanar(Xi)
-    cands = pnp_candidates(Xi, ui, K, coplanar=coplanar)
+    cands = pnp_candidates(Xi, ui, K, coplanar=is_coplanar(Xi))
     if not cands:
-        return fail(FailureCode.PNP_FAILED, "PnP solver found no pose (degenerate layout)")
+        return _failed(fallback, n, FailureCode.PNP_FAILED, "PnP solver found no pose (degenerate layout)")
     k = select_candidate(
-        cands,
-        Xi,
-        ui,
-        K,
-        prior,
-        rule=rule,
-        tie_px=tie_px,
-        pixel_sigma=pixel_sigma,
-        prior_sigmas=prior_sigmas,
+        cands, Xi, ui, K, prior, rule=rule, tie_px=tie_px, pixel_sigma=pixel_sigma, prior_sigmas=prior_sigmas
     )
     if k is None:
-        return fail(FailureCode.BEHIND_CAMERA, "every PnP candidate puts landmarks behind the camera")
+        return _failed(
+            fallback, n, FailureCode.BEHIND_CAMERA, "every PnP candidate puts landmarks behind the camera"
+        )
     T = cands[k]
     if refine:
         T, _ = refine_pose(Xi, ui, K, T)
     rmse, ok = _rmse_and_depth_ok(K, T, Xi, ui)
     if not ok or not np.isfinite(rmse):
-        return fail(FailureCode.BEHIND_CAMERA, "refined pose puts landmarks behind the camera")
+        return _failed(
+            fallback, n, FailureCode.BEHIND_CAMERA, "refined pose puts landmarks behind the camera"
+        )
     return PnPResult(True, T, rmse, inliers, None, tuple(cands))
+
+
+def _failed(fallback: NDArray[np.float64], n: int, code: FailureCode, reason: str) -> PnPResult:
+    """The failed :class:`PnPResult` of ``n`` correspondences: ``fallback``'s pose, no inliers."""
+    return PnPResult(False, fallback.copy(), np.inf, np.zeros(n, dtype=bool), reason, failure_code=code)
+
+
+def _ransac_inliers(
+    X: NDArray[np.float64],
+    u: NDArray[np.float64],
+    K: NDArray[np.float64],
+    usable: NDArray[np.bool_],
+    need: int,
+    threshold_px: float,
+) -> NDArray[np.bool_]:
+    """The (N,) inliers of ``cv2.solvePnPRansac`` (AP3P) among the ``usable`` pairs.
+
+    ``usable`` itself when RANSAC fails or keeps fewer than ``need`` pairs.
+    """
+    idx = np.flatnonzero(usable)
+    try:
+        ok, _, _, ransac_in = cv2.solvePnPRansac(
+            _as_cv(X[idx]),
+            _as_cv(u[idx]),
+            K,
+            None,
+            reprojectionError=float(threshold_px),
+            iterationsCount=100,
+            flags=cv2.SOLVEPNP_AP3P,
+        )
+    except cv2.error:
+        ok, ransac_in = False, None
+    if not (ok and ransac_in is not None and len(ransac_in) >= need):
+        return usable
+    keep = np.zeros(X.shape[0], dtype=bool)
+    keep[idx[np.asarray(ransac_in).reshape(-1)]] = True
+    return keep

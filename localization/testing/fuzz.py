@@ -1,7 +1,7 @@
 """Random localization problems for integrity tests: layouts, cameras, viewpoints, priors, detections.
 
 :func:`draw_case` draws one :class:`FuzzCase` from a ``numpy.random.Generator`` over the axes
-that issue 19's audit found the robust localizer fragile on:
+the robust localizer is sensitive to:
 
 * layout: a ``regular`` grid (equal spacing along each axis), an ``irregular`` grid (random
   spacings, points jittered and some removed) or ``scattered`` points;

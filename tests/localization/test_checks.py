@@ -94,7 +94,7 @@ def test_equality_of_array_dataclasses_is_identity_and_never_raises():
 
 
 def _allclose_reference(T: np.ndarray) -> bool:
-    """check_transform's tests as np.allclose / np.linalg.det (the numpy code it replaced)."""
+    """check_transform's tests written with np.allclose / np.linalg.det, the reference it must match."""
     R = T[:3, :3]
     return bool(np.all(np.isfinite(T)) and np.allclose(T[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9)
                 and np.allclose(R.T @ R, np.eye(3), atol=1e-6) and np.linalg.det(R) >= 0)

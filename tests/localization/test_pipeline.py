@@ -59,6 +59,22 @@ def test_degenerate_inputs_fail_with_reason_and_prior(scene, mode):
     assert est.success and est.assignment[-1] == -1
 
 
+@pytest.mark.parametrize("mode", ["paper", "robust"])
+def test_every_outcome_times_every_stage(scene, mode):
+    # one sequence for both modes: a frame that ends at any step reports every stage, in order,
+    # those it did not reach at 0
+    X, T, uv = scene
+    loc = Localizer(X, PAPER_K, association=mode)
+    stages = ["validate", "associate", "pnp", "covariance", "total"]
+    away = look_at(camera_center(T), 2 * camera_center(T) - np.array([4, 5.5, 3.4]))
+    for det, prior, success in [(uv, paper_prior(T, 3), True), (uv[:3], T, False), (uv, away, False)]:
+        est = loc.localize(det, prior)
+        assert est.success is success and list(est.timings) == stages
+        assert all(v >= 0 for v in est.timings.values())
+    est = loc.localize(uv[:3], T)  # too few detections: nothing after validation ran
+    assert est.timings["associate"] == est.timings["pnp"] == est.timings["covariance"] == 0.0
+
+
 def test_bad_types_raise_with_names(scene):
     X, T, uv = scene
     with pytest.raises(ValueError, match="association"):

@@ -2,19 +2,21 @@
 
 ``finish_pose`` must give exactly what the separate steps give -- ``refine_pose``, the depth of
 ``reprojection_residuals``, ``pose_covariance``, the edge-on spread and ``prior_mahalanobis_sq``
--- bit for bit, so that the localizer's answers did not move when it replaced them.
+-- bit for bit, so that the localizer answers exactly as those steps would.
 """
 
 from __future__ import annotations
+
+import inspect
 
 import numpy as np
 import pytest
 
 from localization.geometry.camera import PAPER_K
+from localization.geometry.kernels import minor_spread
 from localization.geometry.transforms import camera_center, look_at, project, so3_exp
-from localization.pipeline import _minor_spread_px
-from localization.pose.covariance import PriorSigmas, pose_covariance, prior_mahalanobis_sq
-from localization.pose.finish import finish_pose
+from localization.pose.covariance import PriorSigmas, pose_covariance, prior_distance_sq, prior_mahalanobis_sq
+from localization.pose.finish import REFINE_ITERATIONS, REFINE_TOL, FinishInputs, finish_pose
 from localization.pose.pnp import refine_pose, reprojection_residuals
 
 
@@ -29,15 +31,21 @@ def _separately(X, uv, T0, prior, sigmas, pixel_sigma=1.0):
     T, rmse = refine_pose(X, uv, PAPER_K, T0)
     _, depth = reprojection_residuals(PAPER_K, T, X, uv)
     cov = pose_covariance(PAPER_K, T, X, pixel_sigma)
-    return T, rmse, bool(np.all(depth > 0)), cov, prior_mahalanobis_sq(T, prior, sigmas), _minor_spread_px(uv)
+    spread = float(minor_spread(np.ascontiguousarray(uv)))
+    return T, rmse, bool(np.all(depth > 0)), cov, prior_mahalanobis_sq(T, prior, sigmas), spread
 
 
 def _finished(L, det, a, T0, prior, sigmas, pixel_sigma=1.0):
-    T, rmse, in_front, cov, q, far, spread = finish_pose(
-        PAPER_K, T0, L, det, a, pixel_sigma, np.ascontiguousarray(prior[:3, :3]), camera_center(prior),
-        sigmas.as_array(), 200, 1e-8,
-    )
-    return T, rmse, in_front, cov, (prior_mahalanobis_sq(T, prior, sigmas) if far else q), spread
+    done = finish_pose(FinishInputs(PAPER_K, T0, L, det, a, pixel_sigma, prior, sigmas))
+    q = done.prior_mahalanobis_sq
+    return done.cam_from_world, done.rmse_px, done.in_front, done.covariance, q, done.spread_px
+
+
+def test_the_refinement_defaults_are_refine_poses():
+    # refine_pose runs 10 * max_iterations LM steps
+    defaults = inspect.signature(refine_pose).parameters
+    assert REFINE_ITERATIONS == 10 * defaults["max_iterations"].default
+    assert REFINE_TOL == defaults["tol"].default
 
 
 @pytest.mark.parametrize("n", [4, 7, 12])
@@ -82,9 +90,11 @@ def test_finish_pose_reports_points_behind_the_camera_and_far_priors(rng):
     flipped = truth.copy()
     flipped[:3, :3] = so3_exp(np.array([0.0, 0.0, np.pi - 0.01])) @ truth[:3, :3]
     flipped[:3, 3] = -flipped[:3, :3] @ camera_center(truth)
-    _, _, _, _, _, far, _ = finish_pose(
-        PAPER_K, truth, L, uv, np.arange(len(L)), 1.0, np.ascontiguousarray(flipped[:3, :3]),
-        camera_center(flipped), sigmas.as_array(), 200, 1e-8,
+    refined = finish_pose(FinishInputs(PAPER_K, truth, L, uv, np.arange(len(L)), 1.0, flipped, sigmas))
+    T = refined.cam_from_world
+    _, far = prior_distance_sq(  # the kernel's distance is not exact here: finish_pose recomputes it
+        np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
+        np.ascontiguousarray(flipped[:3, :3]), camera_center(flipped), sigmas.as_array(),
     )
     assert far
     assert _finished(L, uv, np.arange(len(L)), truth, flipped, sigmas)[4] == _separately(
