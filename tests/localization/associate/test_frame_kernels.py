@@ -61,7 +61,7 @@ def test_assign_is_the_minimum_cost_assignment_of_the_numpy_code(rng):
 
 
 def _upright_numpy(det, idx, uv, prior_sq, explained, misfit, gate_px, min_pairs, keep, n_distinct):
-    """``associate._upright_hypotheses``' selection as numpy code (before ``upright_starts``)."""
+    """:func:`upright_starts`' selection as plain numpy code."""
     order = np.lexsort((prior_sq, misfit, -explained))
     order = order[explained[order] >= min_pairs][:keep]
     out, seen = [], set()
