@@ -2,8 +2,9 @@
 
 - :mod:`~localization.associate.paper` -- the paper's method (project with the prior, one linear
   assignment) and the :class:`Association` result;
-- :mod:`~localization.associate.robust` -- the robust search (hypotheses, re-association,
-  scoring, gating, rivals);
+- :mod:`~localization.associate.robust` -- the robust search,
+  :class:`~localization.associate.robust.RobustSearch`, a method per step (hypotheses,
+  re-association, scoring, gating, rivals, warm start);
 - :mod:`~localization.associate.hypotheses` -- where the search starts: upright two-point poses,
   the layout vote, enumeration;
 - :mod:`~localization.associate.ambiguity` -- rival hypotheses from the layout's symmetries;

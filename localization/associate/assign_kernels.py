@@ -49,6 +49,45 @@ def pair_sq(det: NDArray, proj: NDArray) -> NDArray:
 
 
 @njit(cache=True, nogil=True)
+def _gated_pair_sq(det: NDArray, proj: NDArray, gate_sq: float) -> NDArray:
+    """(N, M) :func:`pair_sq`, inf beyond the gate ``gate_sq`` (squared) and where NaN."""
+    d2 = pair_sq(det, proj)
+    for i in range(det.shape[0]):
+        for j in range(proj.shape[0]):
+            if not d2[i, j] <= gate_sq:  # NaN too
+                d2[i, j] = np.inf
+    return d2
+
+
+@njit(cache=True, nogil=True)
+def _mutual_nearest(d2: NDArray, jn: NDArray, inn: NDArray, ok: NDArray) -> bool:
+    """One pass of mutual nearest neighbours on squared distances ``d2`` (N, M); whether any pair.
+
+    Into ``jn`` (N,) the nearest projection of each detection and ``inn`` (M,) the nearest
+    detection of each projection (the first of equals); ``ok`` (N,): whether detection ``i`` and
+    its nearest projection are each other's nearest at a finite distance.
+    """
+    n, m = d2.shape
+    for i in range(n):  # nearest projection of each detection (first of equals)
+        best, jb = d2[i, 0], 0
+        for j in range(1, m):
+            if d2[i, j] < best:
+                best, jb = d2[i, j], j
+        jn[i] = jb
+    for j in range(m):  # nearest detection of each projection
+        best, ib = d2[0, j], 0
+        for i in range(1, n):
+            if d2[i, j] < best:
+                best, ib = d2[i, j], i
+        inn[j] = ib
+    anyok = False
+    for i in range(n):
+        ok[i] = inn[jn[i]] == i and d2[i, jn[i]] < np.inf
+        anyok = anyok or ok[i]
+    return anyok
+
+
+@njit(cache=True, nogil=True)
 def assign_one(det: NDArray, proj: NDArray, gate_sq: float, rounds: int, out: NDArray) -> None:
     """Greedy mutual-nearest-neighbour assignment of ``det`` (N, 2) to ``proj`` (M, 2).
 
@@ -58,32 +97,12 @@ def assign_one(det: NDArray, proj: NDArray, gate_sq: float, rounds: int, out: ND
     out[:] = -1
     if n == 0 or m == 0:
         return
-    d2 = pair_sq(det, proj)
-    for i in range(n):
-        for j in range(m):
-            if not d2[i, j] <= gate_sq:  # NaN too
-                d2[i, j] = np.inf
+    d2 = _gated_pair_sq(det, proj, gate_sq)
     jn = np.empty(n, dtype=np.int64)
     inn = np.empty(m, dtype=np.int64)
     ok = np.empty(n, dtype=np.bool_)
     for _ in range(rounds):
-        for i in range(n):  # nearest projection of each detection (first of equals)
-            best, jb = d2[i, 0], 0
-            for j in range(1, m):
-                if d2[i, j] < best:
-                    best, jb = d2[i, j], j
-            jn[i] = jb
-        for j in range(m):  # nearest detection of each projection
-            best, ib = d2[0, j], 0
-            for i in range(1, n):
-                if d2[i, j] < best:
-                    best, ib = d2[i, j], i
-            inn[j] = ib
-        anyok = False
-        for i in range(n):
-            ok[i] = inn[jn[i]] == i and d2[i, jn[i]] < np.inf
-            anyok = anyok or ok[i]
-        if not anyok:
+        if not _mutual_nearest(d2, jn, inn, ok):
             break
         for i in range(n):
             if ok[i]:
@@ -109,7 +128,7 @@ def project_into(
     """Projections (M, 2) of landmarks ``L`` into ``out`` at one pose.
 
     NaN where behind the camera or more than ``margin`` px outside the image (as
-    ``associate._candidate_projections``).
+    :func:`localization.associate.hypotheses.candidate_projections`).
     """
     for j in range(L.shape[0]):
         x, y, z = camera_point(R, t, L, j)
@@ -141,7 +160,9 @@ def refine_reassign(
     width: int, height: int, margin: float, gate: float, coarse_gate: float,
     max_iterations: int, need: int, first_robust: bool,
 ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """Rounds of PnP and gated re-association of H hypotheses (``associate._Problem.refine``).
+    """Rounds of PnP and gated re-association of H hypotheses, until their assignments are stable.
+
+    The batch of :meth:`localization.associate.robust.RobustSearch.refine`.
 
     Args:
         K: (3, 3) intrinsics.
@@ -214,7 +235,7 @@ def refine_reassign(
     return a, R, t, alive
 
 
-#: The squared distance of a pair with a NaN or infinite coordinate (``associate.assign``'s).
+#: The squared distance of a pair with a NaN or infinite coordinate (in :func:`assignment_costs`).
 _BIG = 1e12
 
 
@@ -225,7 +246,7 @@ def candidates(
     """``(idx (k,), uv (k, 2))``: the landmarks ``L`` (M, 3) in front of ``T`` and near the image.
 
     In front: depth above ``MIN_DEPTH``; near: within ``margin`` px of the image rectangle
-    ``[-0.5, width - 0.5] x [-0.5, height - 0.5]`` (``associate.candidate_landmarks``).
+    ``[-0.5, width - 0.5] x [-0.5, height - 0.5]`` (:func:`localization.associate.paper.candidate_landmarks`).
     """
     m = L.shape[0]
     idx = np.empty(m, dtype=np.int64)
@@ -255,7 +276,7 @@ def assignment_costs(det: NDArray, model: NDArray, gate_sq: float, gated: bool) 
     """(N, M) costs of pairing detections ``det`` (N, 2) with projections ``model`` (M, 2).
 
     The squared distance (``_BIG`` where not finite); ``gated``: that minus ``gate_sq``, capped
-    at 0 (``associate.assign`` says why).
+    at 0 (:func:`localization.associate.paper.assign` says why).
     """
     cost = pair_sq(det, model)
     for i in range(cost.shape[0]):
@@ -287,8 +308,9 @@ def assign_many(
     Greedy by mutual nearest neighbours: a detection and a projection are paired when each is
     the other's nearest and they are within ``gate_px``; paired rows and columns leave, and
     ``rounds`` such passes run. Each pass pairs the globally closest remaining pair, so with
-    separated points the result is the minimum-cost assignment (:func:`localization.associate.
-    assign`); NaN detections or projections never pair. -1 marks an unassigned detection.
+    separated points the result is the minimum-cost assignment
+    (:func:`localization.associate.paper.assign`); NaN detections or projections never pair. -1
+    marks an unassigned detection.
     """
     f64 = np.float64
     det, proj = np.ascontiguousarray(det, dtype=f64), np.ascontiguousarray(proj, dtype=f64)

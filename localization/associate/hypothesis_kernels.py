@@ -28,7 +28,9 @@ from localization.pose.covariance import prior_distance_sq
 __all__ = [
     "anchor_pairs",
     "check_many",
+    "MAX_GRID",
     "missed_many",
+    "neighbour_votes",
     "rival_translations",
     "shift_votes",
     "translation_scores",
@@ -38,17 +40,17 @@ __all__ = [
 
 
 #: Most cells of the dense vote grid; a sparser spread of cells is voted by binary search.
-_MAX_GRID = 1 << 20
+MAX_GRID = 1 << 20
 
 
 @njit(cache=True, nogil=True)
-def _neighbour_votes(ux: NDArray, uy: NDArray, cnt: NDArray) -> NDArray:
+def neighbour_votes(ux: NDArray, uy: NDArray, cnt: NDArray) -> NDArray:
     """Per distinct cell ``(ux, uy)`` (sorted by x, then y) the counts of its 3 x 3 neighbourhood."""
     nu = ux.size
     votes = np.zeros(nu, dtype=np.int64)
     x0, y0, y1 = ux[0], uy.min(), uy.max()
     gw, gh = ux[nu - 1] - x0 + 3, y1 - y0 + 3
-    if gw * gh <= _MAX_GRID:  # a dense grid with a border of empty cells
+    if gw * gh <= MAX_GRID:  # a dense grid with a border of empty cells
         grid = np.zeros((gw, gh), dtype=np.int64)
         for c in range(nu):
             grid[ux[c] - x0 + 1, uy[c] - y0 + 1] = cnt[c]
@@ -78,11 +80,12 @@ def _neighbour_votes(ux: NDArray, uy: NDArray, cnt: NDArray) -> NDArray:
 def shift_votes(det: NDArray, proj: NDArray, vote_px: float, k: int) -> tuple[NDArray, NDArray]:
     """The ``k`` best-voted image shifts of each layout ``proj`` (L, M, 2) onto ``det`` (N, 2).
 
-    ``associate._shift_votes``' vote: every (detection, projection) pair proposes a shift, binned
-    in cells of ``vote_px`` (cell ``floor(shift / vote_px)``); a cell's vote is the number of
-    proposals in it and its eight neighbours. Per layout the ``k`` cells of most votes (ties: the
-    lower cell, x then y), each giving the mean of the layout's proposals within ``vote_px`` of
-    its own proposals' mean (or that mean if none). NaN projections propose nothing.
+    The vote of :func:`localization.associate.hypotheses.layout_shift_votes`: every (detection,
+    projection) pair proposes a shift, binned in cells of ``vote_px`` (cell ``floor(shift /
+    vote_px)``); a cell's vote is the number of proposals in it and its eight neighbours
+    (:func:`neighbour_votes`). Per layout the ``k`` cells of most votes (ties: the lower cell, x
+    then y), each giving the mean of the layout's proposals within ``vote_px`` of its own
+    proposals' mean (or that mean if none). NaN projections propose nothing.
 
     Returns:
         ``(layout index (S,), shift (S, 2))``, each layout's best first.
@@ -127,7 +130,7 @@ def shift_votes(det: NDArray, proj: NDArray, vote_px: float, k: int) -> tuple[ND
         for e in range(p):
             sumx[cell[e]] += sx[e]
             sumy[cell[e]] += sy[e]
-        votes = _neighbour_votes(ux[:nu], uy[:nu], cnt[:nu])
+        votes = neighbour_votes(ux[:nu], uy[:nu], cnt[:nu])
         best = np.argsort((-votes[:nu]) * nu + np.arange(nu))  # most votes, then the lower cell
         for r in range(min(k, nu)):
             c = best[r]
@@ -221,29 +224,16 @@ def upright_starts(
 
 
 @njit(cache=True, nogil=True)
-def rival_translations(
-    det: NDArray, L: NDArray, K: NDArray, T: NDArray, anchors: NDArray, prior_centre: NDArray,
-    sigma: NDArray, max_sq: float, gate_sq: float, need: int, limit: int,
-) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """The layout's self-translations that keep a moved winner near the prior, best first.
+def _distinct_translations(
+    L: NDArray, anchors: NDArray, centre: NDArray, prior_centre: NDArray, sigma: NDArray, max_sq: float
+) -> tuple[NDArray, NDArray]:
+    """The distinct translations from ``anchors`` to every landmark that keep the camera near the prior.
 
-    ``ambiguity.translation_hypotheses`` up to its list: the distinct translations ``X_j -
-    X_a`` (rounded to 1 mm, lexicographic order, the zero one dropped) from each landmark index
-    in ``anchors`` to every landmark ``L`` (M, 3); those whose moved camera centre is within
-    ``max_sq`` (squared Mahalanobis, position ``sigma`` (3,)) of ``prior_centre``; each scored
-    against the finite detections ``det`` (N, 2) from the winner's pose ``T`` moved by it
-    (:func:`localization.associate.hypothesis_kernels.translation_scores`, cap ``gate_sq``). Those explaining
-    ``need`` detections or more, by ``misfit`` then prior distance, at most ``limit``.
-
-    Returns:
-        ``(t (R, 3), uv (R, M, 2), depth (R, M), centre (3,))``: the chosen translations, the
-        landmarks' projections and depths from each moved camera, the winner's camera centre.
+    ``X_j - X_a`` rounded to 1 mm, in lexicographic order, the zero one dropped; kept when the
+    camera ``centre`` moved by it is within ``max_sq`` (squared Mahalanobis, position ``sigma``)
+    of ``prior_centre``. Returns ``(t (k, 3), prior_sq (k,))``.
     """
     m = L.shape[0]
-    R = T[:3, :3]
-    centre = np.empty(3)
-    for c in range(3):
-        centre[c] = -(R[0, c] * T[0, 3] + R[1, c] * T[1, 3] + R[2, c] * T[2, 3])
     n_all = anchors.size * m
     raw = np.empty((n_all, 3))
     for p in range(anchors.size):
@@ -271,8 +261,14 @@ def rival_translations(
         t[k] = raw[r]
         prior_sq[k] = d
         k += 1
-    t = t[:k].copy()
-    p = np.empty((m, 3))  # the landmarks in the winner's camera frame, and each t in it
+    return t[:k].copy(), prior_sq[:k].copy()
+
+
+@njit(cache=True, nogil=True)
+def _in_camera_frame(L: NDArray, R: NDArray, centre: NDArray, t: NDArray) -> tuple[NDArray, NDArray]:
+    """The landmarks ``L`` (M, 3) in the frame of camera ``R``, ``centre``, and each ``t`` (k, 3) in it."""
+    m, k = L.shape[0], t.shape[0]
+    p = np.empty((m, 3))
     for j in range(m):
         for c in range(3):
             p[j, c] = (
@@ -283,9 +279,13 @@ def rival_translations(
     for q in range(k):
         for c in range(3):
             shift[q, c] = t[q, 0] * R[c, 0] + t[q, 1] * R[c, 1] + t[q, 2] * R[c, 2]
-    uv, depth, explained, misfit = translation_scores(det, p, shift, K, gate_sq)
-    ranked = _lex_order(misfit, prior_sq[:k].copy(), np.zeros(k))
-    chosen = np.empty(min(k, max(limit, 0)), dtype=np.int64)
+    return p, shift
+
+
+@njit(cache=True, nogil=True)
+def _first_explaining(ranked: NDArray, explained: NDArray, need: int, limit: int) -> NDArray:
+    """The first (at most ``limit``) of ``ranked`` that explain ``need`` detections or more."""
+    chosen = np.empty(min(ranked.size, max(limit, 0)), dtype=np.int64)
     n_chosen = 0
     for q in ranked:
         if n_chosen == chosen.size:
@@ -293,15 +293,45 @@ def rival_translations(
         if explained[q] >= need:
             chosen[n_chosen] = q
             n_chosen += 1
-    chosen = chosen[:n_chosen]
+    return chosen[:n_chosen]
+
+
+@njit(cache=True, nogil=True)
+def rival_translations(
+    det: NDArray, L: NDArray, K: NDArray, T: NDArray, anchors: NDArray, prior_centre: NDArray,
+    sigma: NDArray, max_sq: float, gate_sq: float, need: int, limit: int,
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """The layout's self-translations that keep a moved winner near the prior, best first.
+
+    The compiled core of :func:`localization.associate.ambiguity.translation_hypotheses`: the
+    distinct translations ``X_j - X_a`` (rounded to 1 mm, lexicographic order, the zero one
+    dropped) from each landmark index in ``anchors`` to every landmark ``L`` (M, 3); those whose
+    moved camera centre is within ``max_sq`` (squared Mahalanobis, position ``sigma`` (3,)) of
+    ``prior_centre``; each scored against the finite detections ``det`` (N, 2) from the winner's
+    pose ``T`` moved by it (:func:`translation_scores`, cap ``gate_sq``). Those explaining
+    ``need`` detections or more, by ``misfit`` then prior distance, at most ``limit``.
+
+    Returns:
+        ``(t (R, 3), uv (R, M, 2), depth (R, M), centre (3,))``: the chosen translations, the
+        landmarks' projections and depths from each moved camera, the winner's camera centre.
+    """
+    R = T[:3, :3]
+    centre = np.empty(3)
+    for c in range(3):
+        centre[c] = -(R[0, c] * T[0, 3] + R[1, c] * T[1, 3] + R[2, c] * T[2, 3])
+    t, prior_sq = _distinct_translations(L, anchors, centre, prior_centre, sigma, max_sq)
+    p, shift = _in_camera_frame(L, R, centre, t)
+    uv, depth, explained, misfit = translation_scores(det, p, shift, K, gate_sq)
+    ranked = _lex_order(misfit, prior_sq, np.zeros(t.shape[0]))
+    chosen = _first_explaining(ranked, explained, need, limit)
     return t[chosen], uv[chosen], depth[chosen], centre
 
 
-#: A projection behind the camera counts as this pixel (``np.nan_to_num(nan=1e6)`` before).
+#: A projection behind the camera counts as this pixel in the fit of :func:`check_many`.
 _BEHIND_PX = 1e6
 
 
-#: A projection behind the camera lies this far off every detection (``batch._FAR_PX``).
+#: A projection behind the camera lies this far off every detection (:func:`translation_scores`).
 _FAR_PX = 1e9
 
 
@@ -377,10 +407,10 @@ def missed_many(
 def anchor_pairs(det: NDArray, k: int) -> NDArray:
     """(P, 2) every pair among ``k`` spread-out detections (N, 2) of the dense part of the image.
 
-    The algorithm of ``associate._anchor_pairs`` (whose docstring says why): detections whose
-    median squared distance to the others is at most the median of that (at least ``k`` of
-    them, the least spread out), then farthest-point selection starting from the one with the
-    largest sum of squared distances; pairs in selection order.
+    The spread-out part of :func:`localization.associate.hypotheses.spread_anchor_pairs` (whose
+    docstring says why): detections whose median squared distance to the others is at most the
+    median of that (at least ``k`` of them, the least spread out), then farthest-point selection
+    starting from the one with the largest sum of squared distances; pairs in selection order.
     """
     n = det.shape[0]
     if n < 2:
@@ -440,7 +470,7 @@ def translation_scores(
         ``(uv (T, M, 2), depth (T, M), explained (T,), misfit (T,))``: projections (NaN at or
         behind the camera) and depths after each move; how many detections have a projection
         within the gate; and the sum over detections of the squared distance to the nearest
-        projection, capped at ``cap_sq`` (as ``batch.capped_nearest_sq``).
+        projection, capped at ``cap_sq``.
     """
     n_t, m = shift.shape[0], p.shape[0]
     uv = np.empty((n_t, m, 2))

@@ -105,6 +105,112 @@ def upright_two_point(
 
 
 @njit(cache=True, nogil=True)
+def _similar_pairs(
+    det: NDArray, i1: NDArray, i2: NDArray, idx: NDArray, proj: NDArray
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Every anchor pair x ordered landmark pair whose prior image looks like the detection pair's.
+
+    Within a factor 3 in length and 45 degrees in direction. Returns ``(s1, s2, t1, t2)`` (S,):
+    the two detections and the two landmarks (indices into ``L``) of each sample.
+    """
+    m = idx.size
+    ns = 0
+    cap = i1.size * m * (m - 1)
+    s1 = np.empty(cap, dtype=np.int64)
+    s2 = np.empty(cap, dtype=np.int64)
+    t1 = np.empty(cap, dtype=np.int64)
+    t2 = np.empty(cap, dtype=np.int64)
+    for p in range(i1.size):
+        vdx, vdy = det[i2[p], 0] - det[i1[p], 0], det[i2[p], 1] - det[i1[p], 1]
+        nd = vdx * vdx + vdy * vdy
+        for j1 in range(m):
+            for j2 in range(m):
+                if j1 == j2:
+                    continue
+                vpx, vpy = proj[j2, 0] - proj[j1, 0], proj[j2, 1] - proj[j1, 1]
+                dot = vdx * vpx + vdy * vpy
+                npp = vpx * vpx + vpy * vpy
+                if nd <= 9.0 * npp and npp <= 9.0 * nd and dot > 0.0 and 2.0 * dot * dot >= nd * npp:
+                    s1[ns], s2[ns], t1[ns], t2[ns] = i1[p], i2[p], idx[j1], idx[j2]
+                    ns += 1
+    return s1[:ns], s2[:ns], t1[:ns], t2[:ns]
+
+
+@njit(cache=True, nogil=True)
+def _solve_samples(
+    rays: NDArray, L: NDArray, s1: NDArray, s2: NDArray, t1: NDArray, t2: NDArray, C0: NDArray,
+    sigma_pos: NDArray, sigma_yaw: float, max_prior_sq: float,
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Both roots of every sample: ``(psi (2S,), C (2S, 3), prior_sq (2S,), keep (2S,))``.
+
+    All "+" roots first, then all "-" roots; ``keep``: the root exists and is within
+    ``max_prior_sq`` of the prior (yaw ``sigma_yaw``, centre ``C0`` with ``sigma_pos``).
+    """
+    ns = s1.size
+    psi = np.empty(2 * ns)
+    C = np.empty((2 * ns, 3))
+    keep = np.zeros(2 * ns, dtype=np.bool_)
+    psq = np.empty(2 * ns)
+    for r in range(2):
+        for k in range(ns):
+            q = r * ns + k
+            psi[q], ok = _solve(rays[s1[k]], rays[s2[k]], L[t1[k]], L[t2[k]], 1.0 - 2.0 * r, C[q])
+            d = (psi[q] / sigma_yaw) ** 2
+            for c in range(3):
+                d += ((C[q, c] - C0[c]) / sigma_pos[c]) ** 2
+            psq[q] = d
+            keep[q] = ok and d <= max_prior_sq
+    return psi, C, psq, keep
+
+
+@njit(cache=True, nogil=True)
+def _upright_pose(R0: NDArray, psi: float, C: NDArray, R: NDArray, t: NDArray) -> None:
+    """Into ``R`` (3, 3), ``t`` (3,): the ``cam_from_world`` of ``R0`` turned by ``psi``, centre ``C``."""
+    c, sn = np.cos(psi), np.sin(psi)
+    for a in range(3):  # R = R0 Rz(psi)^T
+        R[a, 0] = R0[a, 0] * c - R0[a, 1] * sn
+        R[a, 1] = R0[a, 0] * sn + R0[a, 1] * c
+        R[a, 2] = R0[a, 2]
+    for a in range(3):
+        t[a] = -(R[a, 0] * C[0] + R[a, 1] * C[1] + R[a, 2] * C[2])
+
+
+@njit(cache=True, nogil=True)
+def _project_candidates(K: NDArray, R: NDArray, t: NDArray, L: NDArray, idx: NDArray, uv: NDArray) -> None:
+    """Into ``uv`` (m, 2): the projections of the candidates ``L[idx]`` at ``R``, ``t`` (NaN behind)."""
+    for j in range(idx.size):
+        X = L[idx[j]]
+        x = R[0, 0] * X[0] + R[0, 1] * X[1] + R[0, 2] * X[2] + t[0]
+        y = R[1, 0] * X[0] + R[1, 1] * X[1] + R[1, 2] * X[2] + t[1]
+        z = R[2, 0] * X[0] + R[2, 1] * X[1] + R[2, 2] * X[2] + t[2]
+        if z > MIN_DEPTH:
+            uv[j, 0] = (K[0, 0] * x + K[0, 1] * y) / z + K[0, 2]
+            uv[j, 1] = K[1, 1] * y / z + K[1, 2]
+        else:
+            uv[j, 0] = np.nan
+            uv[j, 1] = np.nan
+
+
+@njit(cache=True, nogil=True)
+def _explain(det: NDArray, uv: NDArray, gate_sq: float) -> tuple[int, float]:
+    """``(explained, misfit)`` of projections ``uv`` (m, 2): as :func:`score_upright_poses` returns."""
+    explained = 0
+    misfit = 0.0
+    for i in range(det.shape[0]):
+        best = gate_sq
+        for j in range(uv.shape[0]):
+            du = det[i, 0] - uv[j, 0]
+            dv = det[i, 1] - uv[j, 1]
+            d2 = du * du + dv * dv
+            if d2 < best:  # False for NaN
+                best = d2
+        misfit += best
+        if best < gate_sq:
+            explained += 1
+    return explained, misfit
+
+
+@njit(cache=True, nogil=True)
 def score_upright_poses(
     det: NDArray, rays: NDArray, i1: NDArray, i2: NDArray, idx: NDArray, proj: NDArray, L: NDArray,
     K: NDArray, R0: NDArray, C0: NDArray, sigma_pos: NDArray, sigma_yaw: float, max_prior_sq: float,
@@ -125,75 +231,18 @@ def score_upright_poses(
         squared prior distance, the detections within ``sqrt(gate_sq)`` of a projection and the
         sum of squared distances to the nearest projection capped at ``gate_sq``.
     """
-    m, n = idx.size, det.shape[0]
-    ns = 0
-    cap = i1.size * m * (m - 1)
-    s1 = np.empty(cap, dtype=np.int64)
-    s2 = np.empty(cap, dtype=np.int64)
-    t1 = np.empty(cap, dtype=np.int64)
-    t2 = np.empty(cap, dtype=np.int64)
-    for p in range(i1.size):
-        vdx, vdy = det[i2[p], 0] - det[i1[p], 0], det[i2[p], 1] - det[i1[p], 1]
-        nd = vdx * vdx + vdy * vdy
-        for j1 in range(m):
-            for j2 in range(m):
-                if j1 == j2:
-                    continue
-                vpx, vpy = proj[j2, 0] - proj[j1, 0], proj[j2, 1] - proj[j1, 1]
-                dot = vdx * vpx + vdy * vpy
-                npp = vpx * vpx + vpy * vpy
-                if nd <= 9.0 * npp and npp <= 9.0 * nd and dot > 0.0 and 2.0 * dot * dot >= nd * npp:
-                    s1[ns], s2[ns], t1[ns], t2[ns] = i1[p], i2[p], idx[j1], idx[j2]
-                    ns += 1
-    psi = np.empty(2 * ns)
-    C = np.empty((2 * ns, 3))
-    keep = np.zeros(2 * ns, dtype=np.bool_)
-    psq = np.empty(2 * ns)
-    for r in range(2):
-        for k in range(ns):
-            q = r * ns + k
-            psi[q], ok = _solve(rays[s1[k]], rays[s2[k]], L[t1[k]], L[t2[k]], 1.0 - 2.0 * r, C[q])
-            d = (psi[q] / sigma_yaw) ** 2
-            for c in range(3):
-                d += ((C[q, c] - C0[c]) / sigma_pos[c]) ** 2
-            psq[q] = d
-            keep[q] = ok and d <= max_prior_sq
+    s1, s2, t1, t2 = _similar_pairs(det, i1, i2, idx, proj)
+    psi, C, psq, keep = _solve_samples(rays, L, s1, s2, t1, t2, C0, sigma_pos, sigma_yaw, max_prior_sq)
     sel = np.flatnonzero(keep)
     S = sel.size
     R = np.empty((S, 3, 3))
     t = np.empty((S, 3))
-    uv = np.empty((S, m, 2))
+    uv = np.empty((S, idx.size, 2))
     prior_sq = psq[sel]
     explained = np.zeros(S, dtype=np.int64)
     misfit = np.zeros(S)
     for q in range(S):
-        c, sn = np.cos(psi[sel[q]]), np.sin(psi[sel[q]])
-        for a in range(3):  # R = R0 Rz(psi)^T
-            R[q, a, 0] = R0[a, 0] * c - R0[a, 1] * sn
-            R[q, a, 1] = R0[a, 0] * sn + R0[a, 1] * c
-            R[q, a, 2] = R0[a, 2]
-        for a in range(3):
-            t[q, a] = -(R[q, a, 0] * C[sel[q], 0] + R[q, a, 1] * C[sel[q], 1] + R[q, a, 2] * C[sel[q], 2])
-        for j in range(m):
-            X = L[idx[j]]
-            x = R[q, 0, 0] * X[0] + R[q, 0, 1] * X[1] + R[q, 0, 2] * X[2] + t[q, 0]
-            y = R[q, 1, 0] * X[0] + R[q, 1, 1] * X[1] + R[q, 1, 2] * X[2] + t[q, 1]
-            z = R[q, 2, 0] * X[0] + R[q, 2, 1] * X[1] + R[q, 2, 2] * X[2] + t[q, 2]
-            if z > MIN_DEPTH:
-                uv[q, j, 0] = (K[0, 0] * x + K[0, 1] * y) / z + K[0, 2]
-                uv[q, j, 1] = K[1, 1] * y / z + K[1, 2]
-            else:
-                uv[q, j, 0] = np.nan
-                uv[q, j, 1] = np.nan
-        for i in range(n):
-            best = gate_sq
-            for j in range(m):
-                du = det[i, 0] - uv[q, j, 0]
-                dv = det[i, 1] - uv[q, j, 1]
-                d2 = du * du + dv * dv
-                if d2 < best:  # False for NaN
-                    best = d2
-            misfit[q] += best
-            if best < gate_sq:
-                explained[q] += 1
+        _upright_pose(R0, psi[sel[q]], C[sel[q]], R[q], t[q])
+        _project_candidates(K, R[q], t[q], L, idx, uv[q])
+        explained[q], misfit[q] = _explain(det, uv[q], gate_sq)
     return R, t, uv, prior_sq, explained, misfit

@@ -88,18 +88,18 @@ def _brute_votes(ux: np.ndarray, uy: np.ndarray, cnt: np.ndarray) -> np.ndarray:
 
 
 def test_neighbour_votes_count_the_3x3_neighbourhood_on_the_grid_and_by_search(rng):
-    from localization.associate.hypothesis_kernels import _MAX_GRID, _neighbour_votes
+    from localization.associate.hypothesis_kernels import MAX_GRID, neighbour_votes
 
     cells = np.unique(rng.integers(-6, 7, size=(60, 2)), axis=0)  # sorted by x, then y
     cnt = rng.integers(1, 5, size=cells.shape[0])
     ux, uy = cells[:, 0].copy(), cells[:, 1].copy()
-    np.testing.assert_array_equal(_neighbour_votes(ux, uy, cnt), _brute_votes(ux, uy, cnt))
+    np.testing.assert_array_equal(neighbour_votes(ux, uy, cnt), _brute_votes(ux, uy, cnt))
     # one cell far away makes the dense grid too large: the binary search gives the same counts
-    far = np.vstack([cells, [[10 * _MAX_GRID, 0]]])
+    far = np.vstack([cells, [[10 * MAX_GRID, 0]]])
     cnt_far = np.append(cnt, 3)
     ux, uy = far[:, 0].copy(), far[:, 1].copy()
-    assert (ux.max() - ux.min() + 3) * (uy.max() - uy.min() + 3) > _MAX_GRID
-    np.testing.assert_array_equal(_neighbour_votes(ux, uy, cnt_far), _brute_votes(ux, uy, cnt_far))
+    assert (ux.max() - ux.min() + 3) * (uy.max() - uy.min() + 3) > MAX_GRID
+    np.testing.assert_array_equal(neighbour_votes(ux, uy, cnt_far), _brute_votes(ux, uy, cnt_far))
 
 
 def test_shift_votes_find_a_planted_image_shift(rng):

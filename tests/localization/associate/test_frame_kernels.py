@@ -34,7 +34,7 @@ def test_candidates_are_the_projections_in_front_and_near_the_image(rng):
 
 
 def _assign_numpy(det, model, gate_px):
-    """``associate.assign`` as numpy code (before the compiled costs)."""
+    """:func:`localization.associate.paper.assign` as plain numpy code (no compiled costs)."""
     out = np.full(det.shape[0], -1, dtype=np.int64)
     d2 = np.sum((det[:, None, :] - model[None, :, :]) ** 2, axis=2)
     d2 = np.where(np.isfinite(d2), d2, 1e12)
@@ -61,7 +61,7 @@ def test_assign_is_the_minimum_cost_assignment_of_the_numpy_code(rng):
 
 
 def _upright_numpy(det, idx, uv, prior_sq, explained, misfit, gate_px, min_pairs, keep, n_distinct):
-    """``associate._upright_hypotheses``' selection as numpy code (before ``upright_starts``)."""
+    """:func:`upright_starts`' selection as plain numpy code."""
     order = np.lexsort((prior_sq, misfit, -explained))
     order = order[explained[order] >= min_pairs][:keep]
     out, seen = [], set()
@@ -107,7 +107,7 @@ def test_upright_starts_are_the_distinct_assignments_of_the_best_poses(rng):
 
 
 def _translations_numpy(det, L, K, T, anchors, prior_centre, sigma, max_sq, gate_px, need, limit):
-    """``ambiguity.translation_hypotheses``' candidates as numpy code (before the kernel)."""
+    """:func:`localization.associate.ambiguity.translation_hypotheses`' candidates as plain numpy code."""
     from localization.associate.hypothesis_kernels import translation_scores
 
     t = np.round((L[None, :, :] - L[anchors][:, None, :]).reshape(-1, 3), 3)

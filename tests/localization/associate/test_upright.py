@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from localization.associate.assign_kernels import assign_many
-from localization.associate.hypotheses import spread_anchor_pairs as _anchor_pairs
+from localization.associate.hypotheses import spread_anchor_pairs
 from localization.associate.paper import assign
 from localization.associate.upright import upright_two_point
 from localization.geometry.camera import PAPER_K
@@ -150,11 +150,11 @@ def test_batched_geometry_matches_the_scalar_functions(rng):
 def test_anchor_pairs_avoid_outlying_clutter(rng):
     cluster = rng.uniform(500, 700, size=(10, 2))
     det = np.vstack([cluster, [[5.0, 5.0], [1270.0, 710.0], [1270.0, 5.0]]])
-    pairs = _anchor_pairs(det)
+    pairs = spread_anchor_pairs(det)
     assert pairs.shape == (6, 2)
     assert np.all(pairs < 10)
-    assert _anchor_pairs(det[:1]).shape == (0, 2)
-    assert sorted(tuple(sorted(p)) for p in _anchor_pairs(det[:3]).tolist()) == [(0, 1), (0, 2), (1, 2)]
+    assert spread_anchor_pairs(det[:1]).shape == (0, 2)
+    assert sorted(tuple(sorted(p)) for p in spread_anchor_pairs(det[:3]).tolist()) == [(0, 1), (0, 2), (1, 2)]
 
 
 def test_anchor_pairs_add_the_likeliest_detections(rng):
@@ -162,12 +162,14 @@ def test_anchor_pairs_add_the_likeliest_detections(rng):
     (each pair once); without, or with at most four detections, nothing changes."""
     det = np.vstack([rng.uniform(150, 250, size=(14, 2)), [[430, 407], [811, 413], [773, 273], [507, 270]]])
     log_odds = np.concatenate([np.full(14, -1.0), [4.0, 4.0, 3.0, 1.0]])
-    plain = _anchor_pairs(det)
+    plain = spread_anchor_pairs(det)
     assert np.all(plain < 14)  # the dense part is the clutter
-    pairs = _anchor_pairs(det, log_odds=log_odds)
+    pairs = spread_anchor_pairs(det, log_odds=log_odds)
     np.testing.assert_array_equal(pairs[: len(plain)], plain)
     assert sorted(tuple(sorted(p)) for p in pairs[len(plain):].tolist()) == [
         (14, 15), (14, 16), (14, 17), (15, 16), (15, 17), (16, 17)]
-    both = _anchor_pairs(det[10:], log_odds=log_odds[10:])  # anchors shared with the top four
+    both = spread_anchor_pairs(det[10:], log_odds=log_odds[10:])  # anchors shared with the top four
     assert len({tuple(sorted(p)) for p in both.tolist()}) == len(both)
-    np.testing.assert_array_equal(_anchor_pairs(det[:4], log_odds=log_odds[:4]), _anchor_pairs(det[:4]))
+    np.testing.assert_array_equal(
+        spread_anchor_pairs(det[:4], log_odds=log_odds[:4]), spread_anchor_pairs(det[:4])
+    )
