@@ -96,7 +96,12 @@ def test_imports_point_down() -> None:
 
 @pytest.mark.parametrize(
     ("module", "expected"),
-    [("localization.associate.robust", 3), ("localization.pose.covariance", 2), ("uav_struct_env.sim.camera", 11), ("uav_struct_env", 13)],
+    [
+        ("localization.associate.robust", 3),
+        ("localization.pose.covariance", 2),
+        ("uav_struct_env.sim.camera", 11),
+        ("uav_struct_env", 13),
+    ],
 )
 def test_layer_of(module: str, expected: int) -> None:
     assert layer_of(module) == expected
