@@ -255,4 +255,9 @@ def load_ppo(path: str | Path, observation_space: Any, action_space: Any, *, dev
             f"{str(path)!r} holds pickled entries {unknown} that cannot be read safely; "
             "load it with stable_baselines3.PPO.load only if you trust its source"
         )
-    return PPO.load(path, device=device, custom_objects={k: replacements[k] for k in pickled})
+    try:
+        return PPO.load(path, device=device, custom_objects={k: replacements[k] for k in pickled})
+    except Exception as err:  # a tampered or truncated weights file: torch's or SB3's own error
+        first = " ".join(str(err).split())[:200]
+        raise ValueError(f"{str(path)!r} is not a readable stable-baselines3 model: {type(err).__name__}: "
+                         f"{first}") from None
