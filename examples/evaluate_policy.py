@@ -555,9 +555,19 @@ if __name__ == "__main__":
         check_options(args)
     except INPUT_ERRORS as err:
         sys.exit(refuse("evaluate_policy.py", err))
-    try:
+    from uav_struct_env.outputs import OutputBusyError, lock_output
+    from uav_struct_env.processes import interrupted_status, stop_on_sigterm
+
+    stop_on_sigterm()  # SIGTERM ends the run as Ctrl-C does
+    try:  # a second evaluation writing the same --plot / --json-out at the same time is refused
+        for target in (args["plot"], args["json_out"]):
+            if target:
+                lock_output(target, what="output file")
         main(**args)
-    except UsageError as err:  # the model folder, read before the first episode
+    except KeyboardInterrupt:
+        print("evaluate_policy.py: interrupted; nothing written", file=sys.stderr)
+        sys.exit(interrupted_status())
+    except (UsageError, OutputBusyError) as err:  # the model folder, or another run's output
         sys.exit(refuse("evaluate_policy.py", err))
     except OSError as err:  # e.g. the disk filled up
         sys.exit(refuse("evaluate_policy.py", err, status=1))

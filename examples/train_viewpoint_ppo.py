@@ -54,6 +54,7 @@ from pathlib import Path
 from typing import Any
 
 from uav_struct_env.outputs import (
+    OutputBusyError,
     atomic_path,
     atomic_write_json,
     atomic_write_text,
@@ -669,7 +670,9 @@ def _run(argv: list[str] | None = None) -> int:
         return refuse(prog, err)
     try:
         summary = main(**options)
-    except OSError as err:  # e.g. the disk filled up, or another run took --out meanwhile
+    except OutputBusyError as err:  # another run took --out since the check
+        return refuse(prog, err)
+    except OSError as err:  # e.g. the disk filled up
         return refuse(prog, err, status=1)
     if summary["interrupted"] is not None:
         out = summary["options"]["out"]
