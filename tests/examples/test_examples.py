@@ -62,7 +62,8 @@ def test_train_writes_model_normalization_logs_and_checkpoints(trained):
     steps = sorted(d.name for d in (out / "checkpoints").glob("step_*"))
     assert steps == ["step_000000128", "step_000000256"]
     for d in steps:  # model folders the evaluator reads without unpickling
-        assert {f.name for f in (out / "checkpoints" / d).iterdir()} == {"model.zip", "normalization.npz"}
+        assert {f.name for f in (out / "checkpoints" / d).iterdir()} == {
+            "model.zip", "normalization.npz", "vecnormalize.pkl", "resume.npz"}
     rows = [json.loads(line) for line in (out / "progress.jsonl").read_text().splitlines()]
     assert [r["agent_steps"] for r in rows] == [128, 256]  # two rollouts of 32 steps x 4 slots
     assert rows[-1]["agent_steps"] >= 256 and rows[-1]["episode_return_mean"] is not None
