@@ -49,7 +49,6 @@ import sys
 import threading
 import time
 import warnings
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -286,14 +285,15 @@ class _StopRequest:
                 signal.signal(sig, self._note)
 
 
-@dataclass
 class _Snapshot:
-    """The training state at a rollout boundary: what a resumed run restores."""
+    """The training state at a rollout boundary: what a resumed run restores.
 
-    steps: int
-    obs_rms: Any
-    ret_rms: Any
-    rng: Any
+    (Plain classes here: the tests load this script without registering it as a module, which
+    ``dataclasses`` needs.)
+    """
+
+    def __init__(self, steps: int, obs_rms: Any, ret_rms: Any, rng: Any) -> None:
+        self.steps, self.obs_rms, self.ret_rms, self.rng = steps, obs_rms, ret_rms, rng
 
 
 def _snapshot(model, vec) -> _Snapshot:
@@ -352,14 +352,13 @@ def _reseed(model, vec, seed: int, n_envs: int, rollout: int) -> None:
     model._last_episode_starts = np.ones((model.env.num_envs,), dtype=bool)
 
 
-@dataclass
 class _RunState:
     """What the callbacks share with :func:`main`: the stop request and the last boundary."""
 
-    stop: _StopRequest
-    saved: int
-    snapshot: _Snapshot | None = None
-    stopped: bool = False
+    def __init__(self, stop: _StopRequest, saved: int) -> None:
+        self.stop, self.saved = stop, saved
+        self.snapshot: _Snapshot | None = None
+        self.stopped = False
 
 
 class _Boundaries:
