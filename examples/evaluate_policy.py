@@ -92,6 +92,18 @@ DEFAULTS: dict[str, Any] = {
 }
 
 
+def _check_shapes(norm, space, path: Path) -> None:
+    """Raise ValueError unless every normalization entry has its observation key's shape."""
+    if norm is None:
+        return
+    for key, mean in norm.mean.items():
+        sub = space.spaces.get(key) if hasattr(space, "spaces") else None
+        if sub is None or tuple(mean.shape) != tuple(sub.shape):
+            want = None if sub is None else tuple(sub.shape)
+            raise ValueError(f"{str(path)!r}: entry {key!r} has shape {tuple(mean.shape)}, the "
+                             f"observation {want}")
+
+
 class PpoPolicy:
     """A saved SB3 PPO model plus its observation normalization, read without unpickling.
 
@@ -108,6 +120,7 @@ class PpoPolicy:
         try:
             self.model = load_ppo(d / "model.zip", env.observation_space(agent), env.action_space(agent))
             self.norm = load_normalization(stats) if stats.exists() else None
+            _check_shapes(self.norm, env.observation_space(agent), stats)
         except (ValueError, OSError) as err:  # not a model folder of train_viewpoint_ppo.py
             raise UsageError(f"--model {str(d)!r}: {err}") from None
         if self.norm is None and pickled.exists():
@@ -542,9 +555,19 @@ if __name__ == "__main__":
         check_options(args)
     except INPUT_ERRORS as err:
         sys.exit(refuse("evaluate_policy.py", err))
-    try:
+    from uav_struct_env.outputs import OutputBusyError, lock_output
+    from uav_struct_env.processes import interrupted_status, stop_on_sigterm
+
+    stop_on_sigterm()  # SIGTERM ends the run as Ctrl-C does
+    try:  # a second evaluation writing the same --plot / --json-out at the same time is refused
+        for target in (args["plot"], args["json_out"]):
+            if target:
+                lock_output(target, what="output file")
         main(**args)
-    except UsageError as err:  # the model folder, read before the first episode
+    except KeyboardInterrupt:
+        print("evaluate_policy.py: interrupted; nothing written", file=sys.stderr)
+        sys.exit(interrupted_status())
+    except (UsageError, OutputBusyError) as err:  # the model folder, or another run's output
         sys.exit(refuse("evaluate_policy.py", err))
     except OSError as err:  # e.g. the disk filled up
         sys.exit(refuse("evaluate_policy.py", err, status=1))

@@ -23,18 +23,44 @@ final-step localization, also on the progress bar and in TensorBoard), ``checkpo
 (model folders every ``--checkpoint-every`` agent-steps, for ``evaluate_policy.py
 --checkpoints``' learning curve) and ``tb/`` under ``--out`` only (every option is checked, and
 ``--out`` too, before training starts).
+
+Ctrl-C (SIGINT) or SIGTERM stops a run at the next env step: it is saved at its last rollout
+boundary (``model.zip``, a checkpoint, ``train.json`` with the steps done and ``interrupted``)
+and the script exits with one line, status 130 (SIGINT) or 143 (SIGTERM).
+``--resume RUN`` continues such a run from its last checkpoint with the same seed stream: every
+rollout starts from env resets seeded from ``(--seed, rollout index)``, and a checkpoint holds
+the weights, the optimizer, the normalization statistics and the random generators' states, so
+the resumed run reaches the uninterrupted run's weights (to float rounding; tests/examples).
+``--overwrite`` removes the earlier run's files (checkpoints and TensorBoard logs included)
+before training; a second run into an ``--out`` that a running one is writing is refused.
+
+    .venv/bin/python examples/train_viewpoint_ppo.py --resume runs/ppo_state
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import copy
 import json
+import os
+import signal
 import sys
+import threading
 import time
 import warnings
+from pathlib import Path
 from typing import Any
 
-from uav_struct_env.outputs import atomic_path, atomic_write_json, prepare_output_dir, real_folder
+from uav_struct_env.outputs import (
+    OutputBusyError,
+    atomic_path,
+    atomic_write_json,
+    atomic_write_text,
+    prepare_output_dir,
+    real_folder,
+    remove_earlier_run,
+)
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_option, check_output_dir, refuse
 
 DEFAULTS: dict[str, Any] = {
@@ -57,7 +83,11 @@ DEFAULTS: dict[str, Any] = {
     "seed": 0,
     "progress_bar": True,
     "bootstrap_time_limit": True,
+    "resume": None,
 }
+
+#: The options ``--resume`` takes from its command line; every other one is the run's recorded one.
+RESUME_OPTIONS = ("total_timesteps", "minutes", "progress_bar")
 
 
 def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles: int | None = None,
@@ -118,10 +148,12 @@ class _Progress:
     one, with SB3's logging; None for the first); ``train.json``'s ``collect_s`` and
     ``update_total_s`` are their sums (a last update after the last rollout is not in them). The deterministic
     evaluation of saved checkpoints is ``evaluate_policy.py --checkpoints`` (docs/training.md
-    explains why the two returns differ).
+    explains why the two returns differ). With ``minutes`` the bar's total (and so its ETA) is
+    the step count the run is projected to reach when its time is up, if that comes first.
+    ``start`` is the step count a resumed run starts from (``progress.jsonl`` is then extended).
     """
 
-    def __new__(cls, total: int, minutes: float | None, show: bool, log_path):
+    def __new__(cls, total: int, minutes: float | None, show: bool, log_path, start: int = 0):
         from collections import deque
 
         import numpy as np
@@ -133,12 +165,13 @@ class _Progress:
                 self.collect_s, self.update_total_s = 0.0, 0.0
                 self.rollout_t0, self.update_t0, self.update_s = self.t0, None, None
                 self.finals: deque = deque(maxlen=100)
-                log_path.unlink(missing_ok=True)  # a new file, never through a planted link
+                if not start:
+                    log_path.unlink(missing_ok=True)  # a new file, never through a planted link
                 self.bar = None
                 if show:
                     from tqdm.auto import tqdm
 
-                    self.bar = tqdm(total=total, unit="step", smoothing=0.05)
+                    self.bar = tqdm(total=total, initial=start, unit="step", smoothing=0.05)
 
             def _on_step(self) -> bool:
                 for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
@@ -178,10 +211,20 @@ class _Progress:
                         self.logger.record(f"uav/{key}", value)
                 with open(log_path, "a") as log:
                     log.write(json.dumps(row) + "\n")
+                self._bar_total(now)
                 if self.bar is not None and row["episode_return_mean"] is not None:
                     self.bar.set_postfix(ret=f"{row['episode_return_mean']:.2f}",
                                          loc=f"{row['final_success_rate'] or 0:.2f}",
                                          err=f"{row['final_translation_median_m'] or float('nan'):.2f}m")
+
+            def _bar_total(self, now: float) -> None:
+                """With ``minutes``: the bar ends where the time budget is projected to end the run."""
+                if self.bar is None or minutes is None or self.num_timesteps <= start:
+                    return
+                rate = (self.num_timesteps - start) / max(now - self.t0, 1e-9)
+                left_s = max(60.0 * minutes - (now - self.t0), 0.0)
+                self.bar.total = int(min(total, self.num_timesteps + rate * left_s))
+                self.bar.refresh()
 
             def _on_training_end(self) -> None:
                 if self.bar is not None:
@@ -190,29 +233,164 @@ class _Progress:
         return Progress()
 
 
-class _Checkpoints:
-    """Every ``every`` agent-steps a model folder ``checkpoints/step_<steps>/``.
+#: Test hook: with ``UAV_STRUCT_TRAIN_INTERRUPT_AT=N`` in the environment the trainer sends itself
+#: SIGINT once ``N`` agent-steps are done (an interruption at a known step, for the resume test).
+INTERRUPT_HOOK = "UAV_STRUCT_TRAIN_INTERRUPT_AT"
 
-    It holds ``model.zip`` and ``normalization.npz``, which ``evaluate_policy.py`` reads without
-    unpickling (SB3's own checkpoints would pickle the normalization).
+#: What a run writes into ``--out``; ``--overwrite`` removes these first.
+TRAIN_FILES = ("train.json", "model.zip", "normalization.npz", "vecnormalize.pkl", "progress.jsonl",
+               "checkpoints", "tb")
+
+
+class _StopRequest:
+    """SIGINT and SIGTERM during training, noted and acted on at the next env step.
+
+    The handler only records the signal: the rollout stops at the next step
+    (:class:`_Boundaries`), so the run is saved at its last rollout boundary without a traceback.
+    Env subprocesses are started with SIGINT ignored and SIGTERM at its default
+    (:meth:`children`): a terminal's Ctrl-C, sent to the whole process group, reaches only the
+    trainer. The previous handlers come back on exit.
     """
 
-    def __new__(cls, every: int, folder, vec_normalize):
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> _StopRequest:
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, self._note)
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+    def _note(self, signum: int, frame: Any) -> None:
+        if self.signum is None:
+            self.signum = signum
+
+    @contextlib.contextmanager
+    def children(self):
+        """Around the start of env subprocesses (forked: they inherit the handlers)."""
+        if not self._previous:
+            yield
+            return
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        try:
+            yield
+        finally:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, self._note)
+
+
+class _Snapshot:
+    """The training state at a rollout boundary: what a resumed run restores.
+
+    (Plain classes here: the tests load this script without registering it as a module, which
+    ``dataclasses`` needs.)
+    """
+
+    def __init__(self, steps: int, obs_rms: Any, ret_rms: Any, rng: Any) -> None:
+        self.steps, self.obs_rms, self.ret_rms, self.rng = steps, obs_rms, ret_rms, rng
+
+
+def _snapshot(model, vec) -> _Snapshot:
+    from uav_struct_env.training.policy_files import capture_rng_state
+
+    return _Snapshot(int(model.num_timesteps), copy.deepcopy(vec.obs_rms), copy.deepcopy(vec.ret_rms),
+                     capture_rng_state())
+
+
+def _rewind(model, vec, snap: _Snapshot) -> None:
+    """Back to the boundary ``snap`` after a rollout stopped part-way (its steps are dropped)."""
+    model.num_timesteps = snap.steps
+    vec.obs_rms, vec.ret_rms = copy.deepcopy(snap.obs_rms), copy.deepcopy(snap.ret_rms)
+
+
+def _save_checkpoint(folder, model, vec, snap: _Snapshot) -> None:
+    """``step_<steps>/``: ``model.zip`` and ``normalization.npz`` (what ``evaluate_policy.py`` reads)
+    and ``vecnormalize.pkl`` and ``resume.npz`` (what ``--resume`` reads; written last).
+
+    ``model`` and ``vec`` must be at the boundary ``snap``.
+    """
+    from uav_struct_env.training.policy_files import (
+        NORMALIZATION_FILE,
+        RESUME_FILE,
+        save_normalization,
+        save_rng_state,
+    )
+
+    target = real_folder(folder / f"step_{snap.steps:09d}")
+    with atomic_path(target / "model.zip") as tmp:
+        model.save(tmp)
+    save_normalization(vec, target / NORMALIZATION_FILE)
+    with atomic_path(target / "vecnormalize.pkl") as tmp:
+        vec.save(str(tmp))
+    save_rng_state(snap.rng, target / RESUME_FILE)
+
+
+def rollout_seed(seed: int, rollout: int) -> int:
+    """The env seed of rollout ``rollout`` of a run seeded ``seed`` (copy ``k`` gets it ``+ k``)."""
+    import numpy as np
+
+    return int(np.random.SeedSequence([seed, rollout]).generate_state(1)[0] % 2**31)
+
+
+def _reseed(model, vec, seed: int, n_envs: int, rollout: int) -> None:
+    """Start every env copy on a fresh episode seeded from the run's seed stream.
+
+    Each rollout starts from such seeded resets (an episode cut at a rollout's end is bootstrapped
+    from its value, as SB3 does for every rollout's last step): a run resumed at a rollout
+    boundary then sees the very episodes the uninterrupted run saw.
+    """
+    import numpy as np
+
+    _seed_copies(vec.venv.venv.venv, rollout_seed(seed, rollout), n_envs)  # VecNormalize/VecMonitor/SB3
+    model._last_obs = model.env.reset()
+    model._last_episode_starts = np.ones((model.env.num_envs,), dtype=bool)
+
+
+class _RunState:
+    """What the callbacks share with :func:`main`: the stop request and the last boundary."""
+
+    def __init__(self, stop: _StopRequest, saved: int) -> None:
+        self.stop, self.saved = stop, saved
+        self.snapshot: _Snapshot | None = None
+        self.stopped = False
+
+
+class _Boundaries:
+    """At every rollout start: snapshot the state, checkpoint every ``every`` agent-steps, reseed.
+
+    On every step: stop the rollout when a signal arrived (or the :data:`INTERRUPT_HOOK` step is
+    reached, which sends SIGINT). Checkpoints are model folders ``checkpoints/step_<steps>/``
+    (:func:`_save_checkpoint`), for ``evaluate_policy.py --checkpoints``' learning curve and for
+    ``--resume``.
+    """
+
+    def __new__(cls, opt: dict[str, Any], folder, vec, state: _RunState):
         from stable_baselines3.common.callbacks import BaseCallback
 
-        from uav_struct_env.training.policy_files import NORMALIZATION_FILE, save_normalization
+        every, hook = opt["checkpoint_every"], os.environ.get(INTERRUPT_HOOK)
 
-        class Checkpoints(BaseCallback):
+        class Boundaries(BaseCallback):
+            def _on_rollout_start(self) -> None:
+                snap = state.snapshot = _snapshot(self.model, vec)
+                if snap.steps // every > state.saved:
+                    state.saved = snap.steps // every
+                    _save_checkpoint(folder, self.model, vec, snap)
+                per_rollout = self.model.n_steps * self.model.env.num_envs
+                _reseed(self.model, vec, opt["seed"], opt["n_envs"], snap.steps // per_rollout)
+
             def _on_step(self) -> bool:
-                if self.num_timesteps // every > getattr(self, "saved", 0):
-                    self.saved = self.num_timesteps // every
-                    target = real_folder(folder / f"step_{self.num_timesteps:09d}")
-                    with atomic_path(target / "model.zip") as tmp:
-                        self.model.save(tmp)
-                    save_normalization(vec_normalize, target / NORMALIZATION_FILE)
-                return True
+                if hook and state.stop.signum is None and self.num_timesteps >= int(hook):
+                    os.kill(os.getpid(), signal.SIGINT)
+                state.stopped = state.stop.signum is not None
+                return not state.stopped
 
-        return Checkpoints()
+        return Boundaries()
 
 
 def check_options(opt: dict[str, Any]) -> None:
@@ -241,83 +419,184 @@ def check_options(opt: dict[str, Any]) -> None:
         raise ConfigError(f"bootstrap_time_limit must be True or False, got {opt['bootstrap_time_limit']!r}")
     for k, width in enumerate(opt["net_arch"]):
         check_option(f"net_arch[{k}]", width, 1, integer=True)
-    check_output_dir(opt["out"], overwrite=opt["overwrite"])
+    if opt["resume"] is not None:
+        last_checkpoint(opt["resume"])
+    check_output_dir(opt["out"], overwrite=opt["overwrite"] or opt["resume"] is not None)
 
 
-def main(**kwargs: Any) -> dict[str, Any]:
-    """Train and save; returns the ``train.json`` summary. Keys: see :data:`DEFAULTS`."""
+def last_checkpoint(run: str | Path) -> Path:
+    """The run's last checkpoint that ``--resume`` can continue from.
+
+    Raises:
+        UsageError: ``run`` is not a run folder of this script, or holds no such checkpoint.
+    """
+    from uav_struct_env.errors import UsageError
+    from uav_struct_env.training.policy_files import RESUME_FILE
+
+    run = Path(run)
+    if not (run / "train.json").is_file():
+        raise UsageError(f"--resume {str(run)!r} is not a run folder of train_viewpoint_ppo.py "
+                         "(no train.json)")
+    done = sorted(d for d in run.glob("checkpoints/step_*") if (d / RESUME_FILE).is_file())
+    if not done:
+        raise UsageError(f"--resume {str(run)!r} holds no checkpoint to continue from; start it "
+                         "again with --overwrite")
+    return done[-1]
+
+
+def resolve_options(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """All options of a run: ``kwargs`` over :data:`DEFAULTS`, or with ``resume`` the run's recorded
+    options (its ``train.json``) with only :data:`RESUME_OPTIONS` taken from ``kwargs``.
+
+    Raises:
+        ValueError: an unknown option, or a ``resume`` folder whose ``train.json`` is unreadable.
+    """
     unknown = sorted(set(kwargs) - set(DEFAULTS) - {"max_cycles"})
     if unknown:
         raise ValueError(f"unknown options {unknown}; valid: {sorted(DEFAULTS)}")
-    opt = {**DEFAULTS, "max_cycles": None, **kwargs}
+    base = {**DEFAULTS, "max_cycles": None}
+    if kwargs.get("resume") is None:
+        return {**base, **kwargs}
+    run = Path(kwargs["resume"])
+    try:
+        recorded = json.loads((run / "train.json").read_text())["options"]
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise ValueError(f"--resume {str(run)!r}: cannot read its train.json: {err}") from None
+    recorded = {k: v for k, v in recorded.items() if k in base}
+    recorded["net_arch"] = tuple(recorded.get("net_arch", base["net_arch"]))
+    given = {k: v for k, v in kwargs.items() if k in RESUME_OPTIONS}
+    return {**base, **recorded, **given, "out": str(run), "resume": str(run), "overwrite": False}
+
+
+def main(**kwargs: Any) -> dict[str, Any]:
+    """Train (or with ``resume`` continue a run) and save; returns the ``train.json`` summary.
+
+    Keys: see :data:`DEFAULTS`. SIGINT or SIGTERM stops the run at the next env step: it is
+    saved at its last rollout boundary (``model.zip``, a checkpoint, ``train.json`` whose
+    ``interrupted`` names the signal) and the summary is returned.
+    """
+    opt = resolve_options(kwargs)
     check_options(opt)
-    import torch
+    # An earlier run in "out" is refused unless overwrite=True (the error names --overwrite).
+    out = prepare_output_dir(opt["out"], overwrite=opt["overwrite"] or opt["resume"] is not None)
+    if opt["overwrite"]:
+        remove_earlier_run(out, TRAIN_FILES)  # the old run's checkpoints and logs too
+    with _StopRequest() as stop:
+        return _train(opt, out, stop)
+
+
+def _build(opt: dict[str, Any], out: Path, stop: _StopRequest):
+    """The vector env and the PPO model: new, or restored from the resumed run's last checkpoint."""
+    import numpy as np
     from stable_baselines3 import PPO
-    from stable_baselines3.common.callbacks import CallbackList
-    from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from uav_struct_env.provenance import software
-    from uav_struct_env.training.policy_files import NORMALIZATION_FILE, save_normalization
+    from uav_struct_env.training.policy_files import RESUME_FILE, load_rng_state, restore_rng_state
 
-    # An earlier run in "out" is refused unless overwrite=True (the error names --overwrite).
-    out = prepare_output_dir(opt["out"], overwrite=opt["overwrite"])
+    with stop.children():
+        vec = make_vec_env(opt["config"], opt["n_envs"], opt["num_cpus"], opt["seed"],
+                           opt["max_cycles"], opt["bootstrap_time_limit"])
+    tb = str(real_folder(out / "tb"))  # written inside --out, never through a link
+    if opt["resume"] is not None:
+        ckpt = last_checkpoint(opt["resume"])
+        vec = VecNormalize.load(str(ckpt / "vecnormalize.pkl"), vec)
+        model = PPO.load(ckpt / "model.zip", env=vec, device="cpu", tensorboard_log=tb)
+        restore_rng_state(load_rng_state(ckpt / RESUME_FILE))  # after PPO.load drew its init weights
+        model._last_obs = np.zeros(1)  # learn() must not reset: each rollout starts with seeded resets
+        return vec, model
+    vec = VecNormalize(vec, norm_obs=True, norm_reward=True, gamma=opt["gamma"])
+    model = PPO("MultiInputPolicy", vec, n_steps=opt["n_steps"], batch_size=opt["batch_size"],
+                n_epochs=opt["n_epochs"], learning_rate=opt["learning_rate"], gamma=opt["gamma"],
+                ent_coef=opt["ent_coef"], tensorboard_log=tb, device="cpu", verbose=0,
+                policy_kwargs={"net_arch": list(opt["net_arch"]), "log_std_init": opt["log_std_init"]})
+    return vec, model
+
+
+def _train(opt: dict[str, Any], out: Path, stop: _StopRequest) -> dict[str, Any]:
+    import torch
+    from stable_baselines3.common.callbacks import CallbackList
+    from stable_baselines3.common.utils import set_random_seed
+
+    from uav_struct_env.provenance import software
+
     set_random_seed(opt["seed"])
     warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
     torch.set_num_threads(1)
-    vec = make_vec_env(
-        opt["config"], opt["n_envs"], opt["num_cpus"], opt["seed"], opt["max_cycles"],
-        opt["bootstrap_time_limit"],
-    )
-    vec = VecNormalize(vec, norm_obs=True, norm_reward=True, gamma=opt["gamma"])
-    policy = "MultiInputPolicy"
-    model = PPO(
-        policy,
-        vec,
-        n_steps=opt["n_steps"],
-        batch_size=opt["batch_size"],
-        n_epochs=opt["n_epochs"],
-        learning_rate=opt["learning_rate"],
-        gamma=opt["gamma"],
-        ent_coef=opt["ent_coef"],
-        policy_kwargs={"net_arch": list(opt["net_arch"]), "log_std_init": opt["log_std_init"]},
-        tensorboard_log=str(real_folder(out / "tb")),  # written inside --out, never through a link
-        device="cpu",
-        verbose=0,
-    )
-    n = vec.num_envs
-    progress = _Progress(opt["total_timesteps"], opt["minutes"], opt["progress_bar"],
-                         out / "progress.jsonl")
-    callbacks = CallbackList(
-        [_Checkpoints(opt["checkpoint_every"], real_folder(out / "checkpoints"), vec), progress]
-    )
     made_by = software()  # the code as training starts (the checkout may change while it runs)
+    vec, model = _build(opt, out, stop)
+    start = int(model.num_timesteps) if opt["resume"] is not None else 0
+    if start:
+        _trim_progress(out / "progress.jsonl", start)
+    else:
+        _write_summary(out, opt, made_by, {"agent_steps": 0, "finished": False})
+    state = _RunState(stop, saved=start // opt["checkpoint_every"])
+    progress = _Progress(opt["total_timesteps"], opt["minutes"], opt["progress_bar"],
+                         out / "progress.jsonl", start=start)
+    folder = real_folder(out / "checkpoints")
     t0 = time.perf_counter()
-    model.learn(total_timesteps=opt["total_timesteps"], callback=callbacks, tb_log_name="ppo")
+    model.learn(total_timesteps=opt["total_timesteps"] - start, tb_log_name="ppo",
+                callback=CallbackList([_Boundaries(opt, folder, vec, state), progress]),
+                reset_num_timesteps=start == 0)
     wall = time.perf_counter() - t0
+    final = _final_boundary(model, vec, state)
+    if final.steps > start and not (folder / f"step_{final.steps:09d}").exists():
+        _save_checkpoint(folder, model, vec, final)
+    _save_final(out, model, vec)
+    vec.close()
+    steps = final.steps - start
+    record = {
+        "agent_steps": final.steps,
+        "wall_clock_s": wall,
+        "agent_steps_per_s": steps / wall if wall > 0 else float("nan"),
+        # where the wall clock went: collecting rollouts (the env processes stepping, the policy
+        # acting) and the gradient updates between them (the env processes idle)
+        "collect_s": progress.collect_s,
+        "update_total_s": progress.update_total_s,
+        "n_agent_slots": vec.num_envs,
+        "finished": stop.signum is None,
+        "resumed_from": start or None,
+        "interrupted": None if stop.signum is None else signal.Signals(stop.signum).name,
+    }
+    return _write_summary(out, opt, made_by, record)
+
+
+def _final_boundary(model, vec, state: _RunState) -> _Snapshot:
+    """The run's end state: its last boundary if a rollout stopped part-way, else the state now."""
+    if state.snapshot is not None and not model.rollout_buffer.full:
+        _rewind(model, vec, state.snapshot)
+        return state.snapshot
+    return _snapshot(model, vec)
+
+
+def _save_final(out: Path, model, vec) -> None:
+    from uav_struct_env.training.policy_files import NORMALIZATION_FILE, save_normalization
+
     with atomic_path(out / "model.zip") as tmp:
         model.save(tmp)
     with atomic_path(out / "vecnormalize.pkl") as tmp:
         vec.save(str(tmp))
     save_normalization(vec, out / NORMALIZATION_FILE)
-    vec.close()
+
+
+def _write_summary(out: Path, opt: dict[str, Any], made_by: Any, record: dict[str, Any]) -> dict[str, Any]:
+    """``train.json``: the options, ``record`` and, so that a later change of the named config
+    does not change this record, what ``--config`` named when this run trained and the code."""
     summary = {
         "options": {k: (list(v) if isinstance(v, tuple) else v) for k, v in opt.items()},
-        "agent_steps": int(model.num_timesteps),
-        "wall_clock_s": wall,
-        "agent_steps_per_s": model.num_timesteps / wall if wall > 0 else float("nan"),
-        # where the wall clock went: collecting rollouts (the env processes stepping, the policy
-        # acting) and the gradient updates between them (the env processes idle)
-        "collect_s": progress.collect_s,
-        "update_total_s": progress.update_total_s,
-        "n_agent_slots": n,
-        # what --config named when this run trained (env overrides and wrapper options), and the
-        # code that trained it: a later change of the named config does not change this record
+        **record,
         "train_config": _resolved_config(opt["config"], opt["max_cycles"]),
         "software": made_by,
     }
     atomic_write_json(out / "train.json", summary, indent=2)
     return summary
+
+
+def _trim_progress(path: Path, steps: int) -> None:
+    """Keep the ``progress.jsonl`` rows up to ``steps`` (a resumed run writes the later ones again)."""
+    if not path.is_file():
+        return
+    rows = [line for line in path.read_text().splitlines() if json.loads(line)["agent_steps"] <= steps]
+    atomic_write_text(path, "".join(f"{line}\n" for line in rows))
 
 
 def _resolved_config(name: str, max_cycles: int | None) -> dict[str, Any]:
@@ -368,19 +647,40 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
                    help="bootstrap the value where an episode ends at its time limit (SB3's "
                         "TimeLimit.truncated; on by default); --no-bootstrap-time-limit: the limit "
                         "counts as a terminal state, as before 2026-11-27")
+    p.add_argument("--resume", default=None, metavar="RUN",
+                   help="continue the run in folder RUN from its last checkpoint, with its recorded "
+                   "options and seed stream (only --total-timesteps, --minutes and "
+                   "--no-progress-bar may be given anew)")
     args = vars(p.parse_args(argv))
     args["net_arch"] = tuple(args["net_arch"])
+    if args["resume"] is not None:  # the run's own options, but for those given here
+        return {"resume": args["resume"],
+                **{k: args[k] for k in RESUME_OPTIONS if args[k] != DEFAULTS[k]}}
     return args
 
 
-if __name__ == "__main__":
-    options = _parse()
+def _run(argv: list[str] | None = None) -> int:
+    """The command: train, print the summary; one line and status 130/143 after SIGINT/SIGTERM."""
+    prog = "train_viewpoint_ppo.py"
+    options = _parse(argv)
     try:  # every input before any work
-        check_options({**DEFAULTS, "max_cycles": None, **options})
+        check_options(resolve_options(options))
     except INPUT_ERRORS as err:
-        sys.exit(refuse("train_viewpoint_ppo.py", err))
+        return refuse(prog, err)
     try:
         summary = main(**options)
+    except OutputBusyError as err:  # another run took --out since the check
+        return refuse(prog, err)
     except OSError as err:  # e.g. the disk filled up
-        sys.exit(refuse("train_viewpoint_ppo.py", err, status=1))
+        return refuse(prog, err, status=1)
+    if summary["interrupted"] is not None:
+        out = summary["options"]["out"]
+        print(f"{prog}: interrupted by {summary['interrupted']} after {summary['agent_steps']} "
+              f"agent-steps; saved in {out} (continue with --resume {out})", file=sys.stderr)
+        return 128 + signal.Signals[summary["interrupted"]].value
     print(json.dumps({k: v for k, v in summary.items() if k != "options"}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_run())

@@ -102,3 +102,65 @@ def test_staged_folders_replace_folders(tmp_path):
         (staged.stage / "images" / "new.png").write_text("new")
         (staged.stage / "labels.json").write_text("{}")
     assert os.listdir(tmp_path / "images") == ["new.png"]
+
+
+_HOLD = """
+import sys, time
+from uav_struct_env.outputs import prepare_output_dir
+prepare_output_dir(sys.argv[1])
+print("locked", flush=True)
+time.sleep(30)
+"""
+
+
+def test_a_second_run_into_the_same_folder_is_refused_naming_the_other(tmp_path):
+    import subprocess
+    import sys
+
+    from uav_struct_env.outputs import OutputBusyError, lock_path
+
+    out = tmp_path / "run"
+    holder = subprocess.Popen([sys.executable, "-c", _HOLD, str(out)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        with pytest.raises(OutputBusyError, match=rf"being written by another run \(pid {holder.pid}"):
+            prepare_output_dir(out, overwrite=True)
+        with pytest.raises(OutputBusyError, match="being written by another run"):
+            StagedOutput(out, overwrite=True, owned=("results.json",))
+    finally:
+        holder.kill()
+        holder.wait()
+    assert lock_path(out).exists()  # left by the killed run: taken over
+    assert prepare_output_dir(out) == out
+
+
+def test_a_dead_runs_lock_is_taken_over_with_a_line(tmp_path, capsys):
+    from uav_struct_env.outputs import lock_output, lock_path
+
+    out = tmp_path / "run"
+    lock_path(out).write_text("999999999 uav-struct study --out run\n")
+    lock = lock_output(out)
+    assert "left by pid 999999999: uav-struct study --out run, which is no longer running" in (
+        capsys.readouterr().err)
+    lock.release()
+    assert not lock_path(out).exists()
+
+
+def test_the_commit_checks_again_and_replaces_nothing_another_run_wrote(tmp_path):
+    out = tmp_path / "run"
+    with pytest.raises(OutputExistsError, match="already holds results"):
+        with StagedOutput(out, owned=("results.json",)) as staged:
+            (staged.stage / "results.json").write_text("mine")
+            (out / "results.json").write_text("theirs")  # written meanwhile, bypassing the lock
+    assert (out / "results.json").read_text() == "theirs"
+    assert [p.name for p in out.iterdir()] == ["results.json"]
+
+
+def test_remove_earlier_run_removes_only_the_named_entries(tmp_path):
+    from uav_struct_env.outputs import remove_earlier_run
+
+    (tmp_path / "checkpoints" / "step_1").mkdir(parents=True)
+    (tmp_path / "tb").mkdir()
+    (tmp_path / "notes.txt").write_text("mine")
+    assert remove_earlier_run(tmp_path, ("checkpoints", "tb", "train.json")) == ["checkpoints", "tb"]
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]

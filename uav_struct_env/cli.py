@@ -17,12 +17,20 @@ commands:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Dispatch to a sub-command; returns the exit status (130 after Ctrl-C, without a traceback)."""
+    """Dispatch to a sub-command; returns the exit status.
+
+    Ctrl-C and SIGTERM end a command the same way, in one line without a traceback (workers
+    stopped, nothing half-written): exit status 130 after Ctrl-C, 143 after SIGTERM.
+    """
+    from uav_struct_env.processes import interrupted_status, stop_on_sigterm
+
+    stop_on_sigterm()
     try:
-        return _dispatch(argv)
+        status = _dispatch(argv)
     except KeyboardInterrupt:
         print("uav-struct: interrupted", file=sys.stderr)
-        return 130
+        return interrupted_status()
+    return interrupted_status() if status == 130 else status
 
 
 def _dispatch(argv: Sequence[str] | None) -> int:

@@ -14,34 +14,50 @@ generator, the training scripts, the examples) goes through this module:
   folder and moves them into place only when the command has finished (with Ctrl-C held off for
   the few milliseconds the moves take): an interrupted run leaves the previous set or the new
   one, never a mix, and files of the previous run that the new one does not write are removed.
+* :func:`lock_output` keeps two runs out of one output folder (or file): a second command that
+  would write there while the first is still running is refused (:class:`OutputBusyError`, whose
+  message names the folder and the other run) instead of replacing the first's results.
+  :func:`prepare_output_dir` and :class:`StagedOutput` take the lock; :class:`StagedOutput`
+  checks it again just before its commit replaces files.
+* :func:`remove_earlier_run` is what ``--overwrite`` means for folders a library fills by
+  itself (checkpoints, TensorBoard logs): the old run's files go before the new run writes.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import fcntl
 import fnmatch
 import json
 import os
 import shutil
 import signal
+import sys
 import tempfile
 import threading
+import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 __all__ = [
     "PARTIAL_PREFIX",
+    "OutputBusyError",
     "OutputExistsError",
+    "OutputLock",
     "StagedOutput",
     "atomic_path",
     "atomic_write_bytes",
     "atomic_write_json",
     "atomic_write_text",
     "check_no_earlier_run",
+    "lock_output",
+    "lock_path",
     "open_append",
     "prepare_output_dir",
     "real_folder",
+    "remove_earlier_run",
     "save_figure",
 ]
 
@@ -67,8 +83,170 @@ def _leftover(name: str) -> bool:
     return name.startswith(PARTIAL_PREFIX)
 
 
+class OutputBusyError(OutputExistsError):
+    """Another running command is writing into the same output folder (or file)."""
+
+
+#: Name of the lock inside an output folder whose parent this user cannot write into.
+INSIDE_LOCK = ".uav-struct.lock"
+
+#: Seconds to wait for a new lock holder to write its pid into the lock file.
+_HOLDER_WAIT_S = 0.5
+
+
+def lock_path(target: str | Path) -> Path:
+    """The lock file of the output folder or file ``target``: ``.<name>.lock`` beside it.
+
+    The path is resolved first, so two spellings of one folder (a symlink, ``./``) share a lock.
+    When the parent is not writable and ``target`` is an existing folder, the lock lies inside it
+    (:data:`INSIDE_LOCK`, which no check counts as an earlier run's file).
+    """
+    real = Path(os.path.realpath(target))
+    if real.is_dir() and not os.access(real.parent, os.W_OK | os.X_OK):
+        return real / INSIDE_LOCK
+    return real.parent / f".{real.name}.lock"
+
+
+def _describe_holder(text: str) -> str:
+    pid, _, command = text.strip().partition(" ")
+    if not pid.isdigit():
+        return "a run that has not said which yet"
+    return f"pid {pid}: {command}" if command else f"pid {pid}"
+
+
+def _read_holder(fd: int) -> str:
+    """The lock file's ``"<pid> <command>"`` line (waits briefly for a holder that just took it)."""
+    deadline = time.monotonic() + _HOLDER_WAIT_S
+    while True:
+        text = os.pread(fd, 4096, 0).decode("utf-8", "replace")
+        if text.strip() or time.monotonic() > deadline:
+            return text
+        time.sleep(0.02)
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    try:
+        return os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False))
+    except FileNotFoundError:
+        return False
+
+
+class OutputLock:
+    """The lock of one output folder or file, held by this process (see :func:`lock_output`).
+
+    It is an ``flock`` on :func:`lock_path`'s file, which holds ``"<pid> <command line>"``:
+    the kernel releases an ``flock`` when its holder dies however it dies, so a lock left by a
+    killed run is taken over safely (its file remains, naming a pid that no longer runs, and the
+    run that takes it over says so in one line). Re-entrant within the process: every
+    :func:`lock_output` of the same target is matched by one :meth:`release`.
+    """
+
+    def __init__(self, target: Path, path: Path, fd: int) -> None:
+        self.target, self.path, self._fd, self._count = target, path, fd, 1
+
+    def check(self) -> None:
+        """Raise :class:`OutputBusyError` unless this process still holds the lock."""
+        if self._fd is None or not _same_file(self._fd, self.path):
+            raise OutputBusyError(
+                f"the lock {str(self.path)!r} of {str(self.target)!r} was removed or replaced while "
+                "this run worked (another run may be writing there); nothing replaced"
+            )
+
+    def release(self) -> None:
+        """Release one hold; the last removes the lock file (before unlocking it) and closes it."""
+        self._count -= 1
+        if self._count > 0 or self._fd is None:
+            return
+        _HELD.pop(str(self.path), None)
+        if _same_file(self._fd, self.path):
+            with contextlib.suppress(OSError):
+                os.unlink(self.path)
+        os.close(self._fd)
+        self._fd = None
+
+
+_HELD: dict[str, OutputLock] = {}
+
+
+def lock_output(target: str | Path, *, what: str = "output folder") -> OutputLock:
+    """Lock the output folder or file ``target`` for this process (created parents included).
+
+    Raises:
+        OutputBusyError: another live process holds the lock (the message names ``target``,
+            the other run's pid and command, and what to do).
+    """
+    target = Path(target)
+    path = lock_path(target)
+    held = _HELD.get(str(path))
+    if held is not None:
+        held._count += 1
+        return held
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = _take(target, path, what)
+    lock = _HELD[str(path)] = OutputLock(target, path, fd)
+    return lock
+
+
+def _take(target: Path, path: Path, what: str) -> int:
+    """Open, ``flock`` and stamp the lock file; retried when a releasing run unlinked it."""
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, _FILE_MODE)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _describe_holder(_read_holder(fd))
+            os.close(fd)
+            raise OutputBusyError(
+                f"{what} {str(target)!r} is being written by another run ({holder}); wait for it "
+                "to finish or choose another output folder"
+            ) from None
+        if not _same_file(fd, path):  # unlinked by its last holder after we opened it
+            os.close(fd)
+            continue
+        _note_stale(target, os.pread(fd, 4096, 0).decode("utf-8", "replace"))
+        stamp = f"{os.getpid()} {' '.join(sys.argv)[:300]}\n".encode()
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, stamp, 0)
+        return fd
+
+
+def _note_stale(target: Path, text: str) -> None:
+    pid = text.strip().partition(" ")[0]
+    if pid.isdigit() and int(pid) != os.getpid():
+        print(f"note: taking over the lock of {str(target)!r} left by {_describe_holder(text)}, "
+              "which is no longer running", file=sys.stderr)
+
+
+def _busy_elsewhere(out: Path) -> str | None:
+    """The other run holding ``out``'s lock (described), or None."""
+    path = lock_path(out)
+    if str(path) in _HELD:
+        return None
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return _describe_holder(_read_holder(fd))
+    finally:
+        os.close(fd)  # also drops the shared lock taken just to look
+    return None
+
+
+@atexit.register
+def _release_all() -> None:
+    for lock in list(_HELD.values()):
+        lock._count = 1
+        lock.release()
+
+
 def prepare_output_dir(path: str | Path, *, overwrite: bool = False, flag: str = "--overwrite") -> Path:
-    """Create the output folder ``path``, or check that writing into it loses nothing.
+    """Lock and create the output folder ``path``, or check that writing into it loses nothing.
+
+    The lock (:func:`lock_output`) is held until the process exits or the caller calls
+    ``lock_output(path).release()`` twice (once for that call, once for this one).
 
     Args:
         path: the folder (created with its parents if missing).
@@ -79,11 +257,21 @@ def prepare_output_dir(path: str | Path, *, overwrite: bool = False, flag: str =
         ``path`` as a :class:`~pathlib.Path`.
 
     Raises:
+        OutputBusyError: another running command is writing into ``path``.
         OutputExistsError: ``path`` holds files (other than leftovers of an interrupted run of
             this module) and ``overwrite`` is false.
         NotADirectoryError: ``path`` exists and is not a folder.
     """
     out = Path(path)
+    lock = lock_output(out)
+    try:
+        return _prepare(out, overwrite, flag)
+    except BaseException:
+        lock.release()
+        raise
+
+
+def _prepare(out: Path, overwrite: bool, flag: str) -> Path:
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(f"output folder {str(out)!r} exists and is not a folder")
     out.mkdir(parents=True, exist_ok=True)
@@ -94,17 +282,43 @@ def prepare_output_dir(path: str | Path, *, overwrite: bool = False, flag: str =
 
 
 def check_no_earlier_run(out: Path, flag: str = "--overwrite") -> None:
-    """Raise :class:`OutputExistsError` if the existing folder ``out`` holds files of a run.
+    """Raise if the existing folder ``out`` holds files of a run, or another run is writing there.
 
-    Leftovers of an interrupted run of this module do not count.
+    Leftovers of an interrupted run of this module, and the lock, do not count.
+
+    Raises:
+        OutputBusyError: another live process holds ``out``'s lock (checked first, whatever
+            ``out`` holds).
+        OutputExistsError: ``out`` holds files (the message names ``flag``).
     """
-    entries = sorted(e for e in os.listdir(out) if not _leftover(e))
+    holder = _busy_elsewhere(Path(out))
+    if holder is not None:
+        raise OutputBusyError(
+            f"output folder {str(out)!r} is being written by another run ({holder}); wait for it "
+            "to finish or choose another output folder"
+        )
+    entries = sorted(e for e in os.listdir(out) if not _leftover(e) and e != INSIDE_LOCK)
     if entries:
         shown = ", ".join(entries[:4]) + (f" and {len(entries) - 4} more" if len(entries) > 4 else "")
         raise OutputExistsError(
             f"{str(out)!r} already holds results ({shown}); pass {flag} to replace them, "
             "or choose another output folder"
         )
+
+
+def remove_earlier_run(out: str | Path, names: Sequence[str]) -> list[str]:
+    """Remove the top-level entries of ``out`` matching the glob patterns ``names``; returns them.
+
+    ``--overwrite`` of a command whose libraries write folders by themselves (SB3 checkpoints,
+    TensorBoard logs): the earlier run's files must go before the new run writes, or the two
+    runs' files would sit side by side and be read as one run.
+    """
+    out = Path(out)
+    gone = sorted(e for e in os.listdir(out)
+                  if not _leftover(e) and e != INSIDE_LOCK and any(fnmatch.fnmatch(e, g) for g in names))
+    for name in gone:
+        _remove(out / name)
+    return gone
 
 
 def _remove_leftovers(out: Path) -> None:
@@ -253,25 +467,49 @@ class StagedOutput:
                  flag: str = "--overwrite") -> None:
         if not owned:
             raise ValueError("owned must name at least the marker file")
-        self.out = prepare_output_dir(out, overwrite=overwrite, flag=flag)
-        self.owned = tuple(owned)
-        self.stage = Path(tempfile.mkdtemp(prefix=f"{PARTIAL_PREFIX}{os.getpid()}-", dir=self.out))
+        self.lock = lock_output(out)
+        try:
+            self.out = _prepare(Path(out), overwrite, flag)
+            self.stage = Path(tempfile.mkdtemp(prefix=f"{PARTIAL_PREFIX}{os.getpid()}-", dir=self.out))
+        except BaseException:
+            self.lock.release()
+            raise
+        self.owned, self.overwrite, self.flag = tuple(owned), overwrite, flag
 
     def __enter__(self) -> StagedOutput:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.commit()
-        else:
-            self.discard()
+        try:
+            if exc_type is None:
+                try:
+                    self.commit()
+                except BaseException:
+                    self.discard()
+                    raise
+            else:
+                self.discard()
+        finally:
+            self.lock.release()
 
     def discard(self) -> None:
         """Remove the staging folder and everything in it."""
         shutil.rmtree(self.stage, ignore_errors=True)
 
     def commit(self) -> list[Path]:
-        """Move the staged set into :attr:`out`; returns the final paths."""
+        """Move the staged set into :attr:`out`; returns the final paths.
+
+        Checks first that this run still holds the lock and, without ``overwrite``, that the
+        folder still holds no run's files: whatever happened meanwhile, nothing is replaced
+        that this run was not allowed to replace.
+
+        Raises:
+            OutputBusyError / OutputExistsError: the lock was lost, or another run's files
+                appeared in :attr:`out` while this one worked (the staged files stay staged).
+        """
+        self.lock.check()
+        if not self.overwrite:
+            check_no_earlier_run(self.out, self.flag)
         names = sorted(os.listdir(self.stage))
         marker = self.owned[0]
         names.sort(key=lambda n: fnmatch.fnmatch(n, marker))  # the marker last

@@ -11,6 +11,11 @@ memory, ``kill -9``). Here:
 * each worker talks to the parent over its own pipe, and the parent waits on the pipes and on
   the processes' sentinels together: a worker that ends while it still has work raises
   :class:`WorkerDied`, naming the worker, its pid and its exit code or signal.
+
+:func:`stop_on_sigterm` makes SIGTERM (``kill``, a scheduler, a closing terminal session) end a
+command as Ctrl-C does: it raises :class:`Terminated`, a ``KeyboardInterrupt``, so the same
+clean-up runs (workers stopped, staged files removed, one line), and :func:`interrupted_status`
+gives the exit status a shell expects: 130 after SIGINT, 143 (128 + 15) after SIGTERM.
 """
 
 from __future__ import annotations
@@ -24,13 +29,45 @@ from collections.abc import Callable, Iterator, Sequence
 from multiprocessing.connection import wait
 from typing import Any, TypeVar
 
-__all__ = ["WorkerDied", "describe_exit", "run_chunks"]
+__all__ = [
+    "Terminated",
+    "WorkerDied",
+    "describe_exit",
+    "interrupted_status",
+    "run_chunks",
+    "stop_on_sigterm",
+]
 
 T = TypeVar("T")
 R = TypeVar("R")
 
 #: Seconds a terminated worker gets before it is killed.
 _TERMINATE_GRACE_S = 2.0
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM asked this process to stop (handled like Ctrl-C; see :func:`stop_on_sigterm`)."""
+
+
+#: Signals received by :func:`_raise_terminated`, in order.
+_RECEIVED: list[int] = []
+
+
+def _raise_terminated(signum: int, frame: Any) -> None:
+    _RECEIVED.append(signum)
+    signal.signal(signum, signal.SIG_IGN)  # the clean-up runs once, not again on a second signal
+    raise Terminated(f"stopped by {signal.Signals(signum).name}")
+
+
+def stop_on_sigterm() -> None:
+    """From now on SIGTERM raises :class:`Terminated` in the main thread (a no-op elsewhere)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _raise_terminated)
+
+
+def interrupted_status() -> int:
+    """The exit status of an interrupted command: 143 after SIGTERM, else 130 (Ctrl-C)."""
+    return 128 + signal.SIGTERM if _RECEIVED else 130
 
 
 class WorkerDied(RuntimeError):
@@ -160,6 +197,8 @@ def run_chunks(
                         busy[i] = _dispatch(conn, queue)
                 if busy[i] and not procs[i].is_alive():
                     procs[i].join()
+                    if _RECEIVED:  # a SIGTERM to the process group reached the worker first
+                        raise Terminated("stopped by SIGTERM")
                     raise WorkerDied(procs[i].name, procs[i].pid, procs[i].exitcode, done, total)
         clean = True
     finally:

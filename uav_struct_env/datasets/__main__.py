@@ -6,7 +6,7 @@ import sys
 
 from uav_struct_env.datasets.landmarks import ACTIVITIES, CAMERAS, IMAGINGS, DatasetConfig, generate
 from uav_struct_env.outputs import OutputExistsError
-from uav_struct_env.processes import WorkerDied
+from uav_struct_env.processes import WorkerDied, interrupted_status, stop_on_sigterm
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_option, check_output_dir, refuse
 
 
@@ -39,6 +39,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="replace a dataset already in out_dir (otherwise such a folder is refused)")
     args = ap.parse_args(argv)
     prog = ap.prog
+    stop_on_sigterm()  # SIGTERM ends the run as Ctrl-C does (exit 143)
     try:
         config = DatasetConfig(n_layouts=args.layouts, views_per_layout=args.views, seed=args.seed,
                                scale=args.scale, renderer=args.renderer, site=args.site,
@@ -59,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
         return refuse(prog, f"{err}; nothing written to {args.out_dir}", status=1)
     except KeyboardInterrupt:
         print(f"{prog}: interrupted; nothing written to {args.out_dir}", file=sys.stderr)
-        return 130
+        return interrupted_status()
     print(f"wrote {path}")
     return 0
 

@@ -12,6 +12,9 @@ runs whatever code it names, so a model folder from someone else must not be unp
 
 ``vecnormalize.pkl`` is read only when the caller asks for it by name
 (``examples/evaluate_policy.py --trust-pickle``, for folders written before ``normalization.npz``).
+
+A checkpoint the trainer can resume from also holds ``resume.npz`` (:func:`save_rng_state`): the
+random-number generators' states (torch, NumPy, Python) at the rollout boundary it was taken at.
 """
 
 from __future__ import annotations
@@ -28,15 +31,84 @@ from uav_struct_env.outputs import atomic_path
 
 __all__ = [
     "NORMALIZATION_FILE",
+    "RESUME_FILE",
     "ObsNormalizer",
+    "RngState",
+    "capture_rng_state",
     "load_normalization",
     "load_ppo",
+    "load_rng_state",
     "recorded_config",
+    "restore_rng_state",
     "save_normalization",
+    "save_rng_state",
 ]
 
 #: File name of the observation statistics beside ``model.zip``.
 NORMALIZATION_FILE = "normalization.npz"
+
+#: File name of a resumable checkpoint's random-number generator states.
+RESUME_FILE = "resume.npz"
+
+
+@dataclass(frozen=True)
+class RngState:
+    """The global random-number generators training draws from: torch, NumPy and Python's."""
+
+    torch: np.ndarray
+    numpy: tuple
+    python: tuple
+
+
+def capture_rng_state() -> RngState:
+    """The current states of torch's, NumPy's and Python's global generators."""
+    import random
+
+    import torch
+
+    return RngState(torch.get_rng_state().numpy().copy(), np.random.get_state(), random.getstate())
+
+
+def restore_rng_state(state: RngState) -> None:
+    """Set torch's, NumPy's and Python's global generators to ``state``."""
+    import random
+
+    import torch
+
+    torch.set_rng_state(torch.from_numpy(state.torch.copy()))
+    np.random.set_state(state.numpy)
+    random.setstate(state.python)
+
+
+def save_rng_state(state: RngState, path: str | Path) -> Path:
+    """Write ``state`` as plain arrays (no pickle), atomically."""
+    name, keys, pos, has_gauss, gauss = state.numpy
+    version, internal, gauss_next = state.python
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        np.savez(tmp, torch=state.torch, numpy_name=np.str_(name), numpy_keys=keys,
+                 numpy_rest=np.array([pos, has_gauss], dtype=np.int64), numpy_gauss=np.float64(gauss),
+                 python_version=np.int64(version), python_internal=np.array(internal, dtype=np.int64),
+                 python_gauss=np.float64(np.nan if gauss_next is None else gauss_next))
+    return path
+
+
+def load_rng_state(path: str | Path) -> RngState:
+    """Read :func:`save_rng_state`'s file (no pickle).
+
+    Raises:
+        ValueError: the file is not such a file.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            pos, has_gauss = (int(v) for v in z["numpy_rest"])
+            numpy_state = (str(z["numpy_name"]), z["numpy_keys"], pos, has_gauss, float(z["numpy_gauss"]))
+            gauss = float(z["python_gauss"])
+            python_state = (int(z["python_version"]), tuple(int(v) for v in z["python_internal"]),
+                            None if np.isnan(gauss) else gauss)
+            return RngState(z["torch"].astype(np.uint8), numpy_state, python_state)
+    except (KeyError, ValueError, OSError) as err:
+        raise ValueError(f"{str(path)!r} is not a resume file of train_viewpoint_ppo.py: {err}") from None
 
 
 @dataclass(frozen=True, eq=False)
@@ -183,4 +255,9 @@ def load_ppo(path: str | Path, observation_space: Any, action_space: Any, *, dev
             f"{str(path)!r} holds pickled entries {unknown} that cannot be read safely; "
             "load it with stable_baselines3.PPO.load only if you trust its source"
         )
-    return PPO.load(path, device=device, custom_objects={k: replacements[k] for k in pickled})
+    try:
+        return PPO.load(path, device=device, custom_objects={k: replacements[k] for k in pickled})
+    except Exception as err:  # a tampered or truncated weights file: torch's or SB3's own error
+        first = " ".join(str(err).split())[:200]
+        raise ValueError(f"{str(path)!r} is not a readable stable-baselines3 model: {type(err).__name__}: "
+                         f"{first}") from None
