@@ -28,8 +28,8 @@ from numba import njit
 
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.stack import FrameLocalization
-from uav_struct_env.wrappers.base import ParallelWrapper
-from uav_struct_env.wrappers.localize import LocalizePoses, find_wrapper
+from uav_struct_env.wrappers.base import ParallelWrapper, find_wrapper
+from uav_struct_env.wrappers.localize import LocalizePoses
 
 __all__ = ["LAYOUT_COMPONENTS", "PRIVILEGED_LAYOUT_COMPONENTS", "LayoutObservation"]
 
