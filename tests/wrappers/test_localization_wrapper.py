@@ -123,7 +123,9 @@ def test_reward_terms_sum_to_the_reward_including_crashes(reward):
 def test_seeded_resets_repeat_with_a_noisy_detector():
     def rollout():
         env = make_train_env("state", **SMALL)
-        env = LocalizationWrapper(env.unwrapped, association="paper", drop_image=True, miss_rate=0.2, false_positives=1.0)
+        env = LocalizationWrapper(
+            env.unwrapped, association="paper", drop_image=True, miss_rate=0.2, false_positives=1.0
+        )
         out = []
         obs, _ = env.reset(seed=5)
         out.append(obs["uav_1"]["pose"].copy())
@@ -311,14 +313,15 @@ def test_the_wrapper_chain_is_walked_through_env_alone():
         "column_tops", env_overrides={"observe_image": False, **SMALL}, temporal=True, warm_start=True,
     )
     layers = list(iter_chain(wenv))
-    kinds = [type(layer) for layer in layers[:6]]
-    assert kinds == [LocalizationWrapper, RewardWrapper, LayoutObservation, FilterPoses, WarmStart, LocalizePoses]
+    kinds = [LocalizationWrapper, RewardWrapper, LayoutObservation, FilterPoses, WarmStart, LocalizePoses]
+    assert [type(layer) for layer in layers[:6]] == kinds
     assert layers[-1] is wenv.unwrapped and len(layers) == 7
     assert find_wrapper(wenv, LocalizePoses) is wenv.poses and wenv.poses.env is wenv.unwrapped
     assert find_wrapper(wenv, FilterPoses).tracks is wenv.tracks
     assert find_wrapper(wenv.poses, FilterPoses) is None
     plain = make_localization_env("column_tops", env_overrides={"observe_image": False, **SMALL})
-    assert [type(layer) for layer in iter_chain(plain)][1:4] == [RewardWrapper, LayoutObservation, LocalizePoses]
+    kinds = [RewardWrapper, LayoutObservation, LocalizePoses]
+    assert [type(layer) for layer in iter_chain(plain)][1:4] == kinds
     assert plain.tracks is None and not plain.warm_start
 
 
