@@ -35,8 +35,8 @@ class TrainConfig:
     """An environment configuration for training: env overrides + wrapper options.
 
     ``wrapper`` holds :class:`~uav_struct_env.wrappers.LocalizationWrapper` keyword arguments; a
-    ``"mode"`` key (the former name of ``"association"``, in configurations written before the
-    rename) is read as ``"association"`` with a FutureWarning, for one release.
+    ``"mode"`` key (the former name of ``"association"``, as saved configurations may hold it) is
+    read as ``"association"`` with a FutureWarning, for one release.
     """
 
     name: str
