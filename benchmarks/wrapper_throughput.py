@@ -96,11 +96,11 @@ def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: in
 
     train = TRAIN_CONFIGS[config]
     if mode is not None:  # the association mode of the named config, overridden
-        train = train.replace(wrapper={"mode": mode})
+        train = train.replace(wrapper={"association": mode})
     if warm_start is not None:  # the config's warm start, overridden
         train = train.replace(wrapper={"warm_start": warm_start})
     wrapped = make_train_env(train, **({"observe_image": True} if render_images else {}))
-    bare = wrapped.env
+    bare = wrapped.unwrapped
     actions = record(wrapped, model, episodes, seed) if model is not None else policy
     measure(wrapped, 40, actions, seed)  # build the world, warm caches
     bare_rate, _, bare_cpu = measure(bare, steps, actions, seed)
@@ -108,7 +108,7 @@ def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: in
     wrapped.close()
     out = {
         "config": config,
-        "mode": train.wrapper["mode"],
+        "mode": train.wrapper["association"],
         "warm_start": train.wrapper.get("warm_start", False),
         "policy": f"trained ({model}, {episodes} episodes replayed)" if model is not None else policy,
         "observe_image": wrapped.unwrapped.config.observe_image,

@@ -435,7 +435,7 @@ def env_config(opt: dict[str, Any]) -> tuple[Any, str]:
         else:
             config, source = TRAIN_CONFIGS["state"], "state"
     if opt["association"] is not None:
-        config = config.replace(wrapper={"mode": opt["association"]})
+        config = config.replace(wrapper={"association": opt["association"]})
         source += f"; --association {opt['association']}"
     if opt["max_cycles"] is not None:
         config = config.replace(env={"max_cycles": opt["max_cycles"]})
@@ -460,7 +460,7 @@ def main(**kwargs: Any) -> dict[str, Any]:
     from uav_struct_env.wrappers import make_train_env
 
     config, source = env_config({**opt, "policies": policies})
-    print(f"environment: {config.name}, {config.wrapper.get('mode')} association ({source})")
+    print(f"environment: {config.name}, {config.wrapper.get('association')} association ({source})")
     env = make_train_env(config)
     seeds = [opt["seed"] + i for i in range(opt["episodes"])]
     if opt["checkpoints"]:

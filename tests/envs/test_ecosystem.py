@@ -5,23 +5,18 @@ import pytest
 
 import uav_struct_env
 from uav_struct_env.errors import ResetNeededError
-from uav_struct_env.wrappers import make_train_env
+from uav_struct_env.wrappers import iter_chain, make_train_env
 
 
 def test_space_dicts_match_the_per_agent_spaces_on_the_env_and_every_wrapper():
     wrapped = make_train_env("state")
     try:
-        layer = wrapped
         seen = 0
-        while True:
+        for layer in iter_chain(wrapped):
             for a in layer.possible_agents:
                 assert layer.observation_spaces[a] == layer.observation_space(a)
                 assert layer.action_spaces[a] == layer.action_space(a)
             seen += 1
-            inner = getattr(layer, "_chain", None) or getattr(layer, "env", None)
-            if inner is None or inner is layer:
-                break
-            layer = inner
         # The wrapper's dict has the keys it adds (pose ...), not the bare env's.
         assert "pose" in wrapped.observation_spaces["uav_0"].spaces
         assert "pose" not in wrapped.unwrapped.observation_spaces["uav_0"].spaces

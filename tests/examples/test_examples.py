@@ -56,7 +56,7 @@ def test_train_writes_model_normalization_logs_and_checkpoints(trained):
     from uav_struct_env.wrappers import TRAIN_CONFIGS
 
     assert record["train_config"]["wrapper"] == TRAIN_CONFIGS["state"].wrapper
-    assert record["train_config"]["wrapper"]["mode"] == "robust"  # the training default
+    assert record["train_config"]["wrapper"]["association"] == "robust"  # the training default
     assert record["train_config"]["env"]["max_cycles"] == 8  # --max-cycles, as trained
     assert record["software"]["package"] == "uav-struct-env" and record["software"]["version"]
     steps = sorted(d.name for d in (out / "checkpoints").glob("step_*"))
@@ -135,23 +135,24 @@ def test_evaluate_builds_the_env_each_run_recorded(example, trained, tmp_path):
     old = tmp_path / "trained_with_paper"
     shutil.copytree(out, old)
     record = json.loads((old / "train.json").read_text())
-    record["train_config"]["wrapper"]["mode"] = "paper"
+    record["train_config"]["wrapper"]["association"] = "paper"
     (old / "train.json").write_text(json.dumps(record))
     summary = evaluate.main(model=str(old), policies=("ppo",), episodes=1)
-    assert summary["env_config"]["wrapper"]["mode"] == "paper"
+    assert summary["env_config"]["wrapper"]["association"] == "paper"
     assert summary["env_config"]["env"]["max_cycles"] == 8  # as trained, not the config's 30
     over = evaluate.main(model=str(old), policies=("ppo",), episodes=1, association="robust", max_cycles=2)
-    assert over["env_config"]["wrapper"]["mode"] == "robust" and over["env_config"]["env"]["max_cycles"] == 2
+    assert over["env_config"]["wrapper"]["association"] == "robust"
+    assert over["env_config"]["env"]["max_cycles"] == 2
     # a checkpoint folder finds its run's train.json two levels up
     step = sorted((old / "checkpoints").glob("step_*"))[0]
     from_step = evaluate.main(model=str(step), policies=("ppo",), episodes=1)
-    assert from_step["env_config"]["wrapper"]["mode"] == "paper"
+    assert from_step["env_config"]["wrapper"]["association"] == "paper"
     with pytest.raises(UsageError, match="trained in different configurations.*evaluate them separately"):
         evaluate.main(model=[str(out), str(old)], policies=("ppo",), episodes=1)
     # both, under one named configuration
     both = evaluate.main(model=[str(out), str(old)], policies=("ppo",), episodes=1, config="state",
                          max_cycles=2)
-    assert both["env_config"]["wrapper"]["mode"] == "robust"
+    assert both["env_config"]["wrapper"]["association"] == "robust"
     with pytest.raises(ConfigError, match="association must be 'paper' or 'robust', got 'best'"):
         evaluate.main(model=str(out), policies=("ppo",), episodes=1, association="best")
     # a run from before the configuration was recorded: the named one as it is now
@@ -162,7 +163,7 @@ def test_evaluate_builds_the_env_each_run_recorded(example, trained, tmp_path):
     assert unrecorded["env_config_source"].startswith("the runs recorded no configuration")
     # with a recorded run, in its configuration, and the source names the run that recorded none
     mixed = evaluate.main(model=[str(out), str(old)], policies=("ppo",), episodes=1, max_cycles=2)
-    assert mixed["env_config"]["wrapper"]["mode"] == "robust"
+    assert mixed["env_config"]["wrapper"]["association"] == "robust"
     assert mixed["env_config_source"] == (f"recorded by the run(s) in train.json; {old} recorded none "
                                           "and are evaluated in it too")
     (old / "train.json").write_text("{not json")
@@ -387,7 +388,7 @@ def test_the_throughput_benchmark_replays_a_trained_policy_the_same_on_bare_and_
     assert again[3]["uav_2"].tolist() == episodes[0][3]["uav_2"].tolist()
     # the same flights on the bare env (no wrapper): the replayed actions, not the observations
     ends = []
-    for env in (wrapped, wrapped.env):
+    for env in (wrapped, wrapped.unwrapped):
         env.reset(seed=5)
         for acts in episodes[0]:
             *_, infos = env.step(acts)

@@ -166,3 +166,25 @@ def test_degraded_gnss_reproduces_and_validates():
         DegradedGnssNoise(jump_sigma=(1.0, 2.0))
     with pytest.raises(ConfigError, match="outage_duration"):
         DegradedGnssNoise(outage_duration=0.0)
+
+
+def test_every_sensor_model_names_the_filter_noise_that_matches_it():
+    from localization.temporal import FilterNoise
+    from uav_struct_env.wrappers.temporal import filter_noise_for
+
+    ins = GnssInsNoise(gnss_bias_tau=60.0)
+    assert ins.filter_noise() == FilterNoise(
+        gnss_white_sigma=ins.gnss_white_sigma, gnss_bias_sigma=ins.gnss_bias_sigma, gnss_bias_tau=60.0,
+        attitude_white_sigma=ins.attitude_white_sigma, attitude_bias_sigma=ins.attitude_bias_sigma,
+    )
+    assert DegradedGnssNoise(base=ins).filter_noise() == ins.filter_noise()  # jumps: the GNSS gate's
+    paper = PaperNoise().filter_noise()
+    assert paper.gnss_bias_sigma == (3.0,) * 3 and paper.gnss_bias_tau == 1.0e6
+    assert paper.attitude_bias_sigma == tuple(math.radians(d) for d in (2.0, 2.0, 5.0))
+    assert paper.gnss_white_sigma == (0.05,) * 3 and paper.attitude_white_sigma == (math.radians(0.05),) * 3
+    none = NoNoise().filter_noise()
+    assert not none.estimate_gnss_bias and not none.estimate_attitude_bias
+    assert none.gnss_bias_sigma == (0.0,) * 3 and none.gnss_white_sigma == (0.05,) * 3
+    for model in (ins, PaperNoise(), NoNoise()):
+        assert filter_noise_for(model) == model.filter_noise()
+    assert filter_noise_for(object()) == FilterNoise()  # a model that names none: the defaults

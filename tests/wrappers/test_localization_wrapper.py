@@ -8,7 +8,16 @@ from localization import Detections
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.wrappers import (
     PRIVILEGED_LAYOUT_COMPONENTS,
+    TRAIN_CONFIGS,
+    FilterPoses,
+    LayoutObservation,
     LocalizationWrapper,
+    LocalizePoses,
+    RewardWrapper,
+    TrainConfig,
+    WarmStart,
+    find_wrapper,
+    iter_chain,
     make_localization_env,
     make_train_env,
 )
@@ -87,7 +96,7 @@ def test_failed_localization_falls_back_to_the_prior():
 @pytest.mark.parametrize("reward", ["error", "uncertainty"])
 def test_reward_terms_sum_to_the_reward_including_crashes(reward):
     env = make_train_env("state", max_cycles=12)
-    env = LocalizationWrapper(env.env, reward=reward, mode="paper", drop_image=True)
+    env = LocalizationWrapper(env.unwrapped, reward=reward, association="paper", drop_image=True)
     env.reset(seed=2)
     seen_crash = False
     while env.agents:
@@ -114,7 +123,9 @@ def test_reward_terms_sum_to_the_reward_including_crashes(reward):
 def test_seeded_resets_repeat_with_a_noisy_detector():
     def rollout():
         env = make_train_env("state", **SMALL)
-        env = LocalizationWrapper(env.env, mode="paper", drop_image=True, miss_rate=0.2, false_positives=1.0)
+        env = LocalizationWrapper(
+            env.unwrapped, association="paper", drop_image=True, miss_rate=0.2, false_positives=1.0
+        )
         out = []
         obs, _ = env.reset(seed=5)
         out.append(obs["uav_1"]["pose"].copy())
@@ -130,7 +141,7 @@ def test_seeded_resets_repeat_with_a_noisy_detector():
 
 def test_robust_mode_and_other_landmark_sets():
     env = make_localization_env(
-        "all", env_overrides={"image_size": (128, 72), **SMALL}, mode="robust", drop_image=True
+        "all", env_overrides={"image_size": (128, 72), **SMALL}, association="robust", drop_image=True
     )
     obs, infos = env.reset(seed=0, options={"viewpoint": 0})
     assert infos["uav_0"]["localization"]["success"]
@@ -147,8 +158,8 @@ def test_clear_errors():
         LocalizationWrapper(env2, landmarks="aruco", detector="learned")
     with pytest.raises(ConfigError, match="landmarks must be one of"):
         LocalizationWrapper(env2, landmarks="roof")
-    with pytest.raises(ConfigError, match="mode must be one of"):
-        LocalizationWrapper(env2, mode="fast")
+    with pytest.raises(ConfigError, match="association must be one of"):
+        LocalizationWrapper(env2, association="fast")
     with pytest.raises(ConfigError, match="reward must be one of"):
         LocalizationWrapper(env2, reward="distance")
     with pytest.raises(ConfigError, match="failure_penalty must be finite and >= 0"):
@@ -280,3 +291,46 @@ def test_layout_centroid_and_spread_are_numpys_bit_for_bit(rng):
         np.testing.assert_array_equal(_centroid_spread(uv, w / 2.0, h / 2.0), want)
     got = _centroid_spread(np.array([[np.nan, 1.0], [2.0, 3.0]]), 64.0, 36.0)
     assert np.isnan(got[0]) and np.isnan(got[2]) and got[1] == np.clip((2.0 - 35.5) / 36.0, -1, 1)
+
+
+def test_mode_is_still_accepted_with_a_future_warning_naming_association():
+    env = uav_struct_env.parallel_env("train", landmark_sets=("column_tops",), **SMALL)
+    with pytest.warns(FutureWarning, match="association="):
+        wenv = LocalizationWrapper(env, mode="paper")
+    assert wenv.association == "paper" and wenv.poses.spec.association == "paper"
+    with pytest.raises(ConfigError, match="association= only"):
+        LocalizationWrapper(env, association="paper", mode="robust")
+    with pytest.warns(FutureWarning, match="'association'"):
+        config = TRAIN_CONFIGS["state"].replace(wrapper={"mode": "paper"})
+    assert config.wrapper["association"] == "paper" and "mode" not in config.wrapper
+    with pytest.warns(FutureWarning, match="'association'"):  # a configuration saved before the rename
+        old = TrainConfig.from_dict({**TRAIN_CONFIGS["state"].as_dict(), "wrapper": {"mode": "paper"}})
+    assert old.wrapper == {"association": "paper"}
+
+
+def test_the_wrapper_chain_is_walked_through_env_alone():
+    wenv = make_localization_env(
+        "column_tops", env_overrides={"observe_image": False, **SMALL}, temporal=True, warm_start=True,
+    )
+    layers = list(iter_chain(wenv))
+    kinds = [LocalizationWrapper, RewardWrapper, LayoutObservation, FilterPoses, WarmStart, LocalizePoses]
+    assert [type(layer) for layer in layers[:6]] == kinds
+    assert layers[-1] is wenv.unwrapped and len(layers) == 7
+    assert find_wrapper(wenv, LocalizePoses) is wenv.poses and wenv.poses.env is wenv.unwrapped
+    assert find_wrapper(wenv, FilterPoses).tracks is wenv.tracks
+    assert find_wrapper(wenv.poses, FilterPoses) is None
+    plain = make_localization_env("column_tops", env_overrides={"observe_image": False, **SMALL})
+    kinds = [RewardWrapper, LayoutObservation, LocalizePoses]
+    assert [type(layer) for layer in iter_chain(plain)][1:4] == kinds
+    assert plain.tracks is None and not plain.warm_start
+
+
+def test_each_one_job_wrapper_needs_a_localize_poses_below():
+    env = uav_struct_env.parallel_env("train", landmark_sets=("column_tops",), **SMALL)
+    for cls in (WarmStart, FilterPoses, LayoutObservation, RewardWrapper):
+        with pytest.raises(ConfigError, match="needs a LocalizePoses wrapper below"):
+            cls(env)
+    poses = LocalizePoses(env, landmarks="column_tops")
+    FilterPoses(poses)
+    with pytest.raises(ConfigError, match="another FilterPoses"):
+        FilterPoses(poses)

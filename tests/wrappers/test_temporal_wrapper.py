@@ -115,14 +115,14 @@ def test_gnss_outage_at_reset_is_a_clear_error():
 
 def test_options_and_errors():
     w = wrapped(filter_noise=FilterNoise(velocity_sigma=1.0))
-    assert w.poses.tracks.noise.velocity_sigma == 1.0
+    assert w.tracks.noise.velocity_sigma == 1.0
     with pytest.raises(ConfigError, match="filter_noise must be"):
         wrapped(filter_noise={"velocity_sigma": 1.0})
     plain = LocalizationWrapper(
         uav_struct_env.parallel_env("paper", observe_image=False, landmark_sets=("all",)), landmarks="all"
     )
     _, infos = plain.reset(seed=0)
-    assert plain.poses.tracks is None and "fix_accepted" not in infos["uav_0"]["localization"]
+    assert plain.tracks is None and "fix_accepted" not in infos["uav_0"]["localization"]
 
 
 def test_parallel_api_conformance():

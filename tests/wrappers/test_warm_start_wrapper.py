@@ -51,7 +51,7 @@ def test_training_configs_warm_start_and_match_the_full_search():
 def test_warm_start_flag_is_checked():
     env = make_localization_env("column_tops", env_overrides={"max_cycles": 4, "observe_image": False})
     with pytest.raises(ConfigError, match="warm_start must be True or False, got 'yes'"):
-        LocalizationWrapper(env.env, warm_start="yes")
+        LocalizationWrapper(env.unwrapped, warm_start="yes")
 
 
 def test_the_warm_start_benchmark_compares_every_warm_frame_with_the_full_search(load_script, capsys):

@@ -9,6 +9,10 @@ dm_control's observables that carry a noise function taking the random state:
   ``gnss`` all NaN means *no fix* (an outage); the environment then observes the last fix
   held and reports ``info["gnss_fix"] = False``. A model must give a fix at reset (``dt == 0``).
 
+A model may also say what noise a pose filter should assume for it: ``filter_noise() ->``
+:class:`localization.temporal.FilterNoise` (every model here does; a model without the method
+gets the filter's defaults, :func:`uav_struct_env.wrappers.temporal.filter_noise_for`).
+
 All randomness comes from the ``numpy.random.Generator`` passed in, in a fixed order, so a seeded
 generator reproduces every reading. Angles are rad; attitudes follow
 :mod:`uav_struct_env.sim.attitude` and the returned angles are wrapped to [-pi, pi).
@@ -28,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from localization.checks import check_number
+from localization.temporal import FilterNoise
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.named import resolve_named
 
@@ -82,6 +87,11 @@ class SensorModel(Protocol):
         ...
 
 
+#: White noise a pose filter assumes for a model that has none (``none``, ``paper``), m / rad.
+_FLOOR_POSITION_M = 0.05
+_FLOOR_ROTATION_RAD = math.radians(0.05)
+
+
 def _wrap(a: NDArray[np.float64]) -> NDArray[np.float64]:
     return (a + np.pi) % (2.0 * np.pi) - np.pi
 
@@ -109,6 +119,17 @@ class NoNoise:
         """The true position and attitude."""
         return np.array(reading.position, dtype=np.float64), _wrap(
             np.array(reading.attitude, dtype=np.float64)
+        )
+
+    def filter_noise(self) -> FilterNoise:
+        """A tiny white-noise floor and no bias states: the readings are the truth."""
+        return FilterNoise(
+            gnss_white_sigma=(_FLOOR_POSITION_M,) * 3,
+            gnss_bias_sigma=(0.0,) * 3,
+            attitude_white_sigma=(_FLOOR_ROTATION_RAD,) * 3,
+            attitude_bias_sigma=(0.0,) * 3,
+            estimate_gnss_bias=False,
+            estimate_attitude_bias=False,
         )
 
 
@@ -168,6 +189,16 @@ class PaperNoise:
         return (
             np.asarray(reading.position, dtype=np.float64) + dp,
             _wrap(np.asarray(reading.attitude, dtype=np.float64) + da),
+        )
+
+    def filter_noise(self) -> FilterNoise:
+        """A bias of the fixed offsets that never decorrelates (one per episode and viewpoint)."""
+        return FilterNoise(
+            gnss_white_sigma=(_FLOOR_POSITION_M,) * 3,
+            gnss_bias_sigma=(self.position_offset,) * 3,
+            gnss_bias_tau=1.0e6,
+            attitude_white_sigma=(_FLOOR_ROTATION_RAD,) * 3,
+            attitude_bias_sigma=(self.roll_offset, self.pitch_offset, self.yaw_offset),
         )
 
 
@@ -248,6 +279,16 @@ class GnssInsNoise:
         """Error multiplier ``m(c)`` at clearance ``c`` m from the structure."""
         c = max(float(clearance), 0.0)
         return 1.0 + self.near_structure_gain * math.exp(-c / self.near_structure_scale)
+
+    def filter_noise(self) -> FilterNoise:
+        """The model's own sigmas and bias time (the multipath factor scales them per fix)."""
+        return FilterNoise(
+            gnss_white_sigma=self.gnss_white_sigma,
+            gnss_bias_sigma=self.gnss_bias_sigma,
+            gnss_bias_tau=self.gnss_bias_tau,
+            attitude_white_sigma=self.attitude_white_sigma,
+            attitude_bias_sigma=self.attitude_bias_sigma,
+        )
 
     def start(self, rng: np.random.Generator, n_agents: int) -> GnssInsState:
         """Stationary GNSS biases and per-episode attitude biases for every agent."""
@@ -339,6 +380,10 @@ class DegradedGnssNoise:
     def multipath_factor(self, clearance: float) -> float:
         """The base model's error multiplier at ``clearance`` m (jumps not included)."""
         return self.base.multipath_factor(clearance)
+
+    def filter_noise(self) -> FilterNoise:
+        """The base model's: jumps are left to the filter's GNSS gate, outages to ``gnss_fix``."""
+        return self.base.filter_noise()
 
     def start(self, rng: np.random.Generator, n_agents: int) -> DegradedGnssState:
         """The base model's state; no outage and no jump at reset."""

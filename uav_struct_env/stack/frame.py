@@ -41,6 +41,7 @@ class FrameLocalization:
         latency_s: detection + localization wall time, s.
         marker_ids: (K,) ids of the ArUco markers decoded in the frame (:func:`localize_aruco_frame`
             only; None for structural landmarks).
+        prior_rotation_error_deg: geodesic rotation error of the prior, deg (NaN without truth).
     """
 
     estimate: PoseEstimate
@@ -51,6 +52,7 @@ class FrameLocalization:
     prior_translation_error_m: float
     latency_s: float
     marker_ids: NDArray[np.int64] | None = None
+    prior_rotation_error_deg: float = float("nan")
 
 
 _NO_SCORES = AssociationScores(0, 0, 0, float("nan"), float("nan"), float("nan"))
@@ -124,8 +126,9 @@ def localize_aruco_frame(
 def _scored(est, det, scores, prior, gt, latency) -> FrameLocalization:
     nan = float("nan")
     if gt is None:
-        t_err = r_err = p_err = nan
+        t_err = r_err = p_err = p_rot = nan
     else:
-        p_err = pose_errors(prior, gt)[0]
+        p_err, p_rot = pose_errors(prior, gt)
         t_err, r_err = pose_errors(est.cam_from_world, gt) if est.success else (nan, nan)
-    return FrameLocalization(est, det, scores, float(t_err), float(r_err), float(p_err), latency)
+    return FrameLocalization(est, det, scores, float(t_err), float(r_err), float(p_err), latency,
+                             prior_rotation_error_deg=float(p_rot))

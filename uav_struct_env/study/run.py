@@ -18,7 +18,6 @@ from numpy.typing import NDArray
 
 from localization import cramer_rao_bound
 from localization.geometry.transforms import camera_center, invert, project
-from localization.metrics import pose_errors
 from uav_struct_env.processes import run_chunks
 from uav_struct_env.stack import FrameLocalization, StackSpec, build_stack
 from uav_struct_env.study.detections import DetectionRow, detection_rows
@@ -211,7 +210,7 @@ def run_unit_tracked(config: StudyConfig, scene: Scene, viewpoint: int, overlay_
                 rng=_rng(config, method, uav, viewpoint),
                 distortion=info["distortion"],
             )
-            frame = stack.localize(image, {method.landmarks: truth}, prior)
+            frame = stack.localize(image, {method.landmarks: truth}, prior, gt)
             est = frame.estimate
             if method.structural:
                 estimates.setdefault(method.key, {})[agent] = est
@@ -229,7 +228,7 @@ def run_unit_tracked(config: StudyConfig, scene: Scene, viewpoint: int, overlay_
                 counts = _marker_counts(frame, truth, site.markers)
             if method.structural:
                 counts["pixel_error_rms_px"] = _pixel_error_rms(frame.detections, truth)
-            results.append(_row(method, uav, viewpoint, est, gt, prior, truth, K, **counts))
+            results.append(_row(method, uav, viewpoint, frame, gt, prior, truth, K, **counts))
     tracking: list[ViewpointTracking] = []
     if config.track_workers and estimates:
         index = config.scenes.index(scene)
@@ -241,10 +240,10 @@ def run_unit_tracked(config: StudyConfig, scene: Scene, viewpoint: int, overlay_
     return results, overlays, tracking, detections
 
 
-def _row(method, uav, viewpoint, est, gt, prior, truth, K, **counts) -> ImageResult:
+def _row(method, uav, viewpoint, frame: FrameLocalization, gt, prior, truth, K, **counts) -> ImageResult:
+    """One row of ``per_image.csv``: the frame's scores (the stack's), its bound and its centres."""
+    est = frame.estimate
     visible = np.asarray(truth["visible"], dtype=bool)
-    t_err, r_err = pose_errors(est.cam_from_world, gt) if est.success else (float("nan"),) * 2
-    p_err = pose_errors(prior, gt)
     # The bound at 1 px (it scales linearly with the pixel noise): run_units rescales it to the
     # detector's own noise (bound_pixel_sigma). ArUco corners have another noise: no bound.
     if method.structural:
@@ -261,10 +260,10 @@ def _row(method, uav, viewpoint, est, gt, prior, truth, K, **counts) -> ImageRes
         success=bool(est.success),
         failure_reason=est.failure_reason or "",
         failure_code=est.failure_code.value if est.failure_code is not None else "",
-        translation_error_m=t_err,
-        rotation_error_deg=r_err,
-        prior_translation_error_m=p_err[0],
-        prior_rotation_error_deg=p_err[1],
+        translation_error_m=frame.translation_error_m,
+        rotation_error_deg=frame.rotation_error_deg,
+        prior_translation_error_m=frame.prior_translation_error_m,
+        prior_rotation_error_deg=frame.prior_rotation_error_deg,
         n_visible=int(visible.sum()),
         n_inliers=int(est.n_inliers),
         reprojection_rmse_px=float(est.reprojection_rmse_px),

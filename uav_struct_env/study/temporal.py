@@ -159,7 +159,7 @@ def fly(noise: str, seed: int, steps: int, *, near: float = 9.0, far: float = 30
     bar = tqdm(range(steps + 1), desc=f"{noise} seed {seed}", unit="step", disable=not progress, leave=False)
     for k in bar:
         for name in runs:
-            _record(rec, name, infos[name], runs[name].poses.tracks)
+            _record(rec, name, infos[name], runs[name].tracks)
         agents = list(runs["single_frame"].agents)
         if not agents or k == steps:
             break

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -31,12 +32,26 @@ __all__ = ["TRAIN_CONFIGS", "TrainConfig", "make_localization_env", "make_train_
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """An environment configuration for training: env overrides + wrapper options."""
+    """An environment configuration for training: env overrides + wrapper options.
+
+    ``wrapper`` holds :class:`~uav_struct_env.wrappers.LocalizationWrapper` keyword arguments; a
+    ``"mode"`` key (the former name of ``"association"``, as saved configurations may hold it) is
+    read as ``"association"`` with a FutureWarning, for one release.
+    """
 
     name: str
     env: dict[str, Any] = field(default_factory=dict)
     wrapper: dict[str, Any] = field(default_factory=dict)
     preset: str = "train"
+
+    def __post_init__(self) -> None:
+        if "mode" in self.wrapper:  # the former name of association=, for one release
+            warnings.warn(
+                "the wrapper option 'mode' is renamed 'association' (as in StackSpec and Localizer); "
+                "'mode' will be removed in the next release", FutureWarning, stacklevel=3,
+            )
+            wrapper = {k: v for k, v in self.wrapper.items() if k != "mode"}
+            object.__setattr__(self, "wrapper", {**wrapper, "association": self.wrapper["mode"]})
 
     def replace(
         self, env: dict[str, Any] | None = None, wrapper: dict[str, Any] | None = None
@@ -79,7 +94,7 @@ _STATE_ENV = {
 _WRAPPER = {
     "landmarks": "column_tops",
     "detector": "projection",
-    "mode": "robust",
+    "association": "robust",
     "reward": "error",
     "warm_start": True,
 }

@@ -3,11 +3,16 @@
 A thin composition of the one-job wrappers, kept for its keyword arguments::
 
     LocalizePoses(env, spec)        pose, pose_std, localized; info["localization"]
+    -> WarmStart                    with warm_start=True: each frame starts from the predicted pose
+    -> FilterPoses(filter_noise)    with temporal=True: pose, pose_std, localized filtered over time
     -> LayoutObservation            layout (privileged=True: component 0 is the true visible fraction)
     -> RewardWrapper(reward)        reward = sum of the reward object's terms; info["reward_terms"]
     -> DropKeys(("image",))         with drop_image=True (state-only training)
 
-See :mod:`~uav_struct_env.wrappers.localize`, :mod:`~uav_struct_env.wrappers.layout`,
+Its ``env`` is the outermost of them (so :func:`~uav_struct_env.wrappers.base.find_wrapper` finds
+each one); the env it was given is the innermost one's. See
+:mod:`~uav_struct_env.wrappers.localize`, :mod:`~uav_struct_env.wrappers.warm_start`,
+:mod:`~uav_struct_env.wrappers.temporal`, :mod:`~uav_struct_env.wrappers.layout`,
 :mod:`~uav_struct_env.wrappers.rewards` and :mod:`~uav_struct_env.wrappers.keys` for each key,
 term and feature. Compose them directly for another mix (a user's own reward object, no layout).
 By default no observation needs ground truth; only ``privileged=True`` puts the simulator's true
@@ -16,8 +21,11 @@ visible fraction in ``layout[0]``.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from localization.checks import check_choice
 from uav_struct_env.errors import ConfigError
@@ -27,11 +35,30 @@ from uav_struct_env.wrappers.keys import DropKeys
 from uav_struct_env.wrappers.layout import LAYOUT_COMPONENTS, LayoutObservation
 from uav_struct_env.wrappers.localize import LocalizePoses
 from uav_struct_env.wrappers.rewards import REWARDS, Reward, RewardWrapper, make_reward
+from uav_struct_env.wrappers.temporal import FilterPoses
+from uav_struct_env.wrappers.warm_start import WarmStart
 
 __all__ = ["DETECTORS", "LAYOUT_COMPONENTS", "PAPER_WIDTH_PX", "REWARDS", "LocalizationWrapper"]
 
 #: Association modes (the stack's :data:`~uav_struct_env.stack.ASSOCIATIONS`).
 MODES = ASSOCIATIONS
+
+
+def renamed_mode(association: str | None, mode: str | None, default: str = "robust") -> str:
+    """The association asked for as ``association=`` or, for one release, as ``mode=``.
+
+    Raises:
+        ConfigError: when both are given.
+    """
+    if mode is None:
+        return default if association is None else association
+    if association is not None:
+        raise ConfigError(f"give association= only (got association={association!r} and mode={mode!r})")
+    warnings.warn(
+        "the keyword mode= is renamed association= (as in StackSpec and Localizer); mode= will be "
+        "removed in the next release", FutureWarning, stacklevel=3,
+    )
+    return mode
 
 
 class LocalizationWrapper(ParallelWrapper):
@@ -46,11 +73,11 @@ class LocalizationWrapper(ParallelWrapper):
         detector: ``"projection"`` (simulated: true projections + noise, misses, clutter),
             ``"aruco"`` (OpenCV markers; only with ``landmarks="aruco"``), ``"learned"`` (the
             trained detector of :mod:`localization.detect.learned` on the image, at the operating
-            point that suits ``mode``; its ``true_ids`` -- for the association scores only --
+            point that suits ``association``; its ``true_ids`` -- for the association scores only --
             come from matching to the env's truth within 3 px), ``"learned:NAME"`` (the same with
             the weight set ``NAME`` of :mod:`localization.detect.weights`, e.g.
             ``"learned:active"``), or any object following :class:`localization.Detector`.
-        mode: association, ``"robust"`` or ``"paper"``.
+        association: ``"robust"`` (default) or ``"paper"``.
         reward: ``"error"``, ``"uncertainty"`` (:mod:`~uav_struct_env.wrappers.rewards`) or a
             reward object with ``terms(frame, crashed)``.
         pixel_sigma: detector noise, px of the env's images; default 1 px at the paper's
@@ -76,26 +103,30 @@ class LocalizationWrapper(ParallelWrapper):
         privileged: put the simulator's true visible fraction in ``layout[0]`` (privileged
             information a real UAV does not have; default: the deployable inlier fraction).
         temporal: filter each agent's pose over time (GNSS, attitude, commanded motion and the
-            visual fixes; :mod:`~uav_struct_env.wrappers.temporal`): ``pose`` is the filtered
+            visual fixes; :class:`~uav_struct_env.wrappers.temporal.FilterPoses`): ``pose`` is the filtered
             pose at every step and its prediction is the next frame's association prior.
         filter_noise: with ``temporal``, the filters' :class:`~localization.temporal.FilterNoise`
             (default: matched to the env's sensor model).
-        warm_start: ``robust`` mode: start each frame's association from the pose that the
-            agent's previous estimate and its commanded action predict, and search hypotheses
-            only when that pose does not explain the whole frame
-            (:class:`~uav_struct_env.wrappers.LocalizePoses`); the training configurations set
-            it. Default False: every frame searched on its own.
+        warm_start: ``robust`` association: start each frame's association from the pose that
+            the agent's previous estimate and its commanded action predict, and search
+            hypotheses only when that pose does not explain the whole frame
+            (:class:`~uav_struct_env.wrappers.warm_start.WarmStart`); the training
+            configurations set it. Default False: every frame searched on its own.
+        mode: the former name of ``association``, accepted for one release with a FutureWarning.
 
     Raises:
         ConfigError: for an unknown option or when the env does not provide the landmark truth.
     """
+
+    #: the reward object (set by ``__init__``; None on the class, for :meth:`__getattr__`)
+    reward: Reward | None = None
 
     def __init__(
         self,
         env: Any,
         landmarks: str = "column_tops",
         detector: Any = "projection",
-        mode: str = "robust",
+        association: str | None = None,
         reward: str | Reward = "error",
         *,
         pixel_sigma: float | None = None,
@@ -114,9 +145,13 @@ class LocalizationWrapper(ParallelWrapper):
         temporal: bool = False,
         filter_noise: Any = None,
         warm_start: bool = False,
+        mode: str | None = None,
     ) -> None:
-        check_choice("mode", mode, MODES, error=ConfigError)
-        reward_obj = make_reward(
+        association = renamed_mode(association, mode)
+        check_choice("association", association, MODES, error=ConfigError)
+        if not isinstance(warm_start, (bool, np.bool_)):
+            raise ConfigError(f"warm_start must be True or False, got {warm_start!r}")
+        self.reward = make_reward(
             reward,
             rotation_weight=rotation_weight,
             failure_penalty=failure_penalty,
@@ -127,7 +162,7 @@ class LocalizationWrapper(ParallelWrapper):
         spec = StackSpec(
             landmarks=landmarks,
             detector=detector,
-            association=mode,
+            association=association,
             pixel_sigma=pixel_sigma,
             miss_rate=miss_rate,
             false_positives=false_positives,
@@ -135,56 +170,37 @@ class LocalizationWrapper(ParallelWrapper):
             refiner_model=refiner_model,
             localizer_kwargs=localizer_kwargs or {},
         )
-        chain: Any = LocalizePoses(
-            env, spec, temporal=temporal, filter_noise=filter_noise, warm_start=warm_start
-        )
-        self.poses = chain
-        chain = LayoutObservation(chain, privileged=privileged)
-        chain = RewardWrapper(chain, reward_obj)
+        self.poses = LocalizePoses(env, spec)
+        chain: Any = WarmStart(self.poses) if warm_start else self.poses
+        self.tracks = None
+        if temporal:
+            chain = FilterPoses(chain, filter_noise)
+            self.tracks = chain.tracks
+        chain = RewardWrapper(LayoutObservation(chain, privileged=privileged), self.reward)
         self.drop_image = bool(drop_image)
         if self.drop_image and "image" in env.observation_space(env.possible_agents[0]).spaces:
             chain = DropKeys(chain, ("image",))
-        super().__init__(env)
-        self._chain = chain
+        super().__init__(chain)
         self.detector_name = detector if isinstance(detector, str) else type(detector).__name__
-        self.mode = mode
-        self.reward = reward_obj
+        self.association = association
         self.reward_name = reward if isinstance(reward, str) else type(reward).__name__
         self.privileged = bool(privileged)
         self.temporal = bool(temporal)
+        self.warm_start = bool(warm_start)
         self.pixel_sigma = spec.detector_sigma(self.poses.image_size[0])
         self.miss_rate = spec.miss_rate
         self.false_positives = spec.false_positives
 
-    # ``env`` stays the wrapped env (as before the split); the composed chain does the work.
     def __getattr__(self, name: str) -> Any:
         """Public attributes of the reward object (``failure_penalty``, ...), then the chain's."""
-        if name.startswith("_") or "_chain" not in self.__dict__:
-            raise AttributeError(f"accessing private attribute '{name}' is prohibited")
-        if hasattr(self.reward, name):
+        if not name.startswith("_") and hasattr(self.reward, name):
             return getattr(self.reward, name)
-        return getattr(self._chain, name)
-
-    def observation_space(self, agent: str) -> Any:
-        """The cached observation space shared by all agents (the env's plus the added keys)."""
-        return self._chain.observation_space(agent)
-
-    def action_space(self, agent: str) -> Any:
-        """The env's action space."""
-        return self._chain.action_space(agent)
-
-    def reset(self, seed: int | None = None, options: dict | None = None):
-        """Reset the env and localize every agent; ``seed`` also seeds the detector."""
-        return self._chain.reset(seed=seed, options=options)
-
-    def step(self, actions: dict[str, Any]):
-        """Step the env, localize every agent that produced an observation, compute the reward."""
-        return self._chain.step(actions)
+        return super().__getattr__(name)
 
     def __repr__(self) -> str:
         return (
-            f"LocalizationWrapper({self.env!r}, landmarks={self.poses.landmarks!r}, "
-            f"detector={self.detector_name!r}, mode={self.mode!r}, reward={self.reward_name!r}, "
-            f"drop_image={self.drop_image}, temporal={self.temporal}, "
-            f"warm_start={self.poses.warm_start})"
+            f"LocalizationWrapper({self.poses.env!r}, landmarks={self.poses.landmarks!r}, "
+            f"detector={self.detector_name!r}, association={self.association!r}, "
+            f"reward={self.reward_name!r}, drop_image={self.drop_image}, temporal={self.temporal}, "
+            f"warm_start={self.warm_start})"
         )

@@ -36,8 +36,8 @@ from localization.checks import check_choice, check_number
 from uav_struct_env.envs.uav_struct import TEAMMATE_CRASH
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.stack import FrameLocalization
-from uav_struct_env.wrappers.base import ParallelWrapper
-from uav_struct_env.wrappers.localize import LocalizePoses, find_wrapper
+from uav_struct_env.wrappers.base import ParallelWrapper, find_wrapper
+from uav_struct_env.wrappers.localize import LocalizePoses
 
 __all__ = [
     "REWARDS",

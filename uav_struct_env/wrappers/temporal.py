@@ -1,77 +1,117 @@
-"""Localization over time for the wrapper: one :class:`~localization.temporal.PoseFilter` per agent.
+"""``FilterPoses``: each agent's pose filtered over time, one :class:`~localization.temporal.PoseFilter` each.
 
-:class:`PoseTracks` is what :class:`~uav_struct_env.wrappers.LocalizePoses` uses with
-``temporal=True``. Per agent and step it
+:class:`FilterPoses` wraps a :class:`~uav_struct_env.wrappers.localize.LocalizePoses` (directly
+or through other wrappers) and keeps a :class:`PoseTracks`. Per agent and step it
 
 1. predicts the filter over the control period with the agent's *commanded* motion: the action
    applied by :func:`~uav_struct_env.sim.uav.step_uav` to the filtered pose (heading and gimbal
    pitch from the estimate, never the truth), so a real UAV could do the same;
 2. fuses the env's attitude reading and, when ``info["gnss_fix"]``, its GNSS reading, with the
-   noise model of the env's sensor model (:func:`filter_noise_for`) and its multipath factor at
-   the *estimated* clearance from the BIM;
-3. gives the prediction and its sigmas as the association prior of the frame's localization;
+   noise model the env's sensor model names (:func:`filter_noise_for`) and its multipath factor
+   at the *estimated* clearance from the BIM;
+3. gives the prediction and its sigmas as the association prior of the frame's localization
+   (:attr:`LocalizePoses.prior_source <uav_struct_env.wrappers.localize.LocalizePoses>`);
 4. fuses the frame's visual fix (chi-square gated).
 
-Nothing here reads the ground truth.
+Nothing here reads the ground truth but the errors it reports. ``pose`` / ``pose_std`` become
+the filtered pose and its sigmas at every step (also when the frame fails), ``localized`` is 1
+when the frame's fix was accepted by the filter's gate, and ``info["localization"]`` gains
+``filtered_translation_error_m``, ``filtered_rotation_error_deg``, ``filtered_position_std_m``,
+``fix_accepted``, ``fix_nis`` (UNDEFINED without a fix) and ``gnss_fix``; its
+``prior_translation_error_m`` is then the prediction's.
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
 from localization import PoseEstimate, PriorSigmas
-from localization.geometry.transforms import so3_log
+from localization.geometry.transforms import invert, so3_log
+from localization.metrics import pose_errors
 from localization.temporal import FilterNoise, PoseFilter, Update, attitude_of
 from uav_struct_env.errors import ConfigError
-from uav_struct_env.sim.sensors import DegradedGnssNoise, GnssInsNoise, NoNoise, PaperNoise
 from uav_struct_env.sim.uav import ACTION_COMPONENTS, Obstacles, UavState, step_uav
+from uav_struct_env.wrappers.base import ParallelWrapper, find_wrapper
+from uav_struct_env.wrappers.localize import UNDEFINED, LocalizePoses, info_number, set_pose_keys
 
-__all__ = ["PoseTracks", "filter_noise_for"]
-
-#: White noise the filter assumes for a sensor model that has none (``none``, ``paper``), m / rad.
-_FLOOR_POSITION_M = 0.05
-_FLOOR_ROTATION_RAD = math.radians(0.05)
+__all__ = ["FilterPoses", "PoseTracks", "filter_noise_for"]
 
 
 def filter_noise_for(sensor: Any) -> FilterNoise:
-    """The :class:`~localization.temporal.FilterNoise` matching an env sensor model.
+    """The :class:`~localization.temporal.FilterNoise` an env sensor model names.
 
-    ``gnss_ins`` and ``gnss_degraded`` give their own sigmas and bias time (the degraded model's
-    jumps are left to the GNSS gate, its outages to ``info["gnss_fix"]``); ``paper`` is a bias of
-    its fixed offsets that never decorrelates (it is one per episode and viewpoint); ``none`` a
-    tiny noise floor. Another model object: the ``gnss_ins`` defaults.
+    The model's own ``filter_noise()`` (:mod:`uav_struct_env.sim.sensors`); a model object
+    without one gets the filter's defaults (those of ``gnss_ins``).
     """
-    if isinstance(sensor, DegradedGnssNoise):
-        sensor = sensor.base
-    if isinstance(sensor, GnssInsNoise):
-        return FilterNoise(
-            gnss_white_sigma=sensor.gnss_white_sigma,
-            gnss_bias_sigma=sensor.gnss_bias_sigma,
-            gnss_bias_tau=sensor.gnss_bias_tau,
-            attitude_white_sigma=sensor.attitude_white_sigma,
-            attitude_bias_sigma=sensor.attitude_bias_sigma,
-        )
-    if isinstance(sensor, PaperNoise):
-        return FilterNoise(
-            gnss_white_sigma=(_FLOOR_POSITION_M,) * 3,
-            gnss_bias_sigma=(sensor.position_offset,) * 3,
-            gnss_bias_tau=1.0e6,
-            attitude_white_sigma=(_FLOOR_ROTATION_RAD,) * 3,
-            attitude_bias_sigma=(sensor.roll_offset, sensor.pitch_offset, sensor.yaw_offset),
-        )
-    if isinstance(sensor, NoNoise):
-        return FilterNoise(
-            gnss_white_sigma=(_FLOOR_POSITION_M,) * 3,
-            gnss_bias_sigma=(0.0,) * 3,
-            attitude_white_sigma=(_FLOOR_ROTATION_RAD,) * 3,
-            attitude_bias_sigma=(0.0,) * 3,
-            estimate_gnss_bias=False,
-            estimate_attitude_bias=False,
-        )
-    return FilterNoise()
+    own = getattr(sensor, "filter_noise", None)
+    return own() if callable(own) else FilterNoise()
+
+
+class FilterPoses(ParallelWrapper):
+    """Filter every agent's pose over time (module docstring).
+
+    Args:
+        env: a wrapper chain that contains a :class:`~uav_struct_env.wrappers.localize.LocalizePoses`.
+        noise: the filters' :class:`~localization.temporal.FilterNoise` (default: the one the
+            env's sensor model names, :func:`filter_noise_for`).
+
+    Raises:
+        ConfigError: without a LocalizePoses below, with a LocalizePoses whose prior already
+            comes from another filter, or if ``noise`` is not a FilterNoise.
+    """
+
+    def __init__(self, env: Any, noise: FilterNoise | None = None) -> None:
+        super().__init__(env)
+        loc = find_wrapper(env, LocalizePoses)
+        if loc is None:
+            raise ConfigError("FilterPoses needs a LocalizePoses wrapper below it")
+        if loc.prior_source is not None:
+            raise ConfigError("the LocalizePoses below already takes its prior from another FilterPoses")
+        self.tracks = PoseTracks(env.unwrapped, noise)
+        self._loc = loc
+        loc.prior_source = self.tracks.prior
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        """Forget every filter, reset the env (localizing from the first readings) and fuse."""
+        self.tracks.reset()
+        obs, infos = self.env.reset(seed=seed, options=options)
+        self._fuse(obs, infos)
+        return obs, infos
+
+    def step(self, actions: dict[str, Any]):
+        """Step the env with the actions recorded for the prediction, then fuse every fix."""
+        self.tracks.command(actions)
+        obs, rewards, terminations, truncations, infos = self.env.step(actions)
+        self._fuse(obs, infos)
+        return obs, rewards, terminations, truncations, infos
+
+    def _fuse(self, obs: dict, infos: dict) -> None:
+        for agent in obs:
+            info = infos[agent]
+            fix = self.tracks.fuse(agent, self._loc.last_frames[agent].estimate)
+            filt = self.tracks.filters[agent]
+            set_pose_keys(obs[agent], filt.world_from_cam, filt.pose_std, fix is not None and fix.accepted)
+            info["localization"].update(self._info(agent, info))
+
+    def _info(self, agent: str, info: dict) -> dict[str, Any]:
+        """The filter's keys of ``info["localization"]`` (module docstring)."""
+        filt = self.tracks.filters[agent]
+        t_err, r_err = pose_errors(filt.cam_from_world, invert(info["world_from_cam"]))
+        fix = self.tracks.last_updates[agent].get("pose")
+        return {
+            "filtered_translation_error_m": info_number(t_err),
+            "filtered_rotation_error_deg": info_number(r_err),
+            "filtered_position_std_m": info_number(np.sqrt(np.sum(filt.pose_std[:3] ** 2))),
+            "fix_accepted": bool(fix is not None and fix.accepted),
+            "fix_nis": UNDEFINED if fix is None else info_number(fix.nis),
+            "gnss_fix": bool(info.get("gnss_fix", True)),
+        }
+
+    def estimated_position(self, agent: str) -> np.ndarray:
+        """(3,) the filtered camera centre of ``agent``."""
+        return self.tracks.filters[agent].position.copy()
 
 
 class PoseTracks:

@@ -46,8 +46,8 @@ from uav_struct_env.tracking_sim import (
     camera_views,
     check_worker_source,
 )
-from uav_struct_env.wrappers.base import ParallelWrapper
-from uav_struct_env.wrappers.localize import UNDEFINED, LocalizePoses, find_wrapper
+from uav_struct_env.wrappers.base import ParallelWrapper, find_wrapper
+from uav_struct_env.wrappers.localize import LocalizePoses, info_number
 
 __all__ = ["TRACKING_INFO_KEYS", "TrackingReward", "WorkerTracking"]
 
@@ -63,24 +63,6 @@ TRACKING_INFO_KEYS = (
     "my_error_m",
     "my_position_std_m",
 )
-
-
-def _find_localizer(env: Any) -> LocalizePoses | None:
-    """The :class:`LocalizePoses` below ``env``, also inside a :class:`LocalizationWrapper`'s chain."""
-    while env is not None:
-        if isinstance(env, LocalizePoses):
-            return env
-        chain = env.__dict__.get("_chain")  # LocalizationWrapper composes its wrappers there
-        found = find_wrapper(chain, LocalizePoses) if chain is not None else None
-        if found is not None:
-            return found
-        env = env.__dict__.get("env")
-    return None
-
-
-def _number(x: float) -> float:
-    x = float(x)
-    return x if np.isfinite(x) else UNDEFINED
 
 
 class TrackingReward:
@@ -154,7 +136,7 @@ class WorkerTracking(ParallelWrapper):
     ) -> None:
         super().__init__(env)
         self._base = check_worker_source(env)
-        self._loc = _find_localizer(env)
+        self._loc = find_wrapper(env, LocalizePoses)
         if poses is None:
             poses = "estimated" if self._loc is not None else "truth"
         check_choice("poses", poses, POSE_SOURCES, error=ConfigError)
@@ -238,11 +220,11 @@ class WorkerTracking(ParallelWrapper):
                 "n_detections": len(detections[agent]),
                 "n_tracked": len(result.tracked),
                 "n_tracked_with_me": len(mine),
-                "coverage": _number(len(result.tracked) / n_workers if n_workers else np.nan),
-                "median_error_m": _number(np.median(team)),
-                "p95_error_m": _number(np.percentile(team, 95)),
-                "my_error_m": _number(np.mean(my_errors) if len(mine) else np.nan),
-                "my_position_std_m": _number(np.mean(stds) if stds else np.nan),
+                "coverage": info_number(len(result.tracked) / n_workers if n_workers else np.nan),
+                "median_error_m": info_number(np.median(team)),
+                "p95_error_m": info_number(np.percentile(team, 95)),
+                "my_error_m": info_number(np.mean(my_errors) if len(mine) else np.nan),
+                "my_position_std_m": info_number(np.mean(stds) if stds else np.nan),
             }
             out[agent] = (n_workers, my_errors)
         return out
