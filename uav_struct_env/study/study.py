@@ -35,7 +35,7 @@ from uav_struct_env.study.report import (
     write_csv,
     write_results_json,
 )
-from uav_struct_env.study.run import StudyInterrupted, run_units_tracked
+from uav_struct_env.study.run import StudyInterrupted, run_units_tracked, warm_kernels
 from uav_struct_env.study.tracking import tracking_markdown, tracking_summary
 from uav_struct_env.tracking_sim import DEFAULT_WORKER_SIGMA_PX
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_output_dir, check_site, refuse
@@ -75,6 +75,8 @@ def run_study(
     """
     staged = StagedOutput(out, overwrite=overwrite, owned=STUDY_FILES)
     with staged:
+        # Compiled before the bar starts (one line when it is the first time), never in a latency.
+        warm_kernels(announce=lambda line: print(line, file=sys.stderr, flush=True))
         t0 = time.perf_counter()
         bar = tqdm(
             total=len(config.scenes) * config.n_viewpoints,
