@@ -1,0 +1,127 @@
+"""The real-IFC corpus (data/ifc_corpus): parse time, stages and landmarks of every file present.
+
+    .venv/bin/python benchmarks/ifc_corpus.py [--split all|train|heldout] [--timeout 600]
+
+For every building of ``data/ifc_corpus/manifest.json`` whose file is present locally (shipped
+under ``data/ifc_corpus/files/``, or fetched there by ``benchmarks/fetch_ifc_corpus.py``), a fresh
+Python process imports ifcopenshell and ``uav_struct_env.site`` (not timed), then times
+``ifc_stages`` (the parse: tessellation and the import rules; the in-process cache is empty in a
+fresh process) and ``load_ifc`` at the default stage (the highest, served from that cache), and
+counts the landmarks of each structural set at that stage. One process per file, one file at a
+time: a file that crashes, hangs or eats memory cannot take the others with it. A failure is
+reported as its exception type and message.
+
+Columns: name, authoring tool, schema, length unit, size (MB), parse (s: ``ifc_stages``), load
+(s: ``load_ifc`` after the parse), stages, slab_corners / opening_corners / column_tops at the
+default stage, split, and the default stage's name. A benchmark, not a test: times depend on the
+machine and on what else runs on it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CORPUS = ROOT / "data" / "ifc_corpus"
+SETS = ("slab_corners", "opening_corners", "column_tops")
+
+
+def local_path(entry: dict) -> Path:
+    """Where the manifest entry's file lives on this machine (it may not exist): ``local_path``,
+    relative to the repository root."""
+    p = Path(entry["local_path"])
+    return p if p.is_absolute() else ROOT / p
+
+
+def measure(path: str) -> dict:
+    """Parse and load one file in this process (meant to be a fresh one); the figures as a dict."""
+    t = time.perf_counter()
+    import ifcopenshell  # noqa: F401
+
+    from uav_struct_env.site import ifc_stages, load_ifc
+
+    out: dict = {"import_s": time.perf_counter() - t}
+    try:
+        t = time.perf_counter()
+        stages = ifc_stages(path)
+        out["parse_s"] = time.perf_counter() - t
+        out["stages"] = len(stages)
+        t = time.perf_counter()
+        site = load_ifc(path)
+        out["load_s"] = time.perf_counter() - t
+        out["stage"] = site.stage
+        out["landmarks"] = {name: len(site.landmarks(name)) for name in SETS}
+    except Exception as exc:  # the benchmark reports every failure and goes on
+        out["error"] = f"{type(exc).__name__}: {exc}"
+    return out
+
+
+def _run_child(path: Path, timeout: float) -> dict:
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--one", str(path)]
+    try:
+        done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"error": f"TimeoutExpired: still running after {timeout:.0f} s"}
+    lines = [ln for ln in done.stdout.splitlines() if ln.startswith("{")]
+    if done.returncode != 0 or not lines:
+        tail = (done.stderr.strip().splitlines() or ["(no output)"])[-1]
+        return {"error": f"exit {done.returncode}: {tail[:200]}"}
+    return json.loads(lines[-1])
+
+
+def main(manifest: str | Path = CORPUS / "manifest.json", split: str = "all", timeout: float = 600.0,
+         names: list[str] | None = None) -> list[dict]:
+    """Measure every present file of the corpus (one fresh process each); print and return rows."""
+    entries = json.loads(Path(manifest).read_text())["files"]
+    rows = []
+    header = (f"{'name':<22} {'tool':<22} {'schema':<7} {'unit':<5} {'MB':>5} {'parse s':>7} {'load s':>6} "
+              f"{'stages':>6} {'slab':>5} {'open':>5} {'col':>5}  {'split':<7} default stage / error")
+    print(header)
+    print("-" * len(header))
+    for e in entries:
+        if split != "all" and e["split"] != split:
+            continue
+        if names and e["name"] not in names:
+            continue
+        p = local_path(e)
+        row = {"name": e["name"], "tool": e["authoring_tool"], "schema": e["ifc_schema"],
+               "unit": e["length_unit"], "split": e["split"], "path": str(p)}
+        if not p.exists():
+            row["error"] = "not present locally (run benchmarks/fetch_ifc_corpus.py where GitHub is reachable)"
+        else:
+            row["mb"] = p.stat().st_size / 1e6
+            row.update(_run_child(p, timeout))
+        rows.append(row)
+        unit = {"metre": "m", "millimetre": "mm", "foot": "ft"}.get(row["unit"], row["unit"])
+        mb = f"{row['mb']:5.1f}" if "mb" in row else "    -"
+        parse = f"{row['parse_s']:7.1f}" if "parse_s" in row else "      -"
+        load = f"{row['load_s']:6.2f}" if "load_s" in row else "     -"
+        stages = f"{row['stages']:6d}" if "stages" in row else "     -"
+        lm = row.get("landmarks")
+        counts = " ".join(f"{lm[s]:5d}" for s in SETS) if lm else "    -     -     -"
+        tail = row.get("error") or row.get("stage", "")
+        print(f"{row['name']:<22} {row['tool'][:22]:<22} {row['schema']:<7} {unit:<5} {mb} {parse} {load} "
+              f"{stages} {counts}  {row['split']:<7} {tail}", flush=True)
+    ok = sum(1 for r in rows if "landmarks" in r)
+    print(f"{ok} of {len(rows)} files loaded at their default stage")
+    return rows
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--manifest", default=str(CORPUS / "manifest.json"), help="the corpus manifest")
+    parser.add_argument("--split", default="all", choices=("all", "train", "heldout"), help="which files")
+    parser.add_argument("--timeout", type=float, default=600.0, help="seconds allowed per file")
+    parser.add_argument("--names", nargs="*", default=None, help="only these corpus names")
+    parser.add_argument("--one", default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.one:
+        print(json.dumps(measure(args.one)))
+    else:
+        main(manifest=args.manifest, split=args.split, timeout=args.timeout, names=args.names)
