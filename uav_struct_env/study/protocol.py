@@ -85,6 +85,9 @@ class Method:
         return self.aruco_mode is None
 
 
+#: Fewest landmarks of a set at its stage for the study to evaluate it (a PnP pose needs four).
+MIN_LANDMARKS = 4
+
 _SLAB = Scene("slab", 1.0)
 _COLUMNS = Scene("columns", 1.0)
 
@@ -294,19 +297,36 @@ class StudyConfig:
             raise ConfigError(f"methods must be a non-empty subset of {keys}, got {list(self.methods)}")
         object.__setattr__(self, "methods", tuple(self.methods))
         object.__setattr__(self, "image_size", tuple(int(v) for v in self.image_size))
-        object.__setattr__(self, "_stages", self._resolve_stages())
+        stages, skips = self._resolve_stages()
+        object.__setattr__(self, "_stages", stages)
+        object.__setattr__(self, "_skips", skips)
 
-    def _resolve_stages(self) -> dict[str, str | None]:
-        """Stage name for each scene role (``"slab"``, ``"columns"``) on this site."""
+    def _resolve_stages(self) -> tuple[dict[str, str | None], dict[str, str]]:
+        """Stage name for each scene role (``"slab"``, ``"columns"``) on this site, and the skips.
+
+        A structural method is skipped (with the reason) when its role has no stage on this
+        building's floor or its landmark set has fewer than MIN_LANDMARKS landmarks there.
+        """
         if self.stage is None and (self.site in ("paper", "random") or self.site.endswith(".json")):
-            return {"slab": "slab", "columns": "columns"}
+            return {"slab": "slab", "columns": "columns"}, {}
         try:
             site = make_site(
                 self.site, stage=self.stage, marker_size=None, rng=np.random.default_rng(self.seed)
             )
         except ValueError as err:  # SiteGeometryError: an unknown stage, a malformed file
             raise ConfigError(str(err)) from None
-        return {role: site.floor_stage(role) for role in ("slab", "columns")}
+        stages = {role: site.floor_stage(role) for role in ("slab", "columns")}
+        skips: dict[str, str] = {}
+        for m in METHODS:
+            stage = stages[m.scene.stage]
+            if stage is None:
+                skips[m.key] = f"the floor of stage {stages['slab']!r} has no columns stage"
+            elif m.structural:
+                n = len(site.with_stage(stage).landmarks(m.landmarks))
+                if n < MIN_LANDMARKS:
+                    skips[m.key] = (f"stage {stage!r} exposes {n} {m.landmarks} (at least "
+                                    f"{MIN_LANDMARKS} are needed for a pose)")
+        return stages, skips
 
     @property
     def as_built_model(self) -> AsBuilt | None:
@@ -321,13 +341,18 @@ class StudyConfig:
 
     @property
     def skipped_methods(self) -> tuple[str, ...]:
-        """Requested methods whose stage this building lacks (no columns on the floor)."""
-        return tuple(m.key for m in METHODS if m.key in self.methods and self._stages[m.scene.stage] is None)
+        """Requested methods this building cannot evaluate (see :attr:`skip_reasons`)."""
+        return tuple(m.key for m in METHODS if m.key in self.methods and m.key in self._skips)
+
+    @property
+    def skip_reasons(self) -> dict[str, str]:
+        """Why each of :attr:`skipped_methods` is left out: no columns stage, or < 4 landmarks."""
+        return {k: self._skips[k] for k in self.skipped_methods}
 
     @property
     def selected_methods(self) -> tuple[Method, ...]:
         """The methods to run, in table order (without :attr:`skipped_methods`)."""
-        return tuple(m for m in METHODS if m.key in self.methods and self._stages[m.scene.stage] is not None)
+        return tuple(m for m in METHODS if m.key in self.methods and m.key not in self._skips)
 
     @property
     def scenes(self) -> tuple[Scene, ...]:

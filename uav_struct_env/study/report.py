@@ -26,7 +26,7 @@ from localization.metrics import (
 from uav_struct_env.outputs import atomic_write_json
 from uav_struct_env.provenance import software
 from uav_struct_env.study.cells import cell, json_ready, pct_cell, write_records_csv
-from uav_struct_env.study.protocol import METHODS, Method, StudyConfig
+from uav_struct_env.study.protocol import METHODS, Method, PaperFigures, StudyConfig
 from uav_struct_env.study.run import ImageResult, bound_source
 
 __all__ = [
@@ -133,7 +133,20 @@ def results_dict(config: StudyConfig, rows: Sequence[ImageResult], extra_config:
     methods = {}
     for m in config.selected_methods:
         methods[m.key] = summarize(m, [r for r in rows if r.method == m.key], bound_source(config, m))
-    return {"config": cfg, "software": software(), "methods": json_ready(methods)}
+    out = {"config": cfg, "software": software(), "methods": json_ready(methods)}
+    if config.skip_reasons:
+        out["skipped"] = dict(config.skip_reasons)
+    return out
+
+
+def _paper(results: dict, m: Method) -> PaperFigures | None:
+    """The paper's figures for ``m``: only beside a run on the paper's own building."""
+    return m.paper if results["config"].get("site") == "paper" else None
+
+
+def _skipped_lines(results: dict) -> list[str]:
+    skipped = results.get("skipped", {})
+    return ["", *(f"Left out: {key} -- {why}." for key, why in skipped.items())] if skipped else []
 
 
 def write_results_json(path: Path, results: dict) -> None:
@@ -228,13 +241,13 @@ def table1_markdown(results: dict) -> str:
         r = results["methods"].get(m.key)
         if r is None or not m.structural:
             continue
-        p = m.paper
+        p = _paper(results, m)
         lines.append(
             f"| {m.label} | {pct_cell(r['detection_rate'])} | {cell(p and p.detection_pct, 2)} | "
             f"{pct_cell(r['association_f1'])} | {cell(p and p.association_f1_pct, 2)} | "
             f"{cell(r['latency_s']['median'], 4)} | {cell(p and p.latency_s, 2)} |"
         )
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + _skipped_lines(results)) + "\n"
 
 
 def table2_markdown(results: dict) -> str:
@@ -253,7 +266,7 @@ def table2_markdown(results: dict) -> str:
         r = results["methods"].get(m.key)
         if r is None:
             continue
-        p = m.paper
+        p = _paper(results, m)
         t, rot = r["translation_error_m"], r["rotation_error_deg"]
         paper_t = f"{p.translation_median_m:.3f} / {p.translation_p90_m:.3f}" if p else "—"
         paper_r = f"{p.rotation_median_deg:.3f} / {p.rotation_p90_deg:.3f}" if p else "—"
@@ -293,7 +306,7 @@ def table2_markdown(results: dict) -> str:
             f"this run had {total} per method, so its counts and medians are not comparable to "
             "the paper's one for one.",
         ]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + _skipped_lines(results)) + "\n"
 
 
 def _bound_noise(r: dict) -> str:

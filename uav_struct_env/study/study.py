@@ -282,10 +282,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_output_dir(args.out, overwrite=args.overwrite)
     except INPUT_ERRORS as err:
         return refuse("uav-struct study", err)
-    if config.skipped_methods:
-        floor = config.scene_stage(config.selected_methods[0].scene)
-        print(f"uav-struct study: note: {', '.join(config.skipped_methods)} left out: the floor of "
-              f"stage {floor!r} has no columns stage", file=sys.stderr)
+    for key, why in config.skip_reasons.items():
+        print(f"uav-struct study: note: {key} left out: {why}", file=sys.stderr)
+    if not config.selected_methods:
+        return refuse("uav-struct study", "nothing to evaluate: every requested method is left out "
+                      "(above); choose another --stage or --site")
     try:
         results = run_study(config, args.out, progress=not args.no_progress,
                             figures=not args.no_figures, overwrite=args.overwrite)
