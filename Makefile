@@ -23,8 +23,9 @@ demo: $(STAMP)
 	@if [ -e results ]; then echo "make demo: replacing the earlier results in results/"; fi
 	$(BIN)/uav-struct study --out results --workers 2 --overwrite
 
+# The default suite in parallel, one pytest-xdist worker per core (-n auto); test-slow: the long runs.
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow
