@@ -478,8 +478,10 @@ def run_units_tracked(
     except KeyboardInterrupt:
         raise StudyInterrupted(done, total) from None
     order = {m.key: i for i, m in enumerate(METHODS)}
-    results = _with_bounds(config, results)
+    # Sorted before the bounds: their measured noise sums over the rows, and the workers' rows
+    # arrive in whatever order they finish (the sum's last digit followed it).
     results.sort(key=lambda r: (order[r.method], r.uav, r.viewpoint))
+    results = _with_bounds(config, results)
     tracking.sort(key=lambda t: (t.stage, t.viewpoint))
     detections.sort(key=lambda d: (order[d.method], d.uav, d.viewpoint, d.detection))
     return results, overlays, tracking, detections
