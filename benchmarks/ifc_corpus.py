@@ -92,7 +92,8 @@ def main(manifest: str | Path = CORPUS / "manifest.json", split: str = "all", ti
         row = {"name": e["name"], "tool": e["authoring_tool"], "schema": e["ifc_schema"],
                "unit": e["length_unit"], "split": e["split"], "path": str(p)}
         if not p.exists():
-            row["error"] = "not present locally (run benchmarks/fetch_ifc_corpus.py where GitHub is reachable)"
+            row["error"] = ("not present locally (run benchmarks/fetch_ifc_corpus.py where GitHub "
+                            "is reachable)")
         else:
             row["mb"] = p.stat().st_size / 1e6
             row.update(_run_child(p, timeout))
