@@ -9,40 +9,7 @@
 - :mod:`~localization.geometry.kernels` -- the compiled forms of the per-pose maths.
 """
 
-from localization.geometry.transforms import (
-    as_points,
-    camera_center,
-    check_intrinsics,
-    check_transform,
-    inverse_intrinsics,
-    invert,
-    look_at,
-    make_transform,
-    matrix_from_quat_wxyz,
-    project,
-    quat_wxyz_from_matrix,
-    rotation_angle_deg,
-    skew,
-    so3_exp,
-    so3_log,
-    transform_points,
-)
+from localization.geometry import transforms
+from localization.geometry.transforms import *  # noqa: F403  (the conventions are this package's names)
 
-__all__ = [
-    "as_points",
-    "camera_center",
-    "check_intrinsics",
-    "check_transform",
-    "inverse_intrinsics",
-    "invert",
-    "look_at",
-    "make_transform",
-    "matrix_from_quat_wxyz",
-    "project",
-    "quat_wxyz_from_matrix",
-    "rotation_angle_deg",
-    "skew",
-    "so3_exp",
-    "so3_log",
-    "transform_points",
-]
+__all__ = list(transforms.__all__)
