@@ -3,8 +3,7 @@
 Each airframe is a visual-only box made with ``SiteWorld.add_body`` (DJI Mavic 2 Pro unfolded,
 322 x 242 x 84 mm), level, turned to the heading, its centre 0.1 m above the camera (the gimbal
 hangs under the body). Poses are set with ``SiteWorld.place_body``, the unvalidated yaw-only path:
-``SiteWorld.move_body`` validates a general 4x4 pose, ~0.5 ms per call, and a step moves the
-airframes 12 times.
+``SiteWorld.move_body`` validates a general 4x4 pose, and a step moves the airframes 12 times.
 """
 
 from __future__ import annotations

@@ -74,10 +74,9 @@ RENDERERS = ("auto", *BACKENDS)
 TINY_PIXEL_SHIFT = (0.5, -0.5)
 #: The EGL plugin's off-screen surface, (width, height); larger images are rendered in tiles.
 EGL_MAX_TILE = (1024, 768)
-#: "auto" uses EGL for images with at least this many pixels (about 420 x 240). Measured with
-#: ``benchmarks/render.py`` on the paper site, 2 shared cores: TinyRenderer takes ~0.4 us a
-#: pixel (23 ms at 320 x 180, 90 ms at 640 x 360), EGL ~30 ms a frame plus ~0.12 us a pixel
-#: (38 ms and 58 ms): they cross near 1e5 pixels.
+#: "auto" uses EGL for images with at least this many pixels (about 420 x 240): TinyRenderer's
+#: cost grows with the pixels, EGL's is mostly a fixed cost per frame, and on the 2-core machine
+#: they cross near 1e5 pixels (``benchmarks/render.py``; figures in docs/benchmarks.md).
 AUTO_EGL_MIN_PIXELS = 100_000
 
 #: Client ids of the EGL clients alive in this process.

@@ -119,8 +119,8 @@ class LandmarkCrops(torch.utils.data.Dataset):
     """Random augmented crops of a landmark dataset, with stride-4 targets.
 
     Decoded images are kept in memory (per loader process) up to ``cache_mb`` megabytes: PNG
-    decoding was 40 % of the loader's time, and with camera imaging (noisy images compress
-    poorly) the single loader process could not keep up with the network on 2 cores.
+    decoding is a large part of a loader's time, and with camera imaging (noisy images compress
+    poorly) a single loader process cannot keep up with the network on 2 cores.
     """
 
     def __init__(self, labels: dict, crop: tuple[int, int], seed: int, sigma: float = 1.0,
@@ -311,8 +311,8 @@ def train(data: str | list[str], out: str, val: str | None = None, minutes: floa
     labels = pool_labels([data] if isinstance(data, (str, Path)) else data)
     val_labels = load_labels(val) if val else None
     loader = make_loader(LandmarkCrops(labels, crop, seed, epoch_size=10**7), batch, workers, seed)
-    # Channels-last (NHWC) convolutions: 108-118 instead of 140-167 ms per batch-16 step on this
-    # project's 2-core CPU (the refiner trainer does the same).
+    # Channels-last (NHWC) convolutions: faster on a CPU (docs/benchmarks.md; the refiner trainer
+    # does the same).
     model = KeypointNet(width).to(memory_format=torch.channels_last)
 
     def step_loss(batch):

@@ -268,8 +268,8 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
     out_dir.mkdir(parents=True, exist_ok=True)
     ds = PatchSamples(dict(np.load(windows)), seed)
     val_labels = load_labels(val) if val else None
-    # Channels-last (NHWC) convolutions: a training step at batch 128 takes 77 instead of 120 ms
-    # on this project's 2-core CPU, so the same wall-time budget trains ~1.2-1.5x more steps.
+    # Channels-last (NHWC) convolutions: faster on a CPU, so a wall-time budget trains more steps
+    # (docs/benchmarks.md).
     model = PatchNet(width).to(memory_format=torch.channels_last)
 
     def step_loss(batch):
