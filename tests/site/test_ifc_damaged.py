@@ -15,7 +15,7 @@ import pytest
 
 pytest.importorskip("ifcopenshell")
 
-from test_ifc import DUPLEX, _messy_site  # noqa: E402
+from ifc_sites import DUPLEX, messy_site  # noqa: E402
 
 from uav_struct_env.errors import IfcImportError  # noqa: E402
 from uav_struct_env.site import ifc as ifc_module  # noqa: E402
@@ -36,12 +36,12 @@ def _with(site, guid: str, **changes):
 
 @pytest.fixture(scope="module")
 def messy(tmp_path_factory) -> Path:
-    return _write(_messy_site(), tmp_path_factory.mktemp("damaged"), "messy.ifc")
+    return _write(messy_site(), tmp_path_factory.mktemp("damaged"), "messy.ifc")
 
 
 def test_a_degenerate_opening_is_dropped_and_reported_not_fatal(tmp_path):
     """A 2 cm opening has no outline at OUTLINE_TOL; it sank the whole file before."""
-    site = _with(_messy_site(), "s1", holes=(Hole("pin", rectangle(2, 2, 2.02, 2.02), guid="pin"),))
+    site = _with(messy_site(), "s1", holes=(Hole("pin", rectangle(2, 2, 2.02, 2.02), guid="pin"),))
     path = _write(site, tmp_path, "pinhole.ifc")
     report = ifc_report(path)
     [row] = [d for d in report.dropped if "degenerate" in d[3]]
@@ -53,7 +53,7 @@ def test_a_degenerate_opening_is_dropped_and_reported_not_fatal(tmp_path):
 
 
 def test_a_ground_bearing_slab_bears_no_landmarks(tmp_path):
-    site = _messy_site()
+    site = messy_site()
     ground = Slab(guid="sog", name="slab on grade", storey=0, outline=rectangle(-1, -1, 9, 7),
                   z_bottom=-0.15, z_top=0.05)
     site = dataclasses.replace(site, elements=(*site.elements, ground))

@@ -20,12 +20,12 @@ from uav_struct_env.study.report import results_dict, table1_markdown, table2_ma
 from uav_struct_env.study.run import ImageResult  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "site"))
-from test_ifc import _messy_site  # noqa: E402
+from ifc_sites import messy_site  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def messy(tmp_path_factory) -> str:
-    return str(_messy_site().to_ifc(tmp_path_factory.mktemp("messy") / "messy.ifc"))
+    return str(messy_site().to_ifc(tmp_path_factory.mktemp("messy") / "messy.ifc"))
 
 
 def _rows(key: str) -> list[ImageResult]:

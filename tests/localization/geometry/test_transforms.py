@@ -1,0 +1,30 @@
+"""The conventions of localization.geometry.transforms against their numpy definitions."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from localization.geometry import invert, look_at
+
+
+def _look_at_numpy(eye, target, up=(0.0, 0.0, 1.0)):
+    """look_at written with np.cross and np.linalg.inv: the definition it must equal."""
+    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+    z = (target - eye) / np.linalg.norm(target - eye)
+    x = np.cross(z, up)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    world_from_cam = np.eye(4)
+    world_from_cam[:3, :3] = np.column_stack([x, y, z])
+    world_from_cam[:3, 3] = eye
+    return world_from_cam
+
+
+def test_look_at_equals_its_numpy_definition_bit_for_bit():
+    """Its cross products on Python floats are np.cross's to the bit."""
+    rng = np.random.default_rng(0)
+    for _ in range(2000):
+        eye = rng.normal(size=3) * 10 ** rng.uniform(-4, 4)
+        target = eye + rng.normal(size=3)
+        rotation = invert(look_at(eye, target))[:3, :3]  # transposes: exact
+        np.testing.assert_array_equal(rotation, _look_at_numpy(eye, target)[:3, :3])
