@@ -111,6 +111,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                              renderer=args.renderer, site=args.site)
     except (OSError, RendererUnavailableError) as err:
         return refuse(p.prog, f"{err}; nothing written to {args.out}", status=1)
+    if args.stage == "both" and len(stages) == 1:
+        print(f"{p.prog}: note: the floor of stage {stages[0]!r} has no columns stage; rendered that "
+              "stage alone", file=sys.stderr)
     for path in sorted(staged.out.glob("*_viewpoint*.png")):
         print(path.resolve())
     return 0
