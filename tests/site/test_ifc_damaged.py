@@ -116,3 +116,11 @@ def test_the_size_guard_refuses_before_parsing(messy, monkeypatch):
         ifc_stages(messy)
     monkeypatch.setenv(MAX_FILE_MB_VARIABLE, "50")
     assert ifc_stages(messy) == ["L1/slab", "L1/columns", "L2/slab"]
+
+
+def test_the_report_prints_short_and_its_summary_lists_every_element():
+    report = ifc_report(DUPLEX)
+    assert repr(report).startswith(f"ImportReport({str(DUPLEX)!r}: kept ") and len(repr(report)) < 300
+    assert repr(report).endswith("classes not imported; .summary() lists every element)")
+    rows = len(report.kept) + len(report.dropped) + len(report.skipped)
+    assert len(report.summary().splitlines()) == 1 + rows

@@ -173,6 +173,10 @@ class ImportReport:
     dropped: tuple[tuple[str, str, str, str], ...]
     skipped: tuple[tuple[str, int, str], ...]
 
+    def __repr__(self) -> str:
+        return (f"ImportReport({self.path!r}: kept {len(self.kept)}, dropped {len(self.dropped)}, "
+                f"{len(self.skipped)} classes not imported; .summary() lists every element)")
+
     def summary(self) -> str:
         """The report as readable text: counts, then one line per kept and dropped element."""
         lines = [f"IFC import of {self.path}: kept {len(self.kept)}, dropped {len(self.dropped)}, "
