@@ -33,13 +33,13 @@ set), ``--detector-model`` / ``--refiner-model`` other files; ``--keep DIR`` kee
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 import tempfile
 from pathlib import Path
 
 from localization.metrics import pooled_scores
 from uav_struct_env.study import StudyConfig, run_study
+from uav_struct_env.study.cells import read_records_csv
 
 ACTIVITIES = ("none", "light", "busy")
 #: imaging name -> (StudyConfig.camera, StudyConfig.imaging)
@@ -51,8 +51,7 @@ SUMMARY_METHODS = ("slab_corners", "opening_corners", "column_tops")
 
 def read_per_image(per_image: Path) -> list[dict]:
     """The rows of a study's ``per_image.csv`` (strings, as ``csv.DictReader`` gives them)."""
-    with per_image.open() as f:
-        return list(csv.DictReader(f))
+    return read_records_csv(per_image)
 
 
 def posable_views(rows: list[dict], method: str, at_least: int = 4) -> tuple[int, int, float]:

@@ -1,4 +1,3 @@
-import csv
 import json
 import math
 import subprocess
@@ -10,6 +9,7 @@ import pytest
 import uav_struct_env
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.study import METHODS, StudyConfig
+from uav_struct_env.study.cells import read_records_csv
 from uav_struct_env.study.study import main
 
 SCHEMA_KEYS = {
@@ -98,8 +98,9 @@ def test_quick_study_writes_the_schema_with_finite_computed_numbers(quick_study)
 
 def test_quick_study_csv_has_one_row_per_method_and_image(quick_study):
     out, _ = quick_study
-    with (out / "per_image.csv").open() as fh:
-        rows = list(csv.DictReader(fh))
+    first = (out / "per_image.csv").read_text().splitlines()[0]
+    assert first.startswith("# Settings: uav-struct-env ") and "seed 0" in first
+    rows = read_records_csv(out / "per_image.csv")
     assert len(rows) == 8 * len(METHODS)
     assert {
         "method",
@@ -243,11 +244,10 @@ def test_quick_study_detections_csv_sums_to_the_per_image_counts(quick_study):
     """detections.csv has one row per detection, and its rows add up to per_image.csv's counts."""
     out, stdout = quick_study
     assert "detections.csv" in stdout
-    with (out / "per_image.csv").open() as fh:
-        images = [r for r in csv.DictReader(fh) if r["method"] in
-                  {m.key for m in METHODS if m.structural}]
-    with (out / "detections.csv").open() as fh:
-        dets = list(csv.DictReader(fh))
+    images = [r for r in read_records_csv(out / "per_image.csv") if r["method"] in
+              {m.key for m in METHODS if m.structural}]
+    assert (out / "detections.csv").read_text().startswith("# Settings: uav-struct-env ")
+    dets = read_records_csv(out / "detections.csv")
     assert images and dets
     for img in images:
         mine = [d for d in dets if (d["method"], d["uav"], d["viewpoint"]) ==

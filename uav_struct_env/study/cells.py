@@ -42,17 +42,28 @@ def write_records_csv(
     record_type: type,
     rows: Sequence[Any],
     lead: tuple[Sequence[str], Sequence[Sequence[Any]]] = ((), ()),
+    comment: str | None = None,
 ) -> None:
     """Dataclass records of ``record_type`` as CSV, one row each, its fields as the columns.
 
     ``lead``: ``(names, values)``, columns written before the record's, ``values[i]`` for row
-    ``i`` (the sweep's ``site`` and ``seed`` of the run each row came from).
+    ``i`` (the sweep's ``site`` and ``seed`` of the run each row came from). ``comment``: a first
+    line ``# <comment>`` (how the file was made; :func:`read_records_csv` and
+    ``pandas.read_csv(path, comment="#")`` skip it).
     """
     names, values = lead
     fields = [*names, *(f.name for f in dataclasses.fields(record_type))]
     with atomic_path(path) as tmp, tmp.open("w", newline="") as fh:
+        if comment is not None:
+            fh.write("# " + " ".join(comment.split()) + "\n")
         writer = csv.DictWriter(fh, fieldnames=fields)
         writer.writeheader()
         for i, r in enumerate(rows):
             writer.writerow({**(dict(zip(names, values[i], strict=True)) if names else {}),
                              **dataclasses.asdict(r)})
+
+
+def read_records_csv(path: Path) -> list[dict[str, str]]:
+    """The rows of a CSV written by :func:`write_records_csv` (strings), its ``#`` lines skipped."""
+    with Path(path).open(newline="") as fh:
+        return list(csv.DictReader(line for line in fh if not line.startswith("#")))

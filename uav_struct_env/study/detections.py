@@ -95,6 +95,6 @@ def detection_rows(
     ]
 
 
-def write_detections_csv(path: Path, rows: Sequence[DetectionRow]) -> None:
-    """Every detection row, in the order given."""
-    write_records_csv(path, DetectionRow, rows)
+def write_detections_csv(path: Path, rows: Sequence[DetectionRow], comment: str | None = None) -> None:
+    """Every detection row, in the order given (``comment``: a first ``#`` line, the settings)."""
+    write_records_csv(path, DetectionRow, rows, comment=comment)

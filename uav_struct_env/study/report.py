@@ -154,9 +154,9 @@ def write_results_json(path: Path, results: dict) -> None:
     atomic_write_json(path, results, indent=2, allow_nan=False)
 
 
-def write_csv(path: Path, rows: Sequence[ImageResult]) -> None:
-    """Every per-image result, one row each."""
-    write_records_csv(path, ImageResult, rows)
+def write_csv(path: Path, rows: Sequence[ImageResult], comment: str | None = None) -> None:
+    """Every per-image result, one row each (``comment``: a first ``#`` line, the settings)."""
+    write_records_csv(path, ImageResult, rows, comment=comment)
 
 
 #: The paper's protocol (StudyConfig's defaults): viewpoints per UAV and UAVs; fewer is ``--quick``.

@@ -104,8 +104,9 @@ def run_study(
         write_results_json(stage / "results.json", results)
         (stage / "table1.md").write_text(table1_markdown(results))
         (stage / "table2.md").write_text(table2_markdown(results))
-        write_csv(stage / "per_image.csv", rows)
-        write_detections_csv(stage / "detections.csv", detections)
+        made = f"Settings: {settings_line(results)}"
+        write_csv(stage / "per_image.csv", rows, comment=made)
+        write_detections_csv(stage / "detections.csv", detections, comment=made)
         if figures:
             settings = settings_line(results)
             plot_fig2(overlays, stage / "fig2_associations.png", settings)
