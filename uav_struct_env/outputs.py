@@ -107,6 +107,19 @@ def lock_path(target: str | Path) -> Path:
     return real.parent / f".{real.name}.lock"
 
 
+def _run_entries(out: Path) -> list[str]:
+    """The names in ``out`` a run wrote: neither leftovers of an interrupted run nor the lock."""
+    return sorted(e for e in os.listdir(out) if not _leftover(e) and e != INSIDE_LOCK)
+
+
+def _busy(what: str, target: Path, holder: str) -> OutputBusyError:
+    """The error for ``target`` while another run (``holder``, described) is writing it."""
+    return OutputBusyError(
+        f"{what} {str(target)!r} is being written by another run ({holder}); wait for it "
+        "to finish or choose another output folder"
+    )
+
+
 def _describe_holder(text: str) -> str:
     pid, _, command = text.strip().partition(" ")
     if not pid.isdigit():
@@ -196,10 +209,7 @@ def _take(target: Path, path: Path, what: str) -> int:
         except BlockingIOError:
             holder = _describe_holder(_read_holder(fd))
             os.close(fd)
-            raise OutputBusyError(
-                f"{what} {str(target)!r} is being written by another run ({holder}); wait for it "
-                "to finish or choose another output folder"
-            ) from None
+            raise _busy(what, target, holder) from None
         if not _same_file(fd, path):  # unlinked by its last holder after we opened it
             os.close(fd)
             continue
@@ -293,11 +303,8 @@ def check_no_earlier_run(out: Path, flag: str = "--overwrite") -> None:
     """
     holder = _busy_elsewhere(Path(out))
     if holder is not None:
-        raise OutputBusyError(
-            f"output folder {str(out)!r} is being written by another run ({holder}); wait for it "
-            "to finish or choose another output folder"
-        )
-    entries = sorted(e for e in os.listdir(out) if not _leftover(e) and e != INSIDE_LOCK)
+        raise _busy("output folder", Path(out), holder)
+    entries = _run_entries(Path(out))
     if entries:
         shown = ", ".join(entries[:4]) + (f" and {len(entries) - 4} more" if len(entries) > 4 else "")
         raise OutputExistsError(
@@ -314,8 +321,7 @@ def remove_earlier_run(out: str | Path, names: Sequence[str]) -> list[str]:
     runs' files would sit side by side and be read as one run.
     """
     out = Path(out)
-    gone = sorted(e for e in os.listdir(out)
-                  if not _leftover(e) and e != INSIDE_LOCK and any(fnmatch.fnmatch(e, g) for g in names))
+    gone = [e for e in _run_entries(out) if any(fnmatch.fnmatch(e, g) for g in names)]
     for name in gone:
         _remove(out / name)
     return gone
