@@ -25,6 +25,7 @@ import numpy as np
 
 import localization
 from localization.detect.interface import Detections
+from localization.geometry.camera import PAPER_IMAGE_SIZE, PAPER_K
 from localization.geometry.transforms import look_at, project, quat_wxyz_from_matrix
 from localization.metrics import association_scores, pose_errors
 from localization.pipeline import Localizer
@@ -75,11 +76,11 @@ def _scene(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
 def _localize_views(landmarks: np.ndarray, K: np.ndarray, rng: np.random.Generator, **kwargs) -> None:
     views = [look_at([4.0 + dx, -20.0, 15.0], [4.0, 5.5, 4.0]) for dx in (-6.0, 0.0, 6.0)]
     for association in ("robust", "paper"):
-        loc = Localizer(landmarks, K, association=association, image_size=(1280, 720), **kwargs)
+        loc = Localizer(landmarks, K, association=association, image_size=PAPER_IMAGE_SIZE, **kwargs)
         for k, truth in enumerate(views):
             uv, _ = project(K, truth, landmarks)
             clean = uv + rng.normal(0.0, 1.0, uv.shape)
-            cluttered = np.vstack([clean[1:], rng.uniform([0, 0], [1280, 720], (3, 2))])
+            cluttered = np.vstack([clean[1:], rng.uniform([0, 0], PAPER_IMAGE_SIZE, (3, 2))])
             for det in (clean, cluttered):
                 est = loc.localize(det, paper_prior(truth, k))
                 if est.success:
@@ -103,7 +104,7 @@ def warm_up(announce: Callable[[str], None] | None = print) -> float:
         announce(COMPILING)
     t0 = time.perf_counter()
     rng = np.random.default_rng(0)
-    K = np.array([[1108.5, 0.0, 640.0], [0.0, 1108.5, 360.0], [0.0, 0.0, 1.0]])
+    K = PAPER_K
     tops, slab = _scene(rng)
     for landmarks in (tops, slab):
         _localize_views(landmarks, K, rng)
