@@ -240,13 +240,13 @@ def _safe_footprint(tri: NDArray[np.float64]) -> NDArray[np.float64] | None:
     """:func:`_footprint`, None where the plan geometry is degenerate (the element is then dropped)."""
     try:
         return _footprint(tri)
-    except (SiteGeometryError, ValueError):
+    except ValueError:  # SiteGeometryError included
         return None
 
 
-def _degenerate(r: _Raw, exc: Exception) -> _Row:
-    """The report row of element ``r`` dropped because its geometry cannot make an element."""
-    return (r.guid, r.ifc_class, r.name, f"degenerate geometry, dropped: {exc}")
+def _degenerate(guid: str, ifc_class: str, name: str, exc: Exception) -> _Row:
+    """The report row of an element dropped because its geometry cannot make an element."""
+    return (guid, ifc_class, name, f"degenerate geometry, dropped: {exc}")
 
 
 def _ring(points: Any) -> NDArray[np.float64]:
@@ -752,8 +752,8 @@ def _slab_outline(group: list[_Raw], tops: dict[str, _Top]) -> tuple[list[tuple[
             holes = _slab_openings(part, notches, voids, pguid, pname, failed)
             slab = Slab(guid=pguid, name=pname, storey=first.storey, outline=outer, z_bottom=z_bottom,
                         z_top=z_top, mesh=mesh, holes=holes)
-        except (SiteGeometryError, ValueError) as exc:
-            failed.append((pguid, first.ifc_class, pname, f"degenerate geometry, dropped: {exc}"))
+        except ValueError as exc:  # SiteGeometryError included
+            failed.append(_degenerate(pguid, first.ifc_class, pname, exc))
             continue
         out.append(((1, first.storey, first.order, k), slab))
     return out, failed
@@ -797,8 +797,8 @@ def _rendered_slabs(
         try:
             slab = Slab(guid=r.guid, name=r.name, storey=r.storey, outline=fp, z_bottom=r.zmin,
                         z_top=r.zmax, mesh=_mesh_of([r.tri]), structural=False)
-        except (SiteGeometryError, ValueError) as exc:
-            dropped.append(_degenerate(r, exc))
+        except ValueError as exc:  # SiteGeometryError included
+            dropped.append(_degenerate(r.guid, r.ifc_class, r.name, exc))
             continue
         elements.append(((1, r.storey, r.order, 0), slab))
         kept.append((r.guid, r.ifc_class, r.name, why))
@@ -830,8 +830,8 @@ def _columns_beams_walls(
         try:
             element = _ELEMENT_CLASS[r.kind](guid=r.guid, name=r.name, storey=r.storey, outline=fp,
                                              z_bottom=r.zmin, z_top=r.zmax, mesh=_mesh_of([r.tri]), **extra)
-        except (SiteGeometryError, ValueError) as exc:
-            dropped.append(_degenerate(r, exc))
+        except ValueError as exc:  # SiteGeometryError included
+            dropped.append(_degenerate(r.guid, r.ifc_class, r.name, exc))
             continue
         if r.kind == "column":
             columns += 1
