@@ -124,3 +124,21 @@ def test_the_report_prints_short_and_its_summary_lists_every_element():
     assert repr(report).endswith("classes not imported; .summary() lists every element)")
     rows = len(report.kept) + len(report.dropped) + len(report.skipped)
     assert len(report.summary().splitlines()) == 1 + rows
+
+
+def test_same_named_elements_whose_guids_share_a_long_prefix_get_unique_names(tmp_path):
+    """Revit copies an element level by level: the copies' GlobalIds can share 14 characters."""
+    import ifcopenshell
+
+    path = messy_site().to_ifc(tmp_path / "copies.ifc")
+    f = ifcopenshell.open(str(path))
+    columns = sorted(f.by_type("IfcColumn"), key=lambda c: c.Tag)[:3]
+    for k, c in enumerate(columns):
+        c.Name = "Column:600x600:1"
+        c.GlobalId = "0ZBert7zf3GhTh" + "dO12NKA" + "abc"[k]  # 22 characters, same first 21
+    f.write(str(path))
+    site = load_ifc(path)
+    names = [e.name for e in site.elements if e.kind == "column"]
+    assert len(set(names)) == len(names)
+    copies = sorted(n for n in names if n.startswith("Column:600x600:1 ["))
+    assert copies == [f"Column:600x600:1 [0ZBert7zf3GhThdO12NKA{c}]" for c in "abc"]

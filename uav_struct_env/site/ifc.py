@@ -57,7 +57,8 @@ opening too small to outline is dropped while its slab is kept.
 
 Storeys come from IfcBuildingStorey, in elevation order (its placement's z in metres); an element
 belongs to the storey that contains it (through aggregates), else the highest storey at or below
-its bottom. Names of one kind are made unique by appending ``[<guid prefix>]``. The floor of a
+its bottom. Names of one kind are made unique by appending ``[<guid prefix>]`` (8 characters, more
+where 8 do not tell them apart). The floor of a
 storey is its flat structural slabs. Stages, in build order, for each storey with a floor:
 ``"<storey>/slab"`` = every kept element of lower storeys plus the floors up to this one;
 ``"<storey>/columns"`` (only when the storey contains columns) = plus those columns. Imported
@@ -844,12 +845,26 @@ def _columns_beams_walls(
 def _in_order(keyed: list[tuple[tuple, Element]]) -> tuple[Element, ...]:
     """The elements in element order (kind, storey, file order), names unique within a kind.
 
-    A name used twice in a kind gets its guid prefix.
+    A name used twice in a kind gets its guid's prefix: the first 8 characters, or as many as
+    tell that name's elements apart (exports copy elements level by level and their GlobalIds
+    can share 14 characters).
     """
     ordered = [e for _, e in sorted(keyed, key=lambda t: t[0])]
-    name_counts = Counter((e.kind, e.name) for e in ordered)
-    return tuple(e if name_counts[(e.kind, e.name)] == 1
-                 else dataclasses.replace(e, name=f"{e.name} [{e.guid[:8]}]") for e in ordered)
+    groups: dict[tuple[str, str], list[str]] = {}
+    for e in ordered:
+        groups.setdefault((e.kind, e.name), []).append(e.guid)
+    width = {key: _distinct_prefix(guids) for key, guids in groups.items() if len(guids) > 1}
+    return tuple(e if (e.kind, e.name) not in width
+                 else dataclasses.replace(e, name=f"{e.name} [{e.guid[:width[(e.kind, e.name)]]}]")
+                 for e in ordered)
+
+
+def _distinct_prefix(guids: list[str], shortest: int = 8) -> int:
+    """The fewest leading characters (at least ``shortest``) that tell ``guids`` apart."""
+    width = shortest
+    while len({g[:width] for g in guids}) < len(guids) and width < max(map(len, guids)):
+        width += 1
+    return width
 
 
 def _stages(
