@@ -32,6 +32,13 @@ number of EGL clients coexist and each renders exactly what a fresh process rend
 If libEGL cannot be reached through ctypes, at most one EGL client is allowed per process and a
 second raises :class:`RendererUnavailableError` (``"auto"`` then falls back to TinyRenderer).
 
+**The first EGL frame.** A client's first ``getCameraImage`` through the plugin differs from every
+later render of the same request (measured with pybullet 3.2.7 and Mesa llvmpipe at 1280 x 720: 200-1,000
+pixels of six random views of the paper site; the second and third renders agree exactly, and a
+throwaway frame of another size leaves a pixel different). Which frame of a world came first
+depends on how the work is split (the study's ``--workers``), so an EGL client renders its first
+request twice and returns the second (:meth:`RenderClient.render`; ``tests/sim/test_client.py``).
+
 pybullet prints "pybullet build time: ..." on the C-level stderr when it is imported, and the EGL
 plugin its device choice (stderr), OpenGL banner and per-frame chatter (stdout). None of it may
 reach a user's terminal between progress bars: pybullet is imported here, once, with file
@@ -214,6 +221,8 @@ class RenderClient:
         self.client_id = -1
         self._closed = True
         self._egl_state: tuple[int, int, int, int] | None = None
+        #: False until the first EGL frame has been rendered (and discarded: module docstring).
+        self._primed = backend != "egl"
         if backend == "egl" and _LIVE_EGL and _EglApi.get() is None:
             raise RendererUnavailableError(
                 f"EGL client {next(iter(_LIVE_EGL))} is alive and libEGL cannot be reached through "
@@ -296,6 +305,9 @@ class RenderClient:
         if self._closed:
             raise RuntimeError("this RenderClient is closed")
         self.activate()
+        if not self._primed:
+            self._primed = True
+            self.render(view, camera, segmentation=segmentation, light=light)
         if self.backend == "tiny":
             du, dv = TINY_PIXEL_SHIFT
             shifted = camera._replaced(cx=camera.cx - du, cy=camera.cy - dv)
