@@ -38,8 +38,8 @@ from uav_struct_env.photos.georef import Georeference, read_control_points, read
 from uav_struct_env.photos.metadata import PhotoMetadata, read_metadata
 from uav_struct_env.photos.prior import PhotoPrior, prior_from_metadata, prior_from_string
 
-__all__ = ["MAX_DISTANCE_M", "PhotoJob", "PhotoPose", "localize_photos", "prepare_photos",
-           "resolve_georeference"]
+__all__ = ["MAX_DISTANCE_M", "PhotoJob", "PhotoPlan", "PhotoPose", "localize_photos", "plan_photos",
+           "pose_summary", "prepare_photos", "resolve_georeference", "run_plan"]
 
 #: A photo whose prior lies farther than this from the building's plan is refused, m.
 MAX_DISTANCE_M = 500.0
@@ -201,54 +201,92 @@ def _localize_one(job: PhotoJob, stacks: _Stacks) -> PhotoPose:
     )
 
 
-def localize_photos(
+@dataclass(frozen=True, eq=False)
+class PhotoPlan:
+    """Everything checked before the work: the site at its stage, the georeferencing, the jobs.
+
+    Attributes:
+        ifc: the IFC file.
+        site: the :class:`~uav_struct_env.site.Site` at the stage localized against.
+        landmarks: the landmark set's name.
+        georef: the georeferencing used (None with a user prior).
+        jobs: one :class:`PhotoJob` per photo, in order.
+    """
+
+    ifc: Path
+    site: Any
+    landmarks: str
+    georef: Georeference | None
+    jobs: list[PhotoJob]
+
+
+def plan_photos(
     photos: Sequence[str | os.PathLike], ifc: str | os.PathLike, *, stage: str | None = None,
     landmarks: str = "all", camera: str | os.PathLike | CameraModel | None = None,
     georef: Georeference | str | None = None, control_points: str | os.PathLike | None = None,
     prior: str | None = None, takeoff_z: float | None = None, prior_sigmas: PriorSigmas | None = None,
-    max_distance_m: float = MAX_DISTANCE_M, detector: Any = "learned",
-    progress: Callable[[int], None] | None = None,
+    max_distance_m: float = MAX_DISTANCE_M,
+) -> PhotoPlan:
+    """Load the IFC stage and check every photo's inputs; localize nothing (:func:`localize_photos`).
+
+    Raises:
+        PhotoError, FileNotFoundError: an input that cannot work.
+        IfcImportError, ConfigError: an IFC file or stage that cannot be loaded.
+    """
+    from uav_struct_env.site import LANDMARK_SETS, load_ifc
+
+    if landmarks not in LANDMARK_SETS or landmarks == "aruco":
+        raise PhotoError(f"landmarks must be one of {[n for n in LANDMARK_SETS if n != 'aruco']}, got {landmarks!r}")
+    site = load_ifc(ifc, stage)
+    n = len(site.landmarks(landmarks))
+    if n < 4:
+        raise PhotoError(f"stage {site.stage!r} of {str(ifc)!r} exposes {n} {landmarks} landmarks; at least 4 "
+                         "are needed")
+    geo = resolve_georeference(ifc, georef, control_points)
+    jobs = prepare_photos(photos, site, georef=geo, camera=camera, prior=prior, takeoff_z=takeoff_z,
+                          prior_sigmas=prior_sigmas, max_distance_m=max_distance_m)
+    return PhotoPlan(Path(ifc), site, landmarks, geo, jobs)
+
+
+def run_plan(plan: PhotoPlan, detector: Any = "learned",
+             progress: Callable[[int], None] | None = None) -> list[PhotoPose]:
+    """Localize every photo of a :class:`PhotoPlan`; ``progress`` is called with 1 after each."""
+    stacks = _Stacks(plan.site, plan.landmarks, detector)
+    out = []
+    for job in plan.jobs:
+        out.append(_localize_one(job, stacks))
+        if progress is not None:
+            progress(1)
+    return out
+
+
+def localize_photos(
+    photos: Sequence[str | os.PathLike], ifc: str | os.PathLike, *, detector: Any = "learned",
+    progress: Callable[[int], None] | None = None, **options: Any,
 ) -> list[PhotoPose]:
     """Localize each photo in the IFC's project frame (module docstring).
 
     Args:
         photos: JPEG (or any Pillow-readable) files.
         ifc: the building's IFC file.
-        stage: an :func:`~uav_struct_env.site.ifc_stages` name; None: the last.
-        landmarks: landmark set (``all``, ``slab_corners``, ``opening_corners``, ``column_tops``).
-        camera: a calibration file or :class:`CameraModel`; None: from EXIF (warns).
-        georef: a :class:`Georeference` or ``"E,N,H,rotation_deg,EPSG"``; None: the IFC's.
-        control_points: a CSV of ``x,y,z,lat,lon,alt`` rows (instead of ``georef``).
-        prior: ``"x,y,z,yaw,pitch,roll"`` for every photo instead of their metadata.
-        takeoff_z: project height of the take-off point (height from RelativeAltitude).
-        prior_sigmas: override of the prior sigmas (:mod:`uav_struct_env.photos.prior`).
-        max_distance_m: refusal distance of a prior from the building's plan, m.
         detector: ``"learned"`` (default) or a :class:`localization.Detector` object.
         progress: called with 1 after each photo.
+        **options: :func:`plan_photos`'s: ``stage`` (an :func:`~uav_struct_env.site.ifc_stages`
+            name; None: the last), ``landmarks`` (default ``all``), ``camera`` (a calibration file
+            or :class:`CameraModel`; None: EXIF, with a warning), ``georef`` (a
+            :class:`Georeference` or ``"E,N,H,rotation_deg,EPSG"``; None: the IFC's),
+            ``control_points`` (a CSV of ``x,y,z,lat,lon,alt``), ``prior``
+            (``"x,y,z,yaw,pitch,roll"`` for every photo), ``takeoff_z`` (m), ``prior_sigmas``,
+            ``max_distance_m``.
 
     Returns:
-        One :class:`PhotoPose` per photo, in order.
+        One :class:`PhotoPose` per photo, in order: pose, 6x6 covariance, identities, failure reason.
 
     Raises:
         PhotoError, FileNotFoundError: an input that cannot work, before any photo is localized.
         IfcImportError, ConfigError: an IFC file or stage that cannot be loaded.
     """
-    from uav_struct_env.site import load_ifc
-
-    site = load_ifc(ifc, stage)
-    if len(site.landmarks(landmarks)) < 4:
-        raise PhotoError(f"stage {site.stage!r} of {str(ifc)!r} exposes {len(site.landmarks(landmarks))} "
-                         f"{landmarks} landmarks; at least 4 are needed")
-    geo = resolve_georeference(ifc, georef, control_points)
-    jobs = prepare_photos(photos, site, georef=geo, camera=camera, prior=prior, takeoff_z=takeoff_z,
-                          prior_sigmas=prior_sigmas, max_distance_m=max_distance_m)
-    stacks = _Stacks(site, landmarks, detector)
-    out = []
-    for job in jobs:
-        out.append(_localize_one(job, stacks))
-        if progress is not None:
-            progress(1)
-    return out
+    return run_plan(plan_photos(photos, ifc, **options), detector, progress)
 
 
 def pose_summary(pose: PhotoPose) -> dict[str, Any]:
