@@ -21,8 +21,8 @@ def test_an_ifc_without_georeferencing_gives_none(plain_ifc):
 
 def test_project_origin_maps_to_the_stated_eastings_northings():
     g = Georeference((691000.0, 5334000.0, 500.0), 0.3, crs="EPSG:32632")
-    np.testing.assert_allclose(g.map_from_project([[0, 0, 0], [1, 0, 0]]),
-                               [[691000, 5334000, 500], [691000 + math.cos(0.3), 5334000 + math.sin(0.3), 500]])
+    expected = [[691000, 5334000, 500], [691000 + math.cos(0.3), 5334000 + math.sin(0.3), 500]]
+    np.testing.assert_allclose(g.map_from_project([[0, 0, 0], [1, 0, 0]]), expected)
 
 
 @pytest.mark.parametrize("scale", [1.0, 0.001])

@@ -24,7 +24,8 @@ STAGE = "Level 1/slab"
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory, georef_ifc):
     folder = tmp_path_factory.mktemp("flight")
-    env = uav_struct_env.parallel_env(site=load_ifc(georef_ifc, STAGE), noise="gnss_ins", image_size=(640, 360))
+    site = load_ifc(georef_ifc, STAGE)
+    env = uav_struct_env.parallel_env(site=site, noise="gnss_ins", image_size=(640, 360))
     try:
         obs, infos = env.reset(seed=5)
     finally:

@@ -44,7 +44,8 @@ def test_rtk_fixed_takes_the_stds_or_the_defaults(tmp_path):
 
 def test_a_photo_without_a_prior_is_refused_naming_what_is_missing(tmp_path):
     meta = PhotoMetadata(tmp_path / "p.jpg", (640, 360), dji={"GimbalYawDegree": 1.0})
-    with pytest.raises(PhotoError, match=r"lacks a GPS position .*; an altitude .*; the gimbal attitude .*--prior"):
+    missing = r"lacks a GPS position .*; an altitude .*; the gimbal attitude .*--prior"
+    with pytest.raises(PhotoError, match=missing):
         prior_from_metadata(meta, G)
 
 

@@ -125,7 +125,8 @@ def _odm(name: str, cameras: dict, photo_size: tuple[int, int]) -> tuple[NDArray
     c = fitting[0] if fitting else next(iter(cameras.values()))
     kind = c.get("projection_type")
     if kind not in ("brown", "perspective"):
-        raise PhotoError(f"{name}: projection_type {kind!r} is not supported; expected 'brown' or 'perspective'")
+        raise PhotoError(f"{name}: projection_type {kind!r} is not supported; expected 'brown' or "
+                         "'perspective'")
     try:
         w, h = int(c["width"]), int(c["height"])
         size = max(w, h)
@@ -189,7 +190,8 @@ def load_calibration(path: str | Path, photo_size: tuple[int, int]) -> CameraMod
     try:
         data = _read_file(path)
     except Exception as err:  # json, yaml and OpenCV each raise their own parse errors
-        raise PhotoError(f"{name} does not parse ({type(err).__name__}: {' '.join(str(err).split())})") from None
+        detail = " ".join(str(err).split())
+        raise PhotoError(f"{name} does not parse ({type(err).__name__}: {detail})") from None
     if not isinstance(data, dict) or not data:
         raise PhotoError(f"{name} holds no camera (expected OpenCV, JSON or OpenDroneMap cameras.json)")
     if all(isinstance(v, dict) and "projection_type" in v for v in data.values()):
@@ -207,7 +209,8 @@ def _scaled(name: str, K: NDArray, dist: NDArray, size: tuple[int, int] | None,
     sx, sy = photo_size[0] / size[0], photo_size[1] / size[1]
     if abs(sx - sy) > 1e-3 * max(sx, sy):
         raise PhotoError(f"{name} is for {size[0]} x {size[1]} images, the photo is {photo_size[0]} x "
-                         f"{photo_size[1]}: another aspect ratio (crop or rotation); calibrate at the photo's size")
+                         f"{photo_size[1]}: another aspect ratio (crop or rotation); calibrate at the "
+                         "photo's size")
     S = np.array([[sx, 0, 0], [0, sy, 0], [0, 0, 1.0]])
     K2 = S @ K
     K2[0, 2], K2[1, 2] = (K[0, 2] + 0.5) * sx - 0.5, (K[1, 2] + 0.5) * sy - 0.5
@@ -229,7 +232,8 @@ def camera_from_exif(meta: PhotoMetadata) -> CameraModel:
         how = "DJI CalibratedFocalLength"
     elif meta.focal_length_mm and meta.model in SENSOR_WIDTH_MM:
         f = meta.focal_length_mm / SENSOR_WIDTH_MM[meta.model] * w
-        how = f"EXIF FocalLength {meta.focal_length_mm:g} mm, {meta.model} sensor {SENSOR_WIDTH_MM[meta.model]} mm"
+        how = (f"EXIF FocalLength {meta.focal_length_mm:g} mm, {meta.model} sensor "
+               f"{SENSOR_WIDTH_MM[meta.model]} mm")
     elif meta.focal_length_35mm:
         f = meta.focal_length_35mm * math.hypot(w, h) / DIAGONAL_35MM
         how = f"EXIF FocalLengthIn35mmFilm {meta.focal_length_35mm:g} mm"

@@ -21,7 +21,14 @@ from localization import PriorSigmas
 from localization.geometry.attitude import attitude_from_world_from_cam
 from uav_struct_env.outputs import StagedOutput, atomic_write_json
 from uav_struct_env.photos.errors import PhotoError
-from uav_struct_env.photos.localize import MAX_DISTANCE_M, PhotoPlan, PhotoPose, plan_photos, pose_summary, run_plan
+from uav_struct_env.photos.localize import (
+    MAX_DISTANCE_M,
+    PhotoPlan,
+    PhotoPose,
+    plan_photos,
+    pose_summary,
+    run_plan,
+)
 from uav_struct_env.provenance import software
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_input_file, check_output_dir, refuse
 
@@ -33,7 +40,7 @@ LOCALIZE_FILES = ("poses.json", "poses.csv", "flight_summary.png", "overlays")
 
 @dataclass(frozen=True)
 class PoseRow:
-    """One poses.csv row: the estimate (project frame; the prior's values when failed), its stds, the prior."""
+    """One poses.csv row: the estimate (project frame; the prior when failed), its stds, the prior."""
 
     photo: str
     status: str
@@ -121,7 +128,8 @@ def write_outputs(folder: Path, plan: PhotoPlan, poses: Sequence[PhotoPose], set
     """poses.csv, poses.json and (``figures``) the overlays and the flight summary into ``folder``."""
     from uav_struct_env.study.cells import write_records_csv
 
-    write_records_csv(folder / "poses.csv", PoseRow, [pose_row(p) for p in poses], comment=f"Settings: {settings}")
+    rows = [pose_row(p) for p in poses]
+    write_records_csv(folder / "poses.csv", PoseRow, rows, comment=f"Settings: {settings}")
     if figures:
         from uav_struct_env.photos.localize import _load_rgb
         from uav_struct_env.photos.overlay import plot_flight_summary, plot_overlay
@@ -152,15 +160,17 @@ def _parser() -> CommandParser:
     p.add_argument("--georef", default=None,
                    help="E,N,H,rotation_deg,EPSG for an IFC without IfcMapConversion (default: the IFC's)")
     p.add_argument("--control-points", default=None,
-                   help="CSV of >= 3 surveyed points x,y,z,lat,lon,alt (project m, WGS84 deg, m) instead of --georef")
+                   help="CSV of >= 3 surveyed points x,y,z,lat,lon,alt (project m, WGS84 deg, m) "
+                   "instead of --georef")
     p.add_argument("--prior", default=None,
-                   help="x,y,z,yaw,pitch,roll (project frame, m, deg) for every photo instead of its metadata")
+                   help="x,y,z,yaw,pitch,roll (project frame, m, deg) for every photo instead of its "
+                   "metadata")
     p.add_argument("--takeoff-z", type=float, default=None,
                    help="project-frame height of the take-off point, m: height from RelativeAltitude instead "
                    "of the absolute altitude")
     p.add_argument("--prior-sigmas", default=None,
-                   help="H,V,TILT_DEG,YAW_DEG prior standard deviations (default: from RtkFlag, else consumer "
-                   "GNSS 3 m, 5 m, 2 deg, 5 deg)")
+                   help="H,V,TILT_DEG,YAW_DEG prior standard deviations (default: from RtkFlag, else "
+                   "consumer GNSS 3 m, 5 m, 2 deg, 5 deg)")
     p.add_argument("--max-distance", type=float, default=MAX_DISTANCE_M,
                    help="refuse a photo whose prior lies farther than this from the building's plan, m")
     p.add_argument("--out", default="localized", help="output folder")

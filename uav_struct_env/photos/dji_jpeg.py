@@ -100,8 +100,10 @@ def write_dji_jpeg(path: str | Path, rgb: ArrayLike, fields: Mapping[str, float]
         rgb: the pixels.
         fields: ``drone-dji:`` fields (:data:`~uav_struct_env.photos.metadata.DJI_FIELDS` names);
             ``GpsLatitude``/``GpsLongitude``/``AbsoluteAltitude`` also go into the EXIF GPS IFD.
-        make, model: EXIF and ``tiff:`` Make and Model.
-        focal_length_mm, focal_length_35mm: EXIF focal lengths, or None to leave them out.
+        make: EXIF and ``tiff:`` Make.
+        model: EXIF and ``tiff:`` Model (DJI's camera code, ``L1D-20c`` for the Mavic 2 Pro).
+        focal_length_mm: EXIF FocalLength, or None to leave it out.
+        focal_length_35mm: EXIF FocalLengthIn35mmFilm, or None to leave it out.
         quality: JPEG quality.
 
     Raises:
@@ -117,7 +119,8 @@ def write_dji_jpeg(path: str | Path, rgb: ArrayLike, fields: Mapping[str, float]
     exif[ExifTags.Base.Make], exif[ExifTags.Base.Model] = make, model
     sub = exif.get_ifd(ExifTags.IFD.Exif)
     if focal_length_mm:
-        sub[ExifTags.Base.FocalLength] = TiffImagePlugin.IFDRational(Fraction(focal_length_mm).limit_denominator(1000))
+        focal = Fraction(focal_length_mm).limit_denominator(1000)
+        sub[ExifTags.Base.FocalLength] = TiffImagePlugin.IFDRational(focal)
     if focal_length_35mm:
         sub[ExifTags.Base.FocalLengthIn35mmFilm] = int(round(focal_length_35mm))
     if "GpsLatitude" in fields and "GpsLongitude" in fields:
@@ -131,7 +134,8 @@ def write_dji_jpeg(path: str | Path, rgb: ArrayLike, fields: Mapping[str, float]
         if "AbsoluteAltitude" in fields:
             alt = fields["AbsoluteAltitude"]
             gps[ExifTags.GPS.GPSAltitudeRef] = b"\x00" if alt >= 0 else b"\x01"
-            gps[ExifTags.GPS.GPSAltitude] = TiffImagePlugin.IFDRational(Fraction(round(abs(alt) * 1000), 1000))
+            millimetres = Fraction(round(abs(alt) * 1000), 1000)
+            gps[ExifTags.GPS.GPSAltitude] = TiffImagePlugin.IFDRational(millimetres)
     out = Path(path)
     Image.fromarray(img).save(out, "JPEG", quality=int(quality), exif=exif.tobytes(), xmp=xmp)
     return out

@@ -141,7 +141,8 @@ class Georeference:
         """
         xyz = np.asarray(project_xyz, dtype=np.float64).reshape(-1, 3)
         lla = np.asarray(lat_lon_alt, dtype=np.float64).reshape(-1, 3)
-        if len(xyz) < 3 or len(xyz) != len(lla) or not np.all(np.isfinite(xyz)) or not np.all(np.isfinite(lla)):
+        finite = np.all(np.isfinite(xyz)) and np.all(np.isfinite(lla))
+        if len(xyz) < 3 or len(xyz) != len(lla) or not finite:
             raise PhotoError(f"control points: need >= 3 finite project (x, y, z) <-> (lat, lon, alt) pairs, "
                              f"got {len(xyz)} and {len(lla)}")
         crs = crs or utm_crs(lla[0, 0], lla[0, 1])
@@ -217,7 +218,8 @@ class Georeference:
         e, n, h = self.origin_m
         text = (f"{self.source or 'georeference'} E {e:.3f} N {n:.3f} H {h:.3f} m, x axis "
                 f"{math.degrees(self.rotation_rad):.4f} deg from east, scale {self.scale[0]:g}, {self.crs}")
-        return text + (f", control-point RMS {self.residual_m:.3f} m" if self.source == "control points" else "")
+        fitted = self.source == "control points"
+        return text + (f", control-point RMS {self.residual_m:.3f} m" if fitted else "")
 
 
 def _crs_fields(f: Any) -> tuple[str | None, float | None]:
@@ -256,7 +258,7 @@ def read_ifc_georeference(path: str | Path) -> Georeference | None:
     from uav_struct_env.site.ifc_export import require_ifcopenshell
 
     ifcopenshell = require_ifcopenshell()
-    import ifcopenshell.util.geolocation
+    import ifcopenshell.util.geolocation  # noqa: F811 (submodules of the module required above)
     import ifcopenshell.util.unit
 
     f = ifcopenshell.open(str(path))

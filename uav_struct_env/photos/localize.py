@@ -141,8 +141,9 @@ def prepare_photos(photos: Sequence[str | os.PathLike], site: Any, *, georef: Ge
     if not photos:
         raise PhotoError("no photos given")
     if georef is None and prior is None:
-        raise PhotoError("the IFC file states no georeferencing (IfcMapConversion + IfcProjectedCRS) and none "
-                         "was given: pass --georef E,N,H,rotation_deg,EPSG, --control-points FILE or --prior")
+        raise PhotoError("the IFC file states no georeferencing (IfcMapConversion + IfcProjectedCRS) and "
+                         "none was given: pass --georef E,N,H,rotation_deg,EPSG, --control-points FILE or "
+                         "--prior")
     jobs = []
     for photo in photos:
         meta = read_metadata(photo)
@@ -151,8 +152,9 @@ def prepare_photos(photos: Sequence[str | os.PathLike], site: Any, *, georef: Ge
              else prior_from_metadata(meta, georef, takeoff_z=takeoff_z, sigmas=prior_sigmas))
         distance = _plan_distance(site, p.position)
         if distance > max_distance_m:
-            raise PhotoError(f"{meta.path}: its prior lies {distance:.0f} m from the building's plan, more than "
-                             f"{max_distance_m:g} m: a wrong georeferencing (map units?) or another site")
+            raise PhotoError(f"{meta.path}: its prior lies {distance:.0f} m from the building's plan, more "
+                             f"than {max_distance_m:g} m: a wrong georeferencing (map units?) or another "
+                             "site")
         jobs.append(PhotoJob(meta, cam, p))
     return jobs
 
@@ -236,12 +238,13 @@ def plan_photos(
     from uav_struct_env.site import LANDMARK_SETS, load_ifc
 
     if landmarks not in LANDMARK_SETS or landmarks == "aruco":
-        raise PhotoError(f"landmarks must be one of {[n for n in LANDMARK_SETS if n != 'aruco']}, got {landmarks!r}")
+        names = [n for n in LANDMARK_SETS if n != "aruco"]
+        raise PhotoError(f"landmarks must be one of {names}, got {landmarks!r}")
     site = load_ifc(ifc, stage)
     n = len(site.landmarks(landmarks))
     if n < 4:
-        raise PhotoError(f"stage {site.stage!r} of {str(ifc)!r} exposes {n} {landmarks} landmarks; at least 4 "
-                         "are needed")
+        raise PhotoError(f"stage {site.stage!r} of {str(ifc)!r} exposes {n} {landmarks} landmarks; at "
+                         "least 4 are needed")
     geo = resolve_georeference(ifc, georef, control_points)
     jobs = prepare_photos(photos, site, georef=geo, camera=camera, prior=prior, takeoff_z=takeoff_z,
                           prior_sigmas=prior_sigmas, max_distance_m=max_distance_m)

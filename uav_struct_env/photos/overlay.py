@@ -64,8 +64,9 @@ def _title(pose: PhotoPose) -> str:
     if not pose.success:
         return f"{pose.photo.name}: NOT localized -- {pose.failure_reason}"
     std = pose.std
-    return (f"{pose.photo.name}: localized, {pose.n_inliers} landmarks, RMSE {pose.reprojection_rmse_px:.2f} px; "
-            f"std x/y/z {std[0]:.3f}/{std[1]:.3f}/{std[2]:.3f} m, rotation "
+    return (f"{pose.photo.name}: localized, {pose.n_inliers} landmarks, RMSE "
+            f"{pose.reprojection_rmse_px:.2f} px; std x/y/z {std[0]:.3f}/{std[1]:.3f}/{std[2]:.3f} m, "
+            "rotation "
             f"{math.degrees(float(np.linalg.norm(std[3:]))):.3f} deg")
 
 

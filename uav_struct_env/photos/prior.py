@@ -164,4 +164,5 @@ def prior_from_string(text: str, sigmas: PriorSigmas | None = None) -> PhotoPrio
         raise PhotoError(f"--prior must be x,y,z,yaw,pitch,roll (6 numbers: m, degrees), got {text!r}")
     x, y, z, yaw, pitch, roll = values
     T = world_from_cam_from_attitude((x, y, z), np.radians([roll, pitch, yaw]))
-    return PhotoPrior(invert(T), sigmas or _sigmas(*CONSUMER_M), "--prior" + (", user sigmas" if sigmas else ""))
+    source = "--prior" + (", user sigmas" if sigmas else "")
+    return PhotoPrior(invert(T), sigmas or _sigmas(*CONSUMER_M), source)
