@@ -114,3 +114,27 @@ def test_a_user_georeference_or_prior_replaces_a_missing_one(flight, plain_ifc, 
     rec = json.loads((out / "poses.json").read_text())["photos"][0]
     np.testing.assert_allclose(rec["prior"]["xyz_m"], flight["priors"][0][:3, 3], atol=5e-3)
     assert not (out / "flight_summary.png").exists()
+
+
+def test_rtk_fixed_photos_report_the_estimate_against_their_rtk_position(flight, tmp_path, capsys):
+    # an RTK-fixed photo: the true position (RtkFlag 50), the prior's attitude; the prior weighted as
+    # consumer GNSS so that the estimate comes from the image (docs/photos.md, the accuracy protocol)
+    g = read_ifc_georeference(flight["ifc"])
+    truth, prior = flight["truth"][0], flight["priors"][0].copy()
+    prior[:3, 3] = truth[:3, 3]
+    fields = {**dji_fields_from_pose(prior, g), "RtkFlag": 50, "RtkStdLon": 0.02, "RtkStdLat": 0.02,
+              "RtkStdHgt": 0.03}
+    from PIL import Image
+
+    photo = write_dji_jpeg(tmp_path / "DJI_rtk.JPG", np.asarray(Image.open(flight["photos"][0])), fields)
+    out = tmp_path / "out"
+    assert cli_main(["localize", str(photo), "--ifc", flight["ifc"], "--stage", STAGE, "--camera",
+                     flight["camera"], "--prior-sigmas", "3,5,2,5", "--no-figures", "--out", str(out)]) == 0
+    assert "RTK-fixed photos: 1 of 1 localized" in capsys.readouterr().out
+    row = next(csv.DictReader((out / "poses.csv").read_text().splitlines()[1:]))
+    est = np.array([float(row[k]) for k in ("x_m", "y_m", "z_m")])
+    assert float(row["rtk_error_m"]) == pytest.approx(np.linalg.norm(est - truth[:3, 3]), abs=2e-3)
+    doc = json.loads((out / "poses.json").read_text())
+    assert doc["rtk_accuracy"]["rtk_fixed"] == 1 and doc["rtk_accuracy"]["median_m"] == pytest.approx(
+        float(row["rtk_error_m"]), abs=1e-4)
+    assert "RTK fixed (RtkStd), user sigmas" in row["prior_source"]

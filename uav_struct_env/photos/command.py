@@ -27,6 +27,7 @@ from uav_struct_env.photos.localize import (
     PhotoPose,
     plan_photos,
     pose_summary,
+    rtk_accuracy,
     run_plan,
 )
 from uav_struct_env.provenance import software
@@ -67,6 +68,7 @@ class PoseRow:
     identities: str
     reprojection_rmse_px: float
     camera: str
+    rtk_error_m: float
 
 
 def _xyz_ypr(cam_from_world: np.ndarray) -> list[float]:
@@ -83,6 +85,7 @@ def pose_row(p: PhotoPose) -> PoseRow:
         round(math.degrees(float(np.linalg.norm(std[3:]))), 4), *_xyz_ypr(p.prior.cam_from_world),
         p.prior.source, int(len(p.identities)), p.n_inliers, " ".join(str(int(i)) for i in p.identities),
         round(p.reprojection_rmse_px, 3) if p.success else float("nan"), p.camera.source,
+        round(p.rtk_error_m, 4),
     )
 
 
@@ -143,7 +146,7 @@ def write_outputs(folder: Path, plan: PhotoPlan, poses: Sequence[PhotoPose], set
     atomic_write_json(folder / "poses.json", {
         "settings": settings, "software": software(), "ifc": str(plan.ifc), "stage": plan.site.stage,
         "landmarks": plan.landmarks, "georeference": dataclasses.asdict(plan.georef) if plan.georef else None,
-        "photos": [pose_summary(p) for p in poses],
+        "rtk_accuracy": rtk_accuracy(poses), "photos": [pose_summary(p) for p in poses],
     }, indent=1)
 
 
@@ -214,4 +217,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         write_outputs(staged.stage, plan, poses, settings, figures=not args.no_figures)
     n_ok = sum(p.success for p in poses)
     print(f"{n_ok} of {len(poses)} photos localized; {Path(args.out).resolve() / 'poses.csv'}")
+    rtk = rtk_accuracy(poses)
+    if rtk is not None:
+        print(f"RTK-fixed photos: {rtk['localized']} of {rtk['rtk_fixed']} localized; estimate vs RTK "
+              f"position median {rtk['median_m']} m, P90 {rtk['p90_m']} m, max {rtk['max_m']} m")
     return 0

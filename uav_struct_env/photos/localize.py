@@ -39,7 +39,7 @@ from uav_struct_env.photos.metadata import PhotoMetadata, read_metadata
 from uav_struct_env.photos.prior import PhotoPrior, prior_from_metadata, prior_from_string
 
 __all__ = ["MAX_DISTANCE_M", "PhotoJob", "PhotoPlan", "PhotoPose", "localize_photos", "plan_photos",
-           "pose_summary", "prepare_photos", "resolve_georeference", "run_plan"]
+           "pose_summary", "prepare_photos", "resolve_georeference", "rtk_accuracy", "run_plan"]
 
 #: A photo whose prior lies farther than this from the building's plan is refused, m.
 MAX_DISTANCE_M = 500.0
@@ -98,6 +98,13 @@ class PhotoPose:
     def position(self) -> NDArray[np.float64]:
         """(3,) camera centre, project frame, m."""
         return self.world_from_cam[:3, 3]
+
+    @property
+    def rtk_error_m(self) -> float:
+        """Distance of the estimate from the photo's RTK-fixed position, m (NaN without either)."""
+        if not (self.success and self.prior.rtk_fixed):
+            return float("nan")
+        return float(np.linalg.norm(self.position - self.prior.position))
 
     @property
     def std(self) -> NDArray[np.float64]:
@@ -317,4 +324,21 @@ def pose_summary(pose: PhotoPose) -> dict[str, Any]:
         "camera": {"source": pose.camera.source, "calibrated": pose.camera.calibrated,
                    "image_size": list(pose.camera.image_size)},
         "orientation": pose.orientation, "latency_s": round(pose.latency_s, 3),
+        "rtk_error_m": round(pose.rtk_error_m, 4) if pose.prior.rtk_fixed and pose.success else None,
     }
+
+
+def rtk_accuracy(poses: Sequence[PhotoPose]) -> dict[str, Any] | None:
+    """Estimate vs RTK-fixed position over the photos that state one (docs/photos.md), or None.
+
+    ``{"rtk_fixed": n, "localized": k, "median_m", "p90_m", "max_m"}`` (errors over the localized).
+    """
+    fixed = [p for p in poses if p.prior.rtk_fixed]
+    if not fixed:
+        return None
+    errors = np.array([p.rtk_error_m for p in fixed if p.success])
+    stats: dict[str, Any] = {"median_m": None, "p90_m": None, "max_m": None}
+    if len(errors):
+        stats = {"median_m": round(float(np.median(errors)), 4),
+                 "p90_m": round(float(np.percentile(errors, 90)), 4), "max_m": round(float(errors.max()), 4)}
+    return {"rtk_fixed": len(fixed), "localized": int(len(errors)), **stats}

@@ -74,11 +74,14 @@ class PhotoPrior:
         cam_from_world: (4, 4) prior pose in the project frame.
         sigmas: its uncertainty.
         source: where it came from, for outputs (``"EXIF GPS + DJI gimbal, consumer GNSS"``).
+        rtk_fixed: True when the photo states an RTK-fixed position (RtkFlag 50) and the prior's
+            position is it: a reference for the estimate (``rtk_error_m`` in the outputs).
     """
 
     cam_from_world: NDArray[np.float64]
     sigmas: PriorSigmas
     source: str
+    rtk_fixed: bool = False
 
     @property
     def position(self) -> NDArray[np.float64]:
@@ -147,7 +150,8 @@ def prior_from_metadata(meta: PhotoMetadata, georef: Georeference, *, takeoff_z:
     auto, case = prior_sigmas(meta, relative_altitude=takeoff_z is not None)
     height = "take-off + RelativeAltitude" if takeoff_z is not None else "absolute altitude"
     return PhotoPrior(invert(world_from_cam), sigmas or auto,
-                      f"GPS + {height} + DJI gimbal, {case}" + (", user sigmas" if sigmas else ""))
+                      f"GPS + {height} + DJI gimbal, {case}" + (", user sigmas" if sigmas else ""),
+                      rtk_fixed=meta.dji.get("RtkFlag") == 50 and takeoff_z is None)
 
 
 def prior_from_string(text: str, sigmas: PriorSigmas | None = None) -> PhotoPrior:
