@@ -10,6 +10,9 @@ both paths' success counts and median / P90 translation and rotation errors, the
 the georeferencing round trip (project -> WGS84 -> project) over the flight's camera positions.
 
     python benchmarks/photo_roundtrip.py --episodes 10 --quality 95
+    python benchmarks/photo_roundtrip.py --ifc tests/data/ifc/duplex.ifc --stage "Level 2/slab"
+
+``--ifc``: another building (its IFC re-written with the same IfcMapConversion) at ``--stage``.
 """
 
 from __future__ import annotations
@@ -44,15 +47,16 @@ def _summary(name: str, t: list[float], r: list[float], total: int) -> tuple[flo
     return float(t_med), float(t_p90)
 
 
-def main(episodes: int = 10, quality: int = 95, seed: int = 0) -> dict:
+def main(episodes: int = 10, quality: int = 95, seed: int = 0, source: str | None = None,
+         stage: str = STAGE) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        site = paper_site("slab")
-        ifc = write_building(site.name, site.storeys, site.elements, folder / "paper.ifc",
+        site = paper_site("slab") if source is None else load_ifc(source)
+        ifc = write_building(site.name, site.storeys, site.elements, folder / "georef.ifc",
                              map_conversion=MAP_CONVERSION)
         g = read_ifc_georeference(ifc)
         env = LocalizationWrapper(
-            uav_struct_env.parallel_env(site=load_ifc(ifc, STAGE), noise="gnss_ins", render_mode="rgb_array"),
+            uav_struct_env.parallel_env(site=load_ifc(ifc, stage), noise="gnss_ins", render_mode="rgb_array"),
             landmarks="all", detector="learned")
         env_t, env_r, photos, truth = [], [], [], []
         try:
@@ -65,18 +69,18 @@ def main(episodes: int = 10, quality: int = 95, seed: int = 0) -> dict:
                         env_t.append(loc["translation_error_m"])
                         env_r.append(loc["rotation_error_deg"])
                     path = folder / f"DJI_{episode:03d}_{agent}.JPG"
-                    write_dji_jpeg(path, obs[agent]["image"], dji_fields_from_pose(info["prior_world_from_cam"], g),
-                                   quality=quality)
+                    fields = dji_fields_from_pose(info["prior_world_from_cam"], g)
+                    write_dji_jpeg(path, obs[agent]["image"], fields, quality=quality)
                     photos.append(path)
                     truth.append(info["world_from_cam"])
             camera = _calibration(folder, infos["uav_0"])
         finally:
             env.close()
-        poses = localize_photos(photos, ifc, stage=STAGE, camera=camera,
+        poses = localize_photos(photos, ifc, stage=stage, camera=camera,
                                 prior_sigmas=parse_prior_sigmas("3,3,2,5"))
-    ph_t = [float(np.linalg.norm(p.position - T[:3, 3])) for p, T in zip(poses, truth, strict=True) if p.success]
-    ph_r = [rotation_angle_deg(p.world_from_cam[:3, :3], T[:3, :3]) for p, T in zip(poses, truth, strict=True)
-            if p.success]
+    found = [(p, T) for p, T in zip(poses, truth, strict=True) if p.success]
+    ph_t = [float(np.linalg.norm(p.position - T[:3, 3])) for p, T in found]
+    ph_r = [rotation_angle_deg(p.world_from_cam[:3, :3], T[:3, :3]) for p, T in found]
     total = len(photos)
     env_med, env_p90 = _summary("env", env_t, env_r, total)
     ph_med, ph_p90 = _summary("photo", ph_t, ph_r, total)
@@ -104,5 +108,7 @@ if __name__ == "__main__":
     parser.add_argument("--episodes", type=int, default=10, help="env resets (4 photos each)")
     parser.add_argument("--quality", type=int, default=95, help="JPEG quality")
     parser.add_argument("--seed", type=int, default=0, help="first episode's seed")
+    parser.add_argument("--ifc", default=None, help="another building's IFC (default: the paper site)")
+    parser.add_argument("--stage", default=STAGE, help="the stage localized against")
     args = parser.parse_args()
-    main(args.episodes, args.quality, args.seed)
+    main(args.episodes, args.quality, args.seed, args.ifc, args.stage)
