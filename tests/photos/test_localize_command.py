@@ -7,6 +7,7 @@ goes into each JPEG's EXIF GPS and DJI XMP.
 
 import csv
 import json
+import re
 
 import cv2
 import numpy as np
@@ -138,3 +139,14 @@ def test_rtk_fixed_photos_report_the_estimate_against_their_rtk_position(flight,
     assert doc["rtk_accuracy"]["rtk_fixed"] == 1 and doc["rtk_accuracy"]["median_m"] == pytest.approx(
         float(row["rtk_error_m"]), abs=1e-4)
     assert "RTK fixed (RtkStd), user sigmas" in row["prior_source"]
+
+
+def test_help_lists_every_option_with_its_default(capsys):
+    with pytest.raises(SystemExit) as stop:
+        cli_main(["localize", "--help"])
+    assert stop.value.code == 0
+    options = capsys.readouterr().out.split("options:", 1)[1]
+    for entry in re.split(r"\n  (?=--)", options)[1:]:
+        if re.match(r"--[-\w]+ [A-Z]", entry) and not entry.startswith("--version"):
+            assert "default" in " ".join(entry.split()), entry
+    assert "--max-distance MAX_DISTANCE" in options and "(default: 500.0)" in " ".join(options.split())
