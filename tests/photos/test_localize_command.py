@@ -8,6 +8,7 @@ goes into each JPEG's EXIF GPS and DJI XMP.
 import csv
 import json
 import re
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -15,7 +16,8 @@ import pytest
 
 import uav_struct_env
 from uav_struct_env.cli import main as cli_main
-from uav_struct_env.photos import read_ifc_georeference
+from uav_struct_env.photos import PhotoError, read_ifc_georeference
+from uav_struct_env.photos.command import expand_photos
 from uav_struct_env.photos.dji_jpeg import dji_fields_from_pose, write_dji_jpeg
 from uav_struct_env.site import load_ifc
 
@@ -150,3 +152,10 @@ def test_help_lists_every_option_with_its_default(capsys):
         if re.match(r"--[-\w]+ [A-Z]", entry) and not entry.startswith("--version"):
             assert "default" in " ".join(entry.split()), entry
     assert "--max-distance MAX_DISTANCE" in options and "(default: 500.0)" in " ".join(options.split())
+
+
+def test_a_folder_stands_for_its_jpegs(flight, tmp_path):
+    (tmp_path / "none").mkdir()
+    with pytest.raises(PhotoError, match="holds no JPEG photo"):
+        expand_photos([str(tmp_path / "none")])
+    assert expand_photos([str(Path(flight["photos"][0]).parent)]) == sorted(flight["photos"])

@@ -33,7 +33,8 @@ from uav_struct_env.photos.localize import (
 from uav_struct_env.provenance import software
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_input_file, check_output_dir, refuse
 
-__all__ = ["LOCALIZE_FILES", "PoseRow", "main", "parse_prior_sigmas", "settings_line", "write_outputs"]
+__all__ = ["LOCALIZE_FILES", "PoseRow", "expand_photos", "main", "parse_prior_sigmas", "settings_line",
+           "write_outputs"]
 
 #: What ``uav-struct localize`` writes (poses.json is the marker, moved last).
 LOCALIZE_FILES = ("poses.json", "poses.csv", "flight_summary.png", "overlays")
@@ -150,9 +151,29 @@ def write_outputs(folder: Path, plan: PhotoPlan, poses: Sequence[PhotoPose], set
     }, indent=1)
 
 
+#: Suffixes of the photos taken from a folder given in place of photos.
+PHOTO_SUFFIXES = (".jpg", ".jpeg")
+
+
+def expand_photos(paths: Sequence[str]) -> list[str]:
+    """The photos named, with a folder standing for its JPEG files (sorted by name)."""
+    out: list[str] = []
+    for path in paths:
+        p = Path(path)
+        if p.is_dir():
+            found = sorted(str(f) for f in p.iterdir() if f.suffix.lower() in PHOTO_SUFFIXES)
+            if not found:
+                raise PhotoError(f"folder {path!r} holds no JPEG photo (*.jpg, *.jpeg)")
+            out += found
+        else:
+            out.append(str(path))
+    return out
+
+
 def _parser() -> CommandParser:
     p = CommandParser(prog="uav-struct localize", description=__doc__.split("\n")[0])
-    p.add_argument("photos", nargs="+", help="drone photos (JPEG with EXIF GPS and DJI XMP)")
+    p.add_argument("photos", nargs="+",
+                   help="drone photos (JPEG with EXIF GPS and DJI XMP), or folders of them")
     p.add_argument("--ifc", required=True, help="the building's IFC file")
     p.add_argument("--stage", default=None, help="IFC stage to localize against (default: the last)")
     p.add_argument("--landmarks", default="all",
@@ -197,9 +218,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         sigmas = parse_prior_sigmas(args.prior_sigmas)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            plan = plan_photos(args.photos, args.ifc, stage=args.stage, landmarks=args.landmarks,
-                               camera=args.camera, georef=args.georef, control_points=args.control_points,
-                               prior=args.prior, takeoff_z=args.takeoff_z, prior_sigmas=sigmas,
+            plan = plan_photos(expand_photos(args.photos), args.ifc, stage=args.stage,
+                               landmarks=args.landmarks, camera=args.camera, georef=args.georef,
+                               control_points=args.control_points, prior=args.prior,
+                               takeoff_z=args.takeoff_z, prior_sigmas=sigmas,
                                max_distance_m=args.max_distance)
         for w in {str(w.message) for w in caught}:
             print(f"{p.prog}: warning: {w}", file=sys.stderr)
