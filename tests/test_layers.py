@@ -36,6 +36,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("uav_struct_env.wrappers",),
     ("uav_struct_env.training",),
     ("uav_struct_env.study",),
+    ("uav_struct_env.photos",),  # uav-struct localize: writes its CSV with the study's writer
     ("uav_struct_env.demo", "uav_struct_env.cli"),
 ]
 

@@ -6,7 +6,9 @@ without a mesh is an extruded IfcArbitraryClosedProfileDef of its outline; a sla
 IfcOpeningElement voids extruded through it. An element with its own mesh (an imported one) is an
 IfcTriangulatedFaceSet (its openings are already cut). GlobalIds are derived from the site name
 and element guid (the same site writes the same ids); the element guid goes into ``Tag``.
-Markers are not written (they are not building elements).
+Markers are not written (they are not building elements). ``map_conversion`` (optional) writes
+IfcMapConversion with its IfcProjectedCRS (IFC4 georeferencing, metres; see
+:mod:`uav_struct_env.photos.georef`).
 
 The writer reads the plain data only (elements, storeys), so it sits below the
 :class:`~uav_struct_env.site.Site` that calls it; the importer
@@ -19,7 +21,7 @@ from __future__ import annotations
 
 import os
 import uuid
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -163,13 +165,27 @@ def _opening(f: Any, name: str, slab: Slab, hole: Hole, body: Any, product: Any)
     _api("feature.add_feature", f, feature=op, element=product)
 
 
+def _map_conversion(f: Any, fields: Mapping[str, Any]) -> None:
+    """IfcMapConversion from the model context to an IfcProjectedCRS (map unit: metre)."""
+    context = f.by_type("IfcGeometricRepresentationContext", include_subtypes=False)[0]
+    metre = f.createIfcSIUnit(None, "LENGTHUNIT", None, "METRE")
+    crs = f.createIfcProjectedCRS(str(fields["crs"]), None, "WGS84", None, None, None, metre)
+    f.createIfcMapConversion(
+        context, crs, float(fields["eastings"]), float(fields["northings"]),
+        float(fields["orthogonal_height"]), float(fields.get("x_axis_abscissa", 1.0)),
+        float(fields.get("x_axis_ordinate", 0.0)), float(fields.get("scale", 1.0)))
+
+
 def write_building(
-    name: str, storeys: Sequence[Storey], elements: Sequence[Element], path: str | os.PathLike
+    name: str, storeys: Sequence[Storey], elements: Sequence[Element], path: str | os.PathLike,
+    map_conversion: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write a building (its storeys and every element) as IFC4 in metres; returns the path.
 
     ``name`` names the project, site and building and seeds the GlobalIds (see the module
-    docstring).
+    docstring). ``map_conversion``: None, or the georeferencing to write: ``crs`` (a projected
+    CRS name, ``"EPSG:32632"``), ``eastings``, ``northings``, ``orthogonal_height`` (metres),
+    ``x_axis_abscissa``, ``x_axis_ordinate`` (default 1, 0) and ``scale`` (default 1).
 
     Raises:
         ImportError: if ifcopenshell is not installed (names the ``ifc`` extra).
@@ -183,6 +199,8 @@ def write_building(
     f = ifcopenshell.api.project.create_file(version="IFC4")
     body, building = _project(f, name)
     containers = _storeys(f, name, storeys, building)
+    if map_conversion is not None:
+        _map_conversion(f, map_conversion)
     for e in elements:
         product = _element(f, name, e, body, containers)
         if isinstance(e, Slab) and e.mesh is None:
