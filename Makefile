@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed-stamp
 # gymnasium 1.2.2 (the default install has the newest), and it is the optional extra the
 # issue asked for. Its tests skip without it; run them with `make EXTRAS=dev,rl,train,ifc,docs,rl-extra,ray test`
 # in a fresh checkout (or a venv of their own, as docs/training.md shows).
-EXTRAS ?= dev,rl,train,ifc,docs,rl-extra
+EXTRAS ?= dev,rl,train,ifc,docs,rl-extra,photo
 
 .PHONY: demo test test-slow lint bench docs docs-serve detector clean distclean
 
