@@ -7,7 +7,10 @@ box arrays). Per view:
 1. **Visibility pass.** Each triangle is moved to the camera frame (OpenCV: x right, y down,
    z forward), rejected when all three corners lie beyond one side of the view frustum, clipped
    against the near plane (a polygon of at most four corners, each carrying its barycentric
-   weights in the original triangle), and scan-converted: a pixel is covered when its centre,
+   weights in the original triangle), dropped when it faces away from the camera (its corners
+   run clockwise seen from the camera; meshes wind counter-clockwise seen from outside, and
+   TinyRenderer culls back faces too: an element whose faces are wound inward is invisible to
+   both), and scan-converted: a pixel is covered when its centre,
    at integer ``(u, v)``, lies inside or on the projected triangle (the convention of
    :mod:`localization.geometry` and of both pybullet renderers, ``sim/camera.py``). The depth
    along the optical axis is interpolated perspective-correctly (``1/z`` is affine on the
@@ -106,7 +109,7 @@ def _scan(
     u2 = (fx * p[i2, 0] + sk * p[i2, 1]) * iz2 + cx
     v2 = fy * p[i2, 1] * iz2 + cy
     area = (u1 - u0) * (v2 - v0) - (u2 - u0) * (v1 - v0)
-    if area == 0.0 or not np.isfinite(area):
+    if not area < 0.0:  # back-facing (clockwise on the image, v down), edge-on or not finite
         return
     vmin = max(int(np.ceil(min(v0, v1, v2))), 0)
     vmax = min(int(np.floor(max(v0, v1, v2))), H - 1)
