@@ -104,7 +104,7 @@ def throughput(steps: int, seed: int = 0, block: int = 20) -> dict[str, dict[str
         envs = {r: _make(spec, overrides, r) for r in ("tiny", "batch")}
         rngs = {r: np.random.default_rng(seed) for r in envs}
         tally = {r: np.zeros(3) for r in envs}  # wall s, cpu s, agent-steps
-        for r, env in envs.items():
+        for env in envs.values():
             env.reset(seed=seed)
             env.step({a: np.zeros(5, np.float32) for a in env.agents})  # warm up
         for _ in tqdm(range(max(1, steps // block)), desc=name, leave=False):

@@ -557,7 +557,9 @@ class UavStructParallelEnv(ParallelEnv):
                             agent, cam_from_world, obs, render, need_depth, frames.get(agent)
                         )
                     else:
-                        result = frames.get(agent) or world.render(cam_from_world, self.camera, depth=need_depth)
+                        result = frames.get(agent) or world.render(
+                            cam_from_world, self.camera, depth=need_depth
+                        )
                         image = cfg.imaging.apply(result.rgb, self._rng)
                         if cfg.observe_image:
                             obs = {"image": image, **obs}

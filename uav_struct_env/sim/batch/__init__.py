@@ -111,7 +111,7 @@ def render_batch(views: Sequence[BatchView]):
         ConfigError: for a view larger than :data:`MAX_BATCH_PIXELS`.
         ClosedError: if a view's world is closed.
     """
-    from uav_struct_env.sim.world import RenderResult, SKY_RGB
+    from uav_struct_env.sim.world import SKY_RGB, RenderResult
 
     views = list(views)
     for k, view in enumerate(views):

@@ -148,8 +148,7 @@ def _scan(
 
 @njit(cache=True, nogil=True)
 def _culled(cam: NDArray, intr: NDArray, near: float, W: int, H: int) -> bool:
-    """True when the camera-frame triangle ``cam`` is wholly behind the near plane or beyond one
-    side plane of the view."""
+    """True when the camera-frame triangle ``cam`` lies wholly beyond the near or a side plane."""
     if cam[0, 2] < near and cam[1, 2] < near and cam[2, 2] < near:
         return True
     fx, sk, cx, fy, cy = intr[0], intr[1], intr[2], intr[3], intr[4]
@@ -195,7 +194,8 @@ def _draw_triangles(
             continue
         for k in range(3):
             for r in range(3):
-                cam[k, r] = R[r, 0] * tri_v[i, k, 0] + R[r, 1] * tri_v[i, k, 1] + R[r, 2] * tri_v[i, k, 2] + t[r]
+                cam[k, r] = (R[r, 0] * tri_v[i, k, 0] + R[r, 1] * tri_v[i, k, 1] + R[r, 2] * tri_v[i, k, 2]
+                             + t[r])
         if not _culled(cam, intr, near, W, H):
             _draw(cam, i, intr, near, far, poly, weights, izbuf, ids, bary)
 

@@ -67,8 +67,12 @@ class BatchScene:
         return len(self.tri_v)
 
     def boxes(self) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
-        """The world's added bodies now: rotations (B, 3, 3), centres (B, 3), half extents (B, 3),
-        colours (B, 3) in 0-255 and body ids (B,)."""
+        """The world's added bodies now.
+
+        Returns:
+            rotations (B, 3, 3), centres (B, 3), half extents (B, 3), colours (B, 3) in 0-255 and
+            body ids (B,).
+        """
         ids, poses, halves, rgba = self.world.added_bodies()
         return poses[:, :3, :3], poses[:, :3, 3], halves, rgba[:, :3] * 255.0, ids
 
