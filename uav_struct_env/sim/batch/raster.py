@@ -48,7 +48,11 @@ BOX_NORMALS = np.repeat(
 )
 
 
-@njit(cache=True, nogil=True)
+#: Barycentric weights of a triangle's own corners (the unclipped case).
+_CORNERS = np.eye(3)
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _clip_near(cam: NDArray, near: float, poly: NDArray, weights: NDArray) -> int:
     """Clip the camera-frame triangle ``cam`` (3, 3) to ``z >= near``; corners into ``poly``.
 
@@ -75,20 +79,20 @@ def _clip_near(cam: NDArray, near: float, poly: NDArray, weights: NDArray) -> in
     return n
 
 
-@njit(cache=True, nogil=True)
-def _span(a: float, c: float, d: float, v: float, lo: float, hi: float) -> tuple[float, float]:
-    """Narrow ``[lo, hi]`` to the ``u`` where ``a u + c v + d >= 0`` on row ``v``."""
+@njit(cache=True, nogil=True, inline="always")
+def _span(a: float, inv_a: float, c: float, d: float, v: float, lo: float, hi: float) -> tuple[float, float]:
+    """Narrow ``[lo, hi]`` to the ``u`` where ``a u + c v + d >= 0`` on row ``v`` (``inv_a = 1/a``)."""
     e = c * v + d
     if a > 0.0:
-        lo = max(lo, -e / a)
+        lo = max(lo, -e * inv_a)
     elif a < 0.0:
-        hi = min(hi, -e / a)
+        hi = min(hi, -e * inv_a)
     elif e < 0.0:
         hi = -1.0
     return lo, hi
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _scan(
     p: NDArray, w: NDArray, i0: int, i1: int, i2: int, tri: int, intr: NDArray, far: float,
     izbuf: NDArray, ids: NDArray, bary: NDArray,
@@ -122,10 +126,13 @@ def _scan(
     a1, c1, d1 = (v2 - v0) * r, (u0 - u2) * r, (u2 * v0 - u0 * v2) * r
     a2, c2, d2 = (v0 - v1) * r, (u1 - u0) * r, (u0 * v1 - u1 * v0) * r
     inv_far = 1.0 / far
+    r0 = 1.0 / a0 if a0 != 0.0 else 0.0
+    r1 = 1.0 / a1 if a1 != 0.0 else 0.0
+    r2 = 1.0 / a2 if a2 != 0.0 else 0.0
     for v in range(vmin, vmax + 1):
-        lo, hi = _span(a0, c0, d0, v, umin, umax)
-        lo, hi = _span(a1, c1, d1, v, lo, hi)
-        lo, hi = _span(a2, c2, d2, v, lo, hi)
+        lo, hi = _span(a0, r0, c0, d0, v, umin, umax)
+        lo, hi = _span(a1, r1, c1, d1, v, lo, hi)
+        lo, hi = _span(a2, r2, c2, d2, v, lo, hi)
         if lo > hi:
             continue
         for u in range(int(np.ceil(lo)), int(np.floor(hi)) + 1):
@@ -146,11 +153,19 @@ def _scan(
             bary[v, u, 1] = (q0 * w[i0, 2] + q1 * w[i1, 2] + q2 * w[i2, 2]) * z
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _culled(cam: NDArray, intr: NDArray, near: float, W: int, H: int) -> bool:
-    """True when the camera-frame triangle ``cam`` lies wholly beyond the near or a side plane."""
-    if cam[0, 2] < near and cam[1, 2] < near and cam[2, 2] < near:
+    """True when the camera-frame triangle ``cam`` lies wholly beyond the near or a side plane, or
+    lies wholly in front of the camera and faces away from it."""
+    z0, z1, z2 = cam[0, 2], cam[1, 2], cam[2, 2]
+    if z0 < near and z1 < near and z2 < near:
         return True
+    if z0 > 0.0 and z1 > 0.0 and z2 > 0.0:
+        # det[c0, c1, c2] = z0 z1 z2 x (twice the signed image area): back-facing when >= 0
+        det = (cam[0, 0] * (cam[1, 1] * z2 - z1 * cam[2, 1]) - cam[0, 1] * (cam[1, 0] * z2 - z1 * cam[2, 0])
+               + z0 * (cam[1, 0] * cam[2, 1] - cam[1, 1] * cam[2, 0]))
+        if not det < 0.0:
+            return True
     fx, sk, cx, fy, cy = intr[0], intr[1], intr[2], intr[3], intr[4]
     # y / z limits, then x / z limits (skew folded into x)
     lo_y, hi_y = (-0.5 - cy) / fy, (H - 0.5 - cy) / fy
@@ -165,7 +180,7 @@ def _culled(cam: NDArray, intr: NDArray, near: float, W: int, H: int) -> bool:
     return left or right or top or bottom
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _draw(
     cam: NDArray, tri: int, intr: NDArray, near: float, far: float, poly: NDArray, weights: NDArray,
     izbuf: NDArray, ids: NDArray, bary: NDArray,
@@ -174,6 +189,9 @@ def _draw(
 
     Cull first (:func:`_culled`): a call with a dozen array arguments costs more than the test.
     """
+    if cam[0, 2] >= near and cam[1, 2] >= near and cam[2, 2] >= near:
+        _scan(cam, _CORNERS, 0, 1, 2, tri, intr, far, izbuf, ids, bary)
+        return
     n = _clip_near(cam, near, poly, weights)
     for k in range(1, n - 1):
         _scan(poly, weights, 0, k, k + 1, tri, intr, far, izbuf, ids, bary)
