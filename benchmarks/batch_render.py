@@ -18,8 +18,9 @@ with the same body id (target >= 99 %), of landmark-views in the image with the 
 ``renderer="batch"``, stepped in alternating blocks of 20 steps with the same seeded random
 actions, so a shared machine's load drifts over both alike: the ``train`` preset (4 agents,
 128 x 72 cameras), the same with the busy site activity, with the Mavic 2 Pro camera
-(distortion and rolling shutter by remapping), and the wrapped ``image`` training configuration
-(64 x 36 + localization). Agent-steps per second by wall time and by the process's CPU time (the
+(distortion and rolling shutter by remapping), the wrapped ``image`` training configuration
+(64 x 36 + localization) and, as the reference that renders nothing, the wrapped ``state`` one
+(both renderers: the same env). Agent-steps per second by wall time and by the process's CPU time (the
 steadier figure on a shared machine); ``uptime``'s load is printed.
 """
 
@@ -57,6 +58,7 @@ THROUGHPUT = {
     "train 128x72, busy activity": ("train", {"activity": "busy"}),
     "train 128x72, mavic2pro camera": ("train", {"camera": "mavic2pro"}),
     "wrapped image config (64x36)": ("wrapped:image", {}),
+    "wrapped state config (no image)": ("wrapped:state", {}),  # the reference: nothing rendered
 }
 
 

@@ -155,8 +155,7 @@ def _scan(
 
 @njit(cache=True, nogil=True, inline="always")
 def _culled(cam: NDArray, intr: NDArray, near: float, W: int, H: int) -> bool:
-    """True when the camera-frame triangle ``cam`` lies wholly beyond the near or a side plane, or
-    lies wholly in front of the camera and faces away from it."""
+    """True when the camera-frame triangle ``cam`` is beyond a frustum plane or faces away."""
     z0, z1, z2 = cam[0, 2], cam[1, 2], cam[2, 2]
     if z0 < near and z1 < near and z2 < near:
         return True
