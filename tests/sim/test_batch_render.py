@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import uav_struct_env
-from uav_struct_env.errors import ConfigError
+from uav_struct_env.errors import ClosedError, ConfigError
 from uav_struct_env.sim.batch import MAX_BATCH_PIXELS, BatchScene, BatchView, render_batch
 from uav_struct_env.sim.batch.agreement import compare, random_views
 from uav_struct_env.sim.camera import Camera
@@ -88,6 +88,8 @@ def test_views_of_several_worlds_in_one_call_equal_separate_calls(columns):
             np.testing.assert_array_equal(frame.depth, alone.depth)
     finally:
         other.close()
+    with pytest.raises(ClosedError, match=r"SiteWorld of views\[1\].scene is closed"):
+        render_batch([BatchView(scene, poses[0], SMALL), BatchView(scene2, poses[3], SMALL)])
 
 
 def test_hidden_body_is_not_drawn(columns):

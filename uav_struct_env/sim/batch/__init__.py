@@ -38,7 +38,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from uav_struct_env.errors import ConfigError
+from uav_struct_env.errors import ClosedError, ConfigError
 from uav_struct_env.sim.batch.raster import render_views
 from uav_struct_env.sim.batch.scene import BatchScene, PackedScenes
 from uav_struct_env.sim.camera import Camera
@@ -118,9 +118,12 @@ def render_batch(views: Sequence[BatchView]):
         _check_view(k, view)
     scenes: list[BatchScene] = []
     index: dict[int, int] = {}
-    for view in views:
+    for k, view in enumerate(views):
         if view.scene.uid not in index:
-            view.scene.world._check_open()
+            if view.scene.world.closed:
+                raise ClosedError(
+                    f"the SiteWorld of views[{k}].scene is closed; make a BatchScene of an open one"
+                )
             index[view.scene.uid] = len(scenes)
             scenes.append(view.scene)
     if not views:

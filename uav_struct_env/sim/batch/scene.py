@@ -60,6 +60,12 @@ class BatchScene:
         self.tri_tex = np.concatenate(tex)
         self.tri_seg = np.concatenate(seg)
         self.textures = textures
+        #: Every texture's texels in one (N, 3) array; texture k starts at row ``tex_off[k]``.
+        sizes = np.array([t.shape[0] * t.shape[1] for t in textures], dtype=np.int64)
+        self.tex_off = np.cumsum(sizes) - sizes
+        self.tex_w = np.array([t.shape[1] for t in textures], dtype=np.int64)
+        self.tex_h = np.array([t.shape[0] for t in textures], dtype=np.int64)
+        self.tex_data = np.concatenate([t.reshape(-1, 3) for t in textures])
 
     @property
     def n_triangles(self) -> int:
@@ -91,17 +97,18 @@ class PackedScenes:
         ends = np.cumsum(counts)
         self.scene_tris = np.stack([ends - counts, ends], axis=1)
         tex_base = np.cumsum([0] + [len(s.textures) for s in scenes])
-        self.tri_v = np.concatenate([s.tri_v for s in scenes])
-        self.tri_uv = np.concatenate([s.tri_uv for s in scenes])
-        self.tri_n = np.concatenate([s.tri_n for s in scenes])
-        self.tri_tex = np.concatenate([s.tri_tex + b for s, b in zip(scenes, tex_base, strict=False)])
-        self.tri_seg = np.concatenate([s.tri_seg for s in scenes])
-        textures = [t for s in scenes for t in s.textures]
-        sizes = np.array([t.shape[0] * t.shape[1] for t in textures], dtype=np.int64)
-        self.tex_off = np.cumsum(sizes) - sizes
-        self.tex_w = np.array([t.shape[1] for t in textures], dtype=np.int64)
-        self.tex_h = np.array([t.shape[0] for t in textures], dtype=np.int64)
-        self.tex_data = np.concatenate([t.reshape(-1, 3) for t in textures])
+        texel_base = np.cumsum([0] + [len(s.tex_data) for s in scenes])
+        # one scene: its own arrays (np.concatenate of one array would copy the texels)
+        join = (lambda arrays: arrays[0]) if len(scenes) == 1 else np.concatenate
+        self.tri_v = join([s.tri_v for s in scenes])
+        self.tri_uv = join([s.tri_uv for s in scenes])
+        self.tri_n = join([s.tri_n for s in scenes])
+        self.tri_tex = join([s.tri_tex + b for s, b in zip(scenes, tex_base, strict=False)])
+        self.tri_seg = join([s.tri_seg for s in scenes])
+        self.tex_off = join([s.tex_off + b for s, b in zip(scenes, texel_base, strict=False)])
+        self.tex_w = join([s.tex_w for s in scenes])
+        self.tex_h = join([s.tex_h for s in scenes])
+        self.tex_data = join([s.tex_data for s in scenes])
 
     def arrays(self) -> tuple[NDArray, ...]:
         """The static arguments of :func:`~.raster.render_views`, after ``scene_boxes``."""
