@@ -157,3 +157,10 @@ def test_batch_renderer_refuses_large_frames(columns):
         render_batch([BatchView(scene, np.eye(3), SMALL)])
     with pytest.raises(TypeError, match="world must be a uav_struct_env.sim.world.SiteWorld, got str"):
         BatchScene("paper")
+
+
+def test_env_with_batch_renderer_passes_pettingzoo_api_and_seed_tests():
+    from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+    parallel_api_test(_env("batch", image_size=(64, 36), max_cycles=4), num_cycles=4)
+    parallel_seed_test(lambda: _env("batch", image_size=(64, 36), max_cycles=4))
