@@ -31,7 +31,7 @@ from uav_struct_env.errors import ConfigError, ResetNeededError
         ({"n_agents": 1000}, r"n_agents must be an int in \[1, 64\], got 1000"),
         ({"max_cycles": "100"}, r"max_cycles must be an int >= 1, got '100'"),
         ({"marker_size": float("inf")}, r"marker_size must be a number in \(0, 10\], got inf"),
-        ({"renderer": 3}, r"renderer must be one of \('auto', 'tiny', 'egl'\), got 3"),
+        ({"renderer": 3}, r"renderer must be one of \('auto', 'tiny', 'egl', 'batch'\), got 3"),
         ({"on_crash": "everyone"}, r"on_crash must be one of \('agent', 'all'\), got 'everyone'"),
         ({"landmark_sets": "all"}, r"landmark_sets must be a tuple of set names, got 'all'"),
         ({"start_yaw_jitter": 4.0}, r"start_yaw_jitter must be a number in \[0, 3.14159"),

@@ -27,6 +27,7 @@ import numpy as np
 from localization.checks import check_choice, check_number
 from localization.geometry.camera import PAPER_IMAGE_SIZE
 from uav_struct_env.errors import ConfigError, SiteGeometryError
+from uav_struct_env.sim.batch import MAX_BATCH_SIZE
 from uav_struct_env.sim.imaging import ImagingModel, make_imaging
 from uav_struct_env.sim.lens import CameraModel, make_camera_model
 from uav_struct_env.sim.schedule import ScheduleSpec
@@ -58,7 +59,7 @@ def _is_site_file(site: object) -> bool:
     return isinstance(site, str) and site.lower().endswith((".json", ".ifc")) and Path(site).is_file()
 
 RENDER_MODES = ("rgb_array",)
-RENDERERS = ("auto", "tiny", "egl")
+RENDERERS = ("auto", "tiny", "egl", "batch")
 LIGHTINGS = ("fixed", "random")
 
 
@@ -83,7 +84,10 @@ class EnvConfig:
         noise: onboard sensor model: ``"paper"``, ``"gnss_ins"``, ``"none"`` or a model object
             from :mod:`uav_struct_env.sim.sensors`.
         renderer: ``"auto"`` (EGL for images of about 420 x 240 px and more where EGL starts,
-            else TinyRenderer), ``"tiny"`` or ``"egl"``.
+            else TinyRenderer), ``"tiny"``, ``"egl"`` or ``"batch"``: the compiled CPU
+            rasterizer of :mod:`uav_struct_env.sim.batch`, which renders every agent's frame of a
+            step in one call, for images up to 160 x 120 (larger ones are refused); pybullet
+            (TinyRenderer) stays the physics and draws ``render()``'s views.
         max_cycles: steps after which every live agent is truncated.
         render_mode: None or ``"rgb_array"``.
         n_agents: number of UAVs (``uav_0`` ... ``uav_{n-1}``), one per side sector.
@@ -196,6 +200,11 @@ class EnvConfig:
         object.__setattr__(self, "activity", make_activity(self.activity))
         object.__setattr__(self, "camera", make_camera_model(self.camera))
         check_choice("renderer", self.renderer, RENDERERS, error=ConfigError)
+        if self.renderer == "batch" and (w > MAX_BATCH_SIZE[0] or h > MAX_BATCH_SIZE[1]):
+            raise ConfigError(
+                f"renderer='batch' draws images up to {MAX_BATCH_SIZE[0]} x {MAX_BATCH_SIZE[1]} px "
+                f"(training resolution), got image_size {w} x {h}; use renderer='auto', 'tiny' or 'egl'"
+            )
         for name, lo, hi in (("max_cycles", 1, None), ("n_agents", 1, MAX_AGENTS),
                              ("render_view_height", 16, MAX_IMAGE_SIDE), ("render_fps", 1, 1000),
                              ("texture_seed", 0, None)):

@@ -141,6 +141,7 @@ class UavStructParallelEnv(ParallelEnv):
         self.geofence = cfg.geofence.scaled(scale)
         self._targets = _ViewTargets.from_site(self.site)
         self._world = None
+        self._batch_scene = None  # renderer="batch": the world's geometry for sim.batch
         self._closed = False
         self._was_reset = False
 
@@ -237,14 +238,19 @@ class UavStructParallelEnv(ParallelEnv):
         if self._world is None:
             from uav_struct_env.sim.world import SiteWorld
 
+            batch = self.config.renderer == "batch"
             self._world = SiteWorld(
                 self.built_site,
-                renderer=self.config.renderer,
+                renderer="tiny" if batch else self.config.renderer,
                 image_size=self.config.image_size,
                 rng=np.random.default_rng(self.config.texture_seed),
             )
             if self.config.show_uavs:
                 self._airframes = Airframes(self._world, self.possible_agents)
+            if batch:
+                from uav_struct_env.sim.batch import BatchScene
+
+                self._batch_scene = BatchScene(self._world)
         return self._world
 
     # ------------------------------------------------------------------ reset / step
@@ -513,6 +519,7 @@ class UavStructParallelEnv(ParallelEnv):
             self._airframes.place({a: self._states[a] for a in agents})
         if self._activity_bodies is not None:
             self._activity_bodies.update(self._activity_time())
+        frames = self._batch_frames(agents) if render and self._batch_scene is not None else {}
         for k, agent in enumerate(agents):
             i = self._index[agent]
             state = self._states[agent]
@@ -543,11 +550,16 @@ class UavStructParallelEnv(ParallelEnv):
                     for name in cfg.landmark_sets
                 }
             else:
-                with self._own_airframe_hidden(agent):
+                # a batched frame was drawn without the agent's own airframe
+                with nullcontext() if frames else self._own_airframe_hidden(agent):
                     if self._lens is not None:
-                        obs, landmarks = self._observe_lens(agent, cam_from_world, obs, render, need_depth)
+                        obs, landmarks = self._observe_lens(
+                            agent, cam_from_world, obs, render, need_depth, frames.get(agent)
+                        )
                     else:
-                        result = world.render(cam_from_world, self.camera, depth=need_depth)
+                        result = frames.get(agent) or world.render(
+                            cam_from_world, self.camera, depth=need_depth
+                        )
                         image = cfg.imaging.apply(result.rgb, self._rng)
                         if cfg.observe_image:
                             obs = {"image": image, **obs}
@@ -555,7 +567,7 @@ class UavStructParallelEnv(ParallelEnv):
                         if cfg.observe_depth:
                             obs["depth"] = np.asarray(result.depth, dtype=np.float32)
                         landmarks = {
-                            name: world.landmark_truth(name, cam_from_world, self.camera, result.depth)
+                            name: world.landmark_truth(name, cam_from_world, self.camera, result)
                             for name in cfg.landmark_sets
                         }
             prior = world_from_cam_from_attitude(
@@ -578,10 +590,30 @@ class UavStructParallelEnv(ParallelEnv):
             self._priors[agent] = prior
         return observations, infos
 
+    def _batch_frames(self, agents: list[str]) -> dict[str, Any]:
+        """Every agent's frame of this step in one call of :mod:`uav_struct_env.sim.batch`.
+
+        Each camera is rendered without its own airframe; a real camera's frame is its wide render
+        (:attr:`LensView.render_camera`), remapped by :meth:`_observe_lens`.
+        """
+        from uav_struct_env.sim.batch import BatchView, render_batch
+
+        camera = self.camera if self._lens is None else self._lens.render_camera
+        own = {} if self._airframes is None else self._airframes.bodies
+        views = [
+            BatchView(self._batch_scene, invert(self._states[a].world_from_cam), camera, own.get(a, -1))
+            for a in agents
+        ]
+        return dict(zip(agents, render_batch(views), strict=True))
+
     def _observe_lens(
-        self, agent: str, cam_from_world: NDArray[np.float64], obs: dict, render: bool, need_depth: bool
+        self, agent: str, cam_from_world: NDArray[np.float64], obs: dict, render: bool, need_depth: bool,
+        rendered: Any = None,
     ) -> tuple[dict, dict]:
-        """:meth:`_observe`'s render and landmark truth through a real camera (``self._lens``)."""
+        """:meth:`_observe`'s render and landmark truth through a real camera (``self._lens``).
+
+        ``rendered``: the agent's wide frame if already drawn (``renderer="batch"``).
+        """
         cfg, world, lens = self.config, self.world, self._lens
         motion = self._motions.get(agent)
         if not render:
@@ -591,7 +623,7 @@ class UavStructParallelEnv(ParallelEnv):
             }
         else:
             moving = motion is not None and not motion.is_static
-            result = world.render(cam_from_world, lens.render_camera, depth=need_depth or moving)
+            result = rendered or world.render(cam_from_world, lens.render_camera, depth=need_depth or moving)
             rgb, depth = lens.warp(
                 result.rgb, result.depth, cam_from_world, motion, warp_depth=cfg.observe_depth
             )
@@ -680,6 +712,7 @@ class UavStructParallelEnv(ParallelEnv):
         self._closed = True
         self._airframes = None
         self._activity_bodies = None
+        self._batch_scene = None
         if self._world is not None:
             self._world.close()
             self._world = None

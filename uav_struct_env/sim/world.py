@@ -171,8 +171,11 @@ class SiteWorld:
         except BaseException:
             self.close()
             raise
+        #: The loaded elements (meshes and textures), for renderers other than pybullet's.
+        self.elements: tuple = tuple(elements)
         #: Bodies added with add_body: body id -> the box's half extents (m), and -> its pose.
         self._extra_bodies: dict[int, NDArray[np.float64]] = {}
+        self._extra_rgba: dict[int, tuple[float, ...]] = {}
         #: Their poses as rows of one array (ray casting and the near plane read them all at once).
         self._body_row: dict[int, int] = {}
         self._body_poses = np.zeros((0, 4, 4))
@@ -405,6 +408,18 @@ class SiteWorld:
         halves = np.array(list(self._extra_bodies.values())).reshape(-1, 3)
         return ids, poses, halves
 
+    def added_bodies(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64],
+                                    NDArray[np.float64]]:
+        """The bodies added with :meth:`add_body`, at their current poses.
+
+        Returns:
+            ``(body ids (B,), world_from_body (B, 4, 4), half extents (B, 3) m, rgba (B, 4))``,
+            in the order they were added (the pose array is this world's own: do not write to it).
+        """
+        ids, poses, halves = self._added_boxes()
+        rgba = np.array([self._extra_rgba[b] for b in ids], dtype=np.float64).reshape(-1, 4)
+        return np.array(ids, dtype=np.int64), poses, halves, rgba
+
     def _sync_ray_boxes(self) -> list[int]:
         """Give the ray scene the added bodies at their current poses; their ids in box order."""
         ids, poses, halves = self._added_boxes()
@@ -432,6 +447,7 @@ class SiteWorld:
             physicsClientId=self.client_id,
         )
         self._extra_bodies[body] = np.asarray(half_extents, dtype=np.float64)
+        self._extra_rgba[body] = tuple(float(c) for c in rgba)
         self._body_row[body] = len(self._body_poses)
         self._body_poses = np.concatenate([self._body_poses, np.eye(4)[None]])
         if world_from_body is not None:
@@ -477,6 +493,7 @@ class SiteWorld:
         self._client.activate()
         p.removeBody(body_id, physicsClientId=self.client_id)
         del self._extra_bodies[body_id]
+        del self._extra_rgba[body_id]
         self._body_poses = np.delete(self._body_poses, self._body_row.pop(body_id), axis=0)
         self._body_row = {b: k for k, b in enumerate(self._extra_bodies)}
 

@@ -12,7 +12,9 @@ on 2 CPU cores (docs/training.md):
   starts 15-35 m out turned by up to +-60 deg of heading (some start views miss part of the
   structure).
 * ``"image"``: the same plus a low-resolution 64 x 36 RGB ``image`` (``MultiInputPolicy`` with
-  SB3's NatureCNN, several times slower per step to learn from).
+  SB3's NatureCNN, several times slower per step to learn from), drawn by the batched renderer
+  (``renderer="batch"``, :mod:`uav_struct_env.sim.batch`: the same body at 99+ % of pixels and the
+  same landmark visibility as TinyRenderer, ``benchmarks/batch_render.py``).
 """
 
 from __future__ import annotations
@@ -105,7 +107,7 @@ TRAIN_CONFIGS: dict[str, TrainConfig] = {
     ),
     "image": TrainConfig(
         "image",
-        env={**_STATE_ENV, "image_size": (64, 36)},
+        env={**_STATE_ENV, "image_size": (64, 36), "renderer": "batch"},
         wrapper={**_WRAPPER, "drop_image": False},
     ),
 }
