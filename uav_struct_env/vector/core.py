@@ -41,6 +41,8 @@ __all__ = ["FINAL_OBSERVATION", "ParallelVectorEnv"]
 FINAL_OBSERVATION = "final_observation"
 
 StepResult = tuple[dict, dict, dict, dict, dict]
+#: ``(obs, rewards, terminations, truncations, infos)`` of :meth:`ParallelVectorEnv.step`.
+VectorStep = tuple[Any, np.ndarray, np.ndarray, np.ndarray, list[dict]]
 
 
 def _same_spaces(envs: Sequence[Any]) -> tuple[list[str], Any, Any]:
@@ -99,7 +101,8 @@ class ParallelVectorEnv:
 
     def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, list[dict]]:
         """Reset every env (env ``k`` with ``seed + k``); stacked observations and per-slot infos."""
-        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
+        bad = isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0
+        if seed is not None and bad:
             raise ConfigError(f"seed must be None or an int >= 0, got {seed!r}")
         results = [
             env.reset(seed=None if seed is None else int(seed) + k, options=options)
@@ -110,7 +113,7 @@ class ParallelVectorEnv:
         self._was_reset = True
         return self._stack(obs), [dict(i) for i in self.reset_infos]
 
-    def step(self, actions: Any) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray, list[dict]]:
+    def step(self, actions: Any) -> VectorStep:
         """Step every env with ``actions`` (one row per slot); autoreset the envs whose episode ended.
 
         Returns:
@@ -130,8 +133,9 @@ class ParallelVectorEnv:
             raise ConfigError(
                 f"actions must have one row per slot ({self.num_slots}), got shape {actions.shape}"
             )
+        n = self.agents_per_env
         per_env = [
-            dict(zip(self.possible_agents, actions[k * self.agents_per_env:(k + 1) * self.agents_per_env]))
+            dict(zip(self.possible_agents, actions[k * n:(k + 1) * n], strict=True))
             for k in range(self.num_envs)
         ]
         results = self.step_envs(per_env)
@@ -143,9 +147,9 @@ class ParallelVectorEnv:
         Every env renders its own cameras inside its step here; this is the seam where a batched
         renderer draws the step's cameras of all K envs in one call.
         """
-        return [env.step(a) for env, a in zip(self.envs, actions)]
+        return [env.step(a) for env, a in zip(self.envs, actions, strict=True)]
 
-    def _collect(self, results: list[StepResult]) -> tuple[dict, np.ndarray, np.ndarray, np.ndarray, list[dict]]:
+    def _collect(self, results: list[StepResult]) -> VectorStep:
         n = self.num_slots
         rewards = np.zeros(n, np.float32)
         terminations = np.zeros(n, bool)
@@ -170,9 +174,11 @@ class ParallelVectorEnv:
         return self._stack(observations), rewards, terminations, truncations, infos
 
     def _check_complete(self, k: int, obs: dict) -> None:
-        if len(obs) != self.agents_per_env:
+        left = self.envs[k].agents
+        if len(obs) != self.agents_per_env or (left and len(left) != self.agents_per_env):
             raise ConfigError(
-                f"env {k} returned observations of {sorted(obs)}, not of all its agents "
+                f"env {k} returned observations of {sorted(obs)} and goes on with {left}, not with "
+                f"all its agents {self.possible_agents}: a vector env needs every agent to finish together "
                 f"{self.possible_agents}: a vector env needs every agent to finish together "
                 "(build the env with on_crash='all', as every training configuration does)"
             )

@@ -73,7 +73,9 @@ class SB3VecEnv(VecEnv):
         for env in self._envs(indices):
             setattr(env, attr_name, value)
 
-    def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list[Any]:
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any
+    ) -> list[Any]:
         """Call ``method_name`` on each slot's env."""
         return [getattr(env, method_name)(*method_args, **method_kwargs) for env in self._envs(indices)]
 
