@@ -11,13 +11,17 @@ model = stable_baselines3.PPO("MultiInputPolicy", SB3VecEnv(vec))
 from uav_struct_env.vector.core import FINAL_OBSERVATION, ParallelVectorEnv
 from uav_struct_env.vector.make import make_vector_env
 
-__all__ = ["FINAL_OBSERVATION", "ParallelVectorEnv", "SB3VecEnv", "make_vector_env"]
+__all__ = ["FINAL_OBSERVATION", "ParallelVectorEnv", "SB3VecEnv", "TorchRLVectorEnv", "make_vector_env"]
 
 
 def __getattr__(name: str):
-    """The library adapters, imported on first use (SB3 is an optional extra)."""
+    """The library adapters, imported on first use (SB3 and TorchRL are optional extras)."""
     if name == "SB3VecEnv":
         from uav_struct_env.vector.sb3 import SB3VecEnv
 
         return SB3VecEnv
+    if name == "TorchRLVectorEnv":
+        from uav_struct_env.vector.torchrl import TorchRLVectorEnv
+
+        return TorchRLVectorEnv
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
