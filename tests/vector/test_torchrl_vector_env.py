@@ -68,3 +68,18 @@ def test_a_masked_reset_restarts_only_the_masked_env():
     assert not torch.equal(out["uav", "observation"][0], before[0])
     assert torch.equal(out["uav", "observation"][1], before[1])
     env.close()
+
+
+def test_torchrls_collector_gathers_whole_batches_across_episodes():
+    from torchrl.collectors import Collector
+
+    torch.manual_seed(0)  # the collector's random policy
+    env = TorchRLVectorEnv(make_vector_env("state", K, wrap=FlattenObservation, max_cycles=CYCLES))
+    env.set_seed(0)
+    collector = Collector(env, policy=None, frames_per_batch=4 * K, total_frames=8 * K)
+    batches = list(collector)
+    collector.shutdown()
+    assert len(batches) == 2 and batches[0]["uav", "action"].shape == (K, 4, 4, 5)
+    done = torch.cat([b["next", "done"] for b in batches], dim=1)[..., 0]
+    assert done[:, CYCLES - 1].all() and done[:, 2 * CYCLES - 1].all()
+    assert torch.cat([b["uav", "info", "localization.success"] for b in batches], 1).shape == (K, 8, 4)
