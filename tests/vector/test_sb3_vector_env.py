@@ -42,4 +42,10 @@ def test_done_slots_carry_the_terminal_observation_and_the_time_limit():
         # the step's observation is the next episode's first: a new start, not the terminal one
         assert not np.array_equal(obs["gnss"][slot], info["terminal_observation"]["gnss"])
     assert not np.array_equal(first["gnss"], obs["gnss"])
+    # slot 5 is uav_1 of the second copy: SB3's attribute calls reach that copy
+    assert env.get_attr("unwrapped", [5])[0] is env.vec.envs[1].unwrapped
+    assert env.env_method("observation_space", "uav_0", indices=[0, 7]) == [env.observation_space] * 2
+    env.set_attr("marker", 3, indices=[4])
+    assert getattr(env.vec.envs[1], "marker", None) == 3 and getattr(env.vec.envs[0], "marker", None) is None
+    assert env.env_is_wrapped(object) == [False] * 8
     env.close()
