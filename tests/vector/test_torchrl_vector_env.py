@@ -12,7 +12,7 @@ from torchrl.envs.utils import check_env_specs  # noqa: E402
 
 from uav_struct_env.errors import ConfigError  # noqa: E402
 from uav_struct_env.vector import FINAL_OBSERVATION, make_vector_env  # noqa: E402
-from uav_struct_env.vector.torchrl import TorchRLVectorEnv  # noqa: E402
+from uav_struct_env.vector.torchrl_env import TorchRLVectorEnv  # noqa: E402
 from uav_struct_env.wrappers import FlattenObservation  # noqa: E402
 
 pytestmark = pytest.mark.filterwarnings("ignore:The `render_mode` attribute is not defined")

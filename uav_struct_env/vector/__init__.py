@@ -21,7 +21,7 @@ def __getattr__(name: str):
 
         return SB3VecEnv
     if name == "TorchRLVectorEnv":
-        from uav_struct_env.vector.torchrl import TorchRLVectorEnv
+        from uav_struct_env.vector.torchrl_env import TorchRLVectorEnv
 
         return TorchRLVectorEnv
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
