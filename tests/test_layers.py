@@ -34,6 +34,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("uav_struct_env.stack", "uav_struct_env.validate", "uav_struct_env.provenance"),
     ("uav_struct_env.tracking_sim", "uav_struct_env.baselines", "uav_struct_env.datasets"),
     ("uav_struct_env.wrappers",),
+    ("uav_struct_env.vector",),
     ("uav_struct_env.training",),
     ("uav_struct_env.study",),
     ("uav_struct_env.photos",),  # uav-struct localize: writes its CSV with the study's writer
