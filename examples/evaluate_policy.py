@@ -43,6 +43,10 @@ from the lowest to the highest run where several are given.
         --episodes 10 --plot curve.png --json-out curve.json
 
 Nothing is written unless asked: ``--plot`` and ``--json-out`` name the files (no default path).
+Each says how it was made: the JSON has ``"software"`` (version, git commit) and ``"settings"``,
+the settings line (:func:`uav_struct_env.provenance.settings_line`: the software, then every
+option given); the figure carries the same line in its PNG ``Settings`` text chunk
+(:func:`uav_struct_env.provenance.png_settings` reads it).
 
 A model folder is read without unpickling anything from it (unpickling runs whatever code the
 file names): ``model.zip`` through :func:`uav_struct_env.training.policy_files.load_ppo` and the
@@ -221,7 +225,7 @@ def across_runs(results: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
     return out
 
 
-def plot(results: dict[str, dict], path: str | Path) -> None:
+def plot(results: dict[str, dict], path: str | Path, settings: str | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -251,7 +255,7 @@ def plot(results: dict[str, dict], path: str | Path) -> None:
     axes[1].legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))  # beside the curves
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    save_figure(fig, path)
+    save_figure(fig, path, settings=settings)
     plt.close(fig)
 
 
@@ -310,7 +314,7 @@ CURVE_METRICS = (("final_success_rate", "localized at final step"),
                  ("mean_return", "deterministic episode return"))
 
 
-def plot_curve(curves: dict[str, list[dict]], path: str | Path) -> None:
+def plot_curve(curves: dict[str, list[dict]], path: str | Path, settings: str | None = None) -> None:
     """Each metric against agent-steps: the median over runs, a min-max band over runs."""
     import matplotlib
 
@@ -335,7 +339,7 @@ def plot_curve(curves: dict[str, list[dict]], path: str | Path) -> None:
     axes[0].set_ylim(0, 1.02)
     axes[0].legend(fontsize=8)
     fig.tight_layout()
-    save_figure(fig, path)
+    save_figure(fig, path, settings=settings)
     plt.close(fig)
 
 
@@ -448,46 +452,44 @@ def env_config(opt: dict[str, Any]) -> tuple[Any, str]:
     return config, source
 
 
-def main(**kwargs: Any) -> dict[str, Any]:
-    """Evaluate; returns ``{policy: summary}``. Keys: see :data:`DEFAULTS`."""
-    unknown = sorted(set(kwargs) - set(DEFAULTS))
-    if unknown:
-        raise ValueError(f"unknown options {unknown}; valid: {sorted(DEFAULTS)}")
-    opt = {**DEFAULTS, **kwargs}
-    policies = list(opt["policies"])
-    check_options({**opt, "policies": policies})
-    warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
-    from uav_struct_env.wrappers import make_train_env
+def run_settings(opt: dict[str, Any], config: Any) -> str:
+    """The settings line of an evaluation: the software, the env configuration, every option given."""
+    from uav_struct_env.provenance import settings_line
 
-    config, source = env_config({**opt, "policies": policies})
-    print(f"environment: {config.name}, {config.wrapper.get('association')} association ({source})")
-    env = make_train_env(config)
-    seeds = [opt["seed"] + i for i in range(opt["episodes"])]
-    if opt["checkpoints"]:
-        try:
-            curves = learning_curve(list(opt["checkpoints"]), env, seeds)
-        finally:
-            env.close()
-        if opt["plot"]:
-            plot_curve(curves, opt["plot"])
-        summary = {"options": opt, "env_config": config.as_dict(), "env_config_source": source,
-                   "seeds": seeds, "learning_curve": curves}
-        if opt["json_out"]:
-            atomic_write_json(opt["json_out"], summary, indent=2, default=str)
-        for run, points in curves.items():
-            print(run)
-            for q in points:
-                print(f"  {q['agent_steps']:>9d} steps: localized {q['final_success_rate']:.2f}, "
-                      f"median {q['final_translation_median_m']:.3f} m, return {q['mean_return']:.2f}")
-        return summary
+    shown = {k: v for k, v in opt.items()
+             if k not in ("plot", "json_out", "overwrite", "config") and v not in (None, False)}
+    return settings_line({"env": config.name, "association": config.wrapper.get("association"), **shown})
+
+
+def _write_curve(opt: dict[str, Any], env, head: dict[str, Any]) -> dict[str, Any]:
+    """``--checkpoints``: the learning curve, its figure and JSON; returns the summary."""
+    try:
+        curves = learning_curve(list(opt["checkpoints"]), env, head["seeds"])
+    finally:
+        env.close()
+    if opt["plot"]:
+        plot_curve(curves, opt["plot"], head["settings"])
+    summary = {**head, "learning_curve": curves}
+    if opt["json_out"]:
+        atomic_write_json(opt["json_out"], summary, indent=2, default=str)
+    for run, points in curves.items():
+        print(run)
+        for q in points:
+            print(f"  {q['agent_steps']:>9d} steps: localized {q['final_success_rate']:.2f}, "
+                  f"median {q['final_translation_median_m']:.3f} m, return {q['mean_return']:.2f}")
+    return summary
+
+
+def compare(opt: dict[str, Any], env, seeds: list[int]) -> dict[str, dict]:
+    """Every policy of ``opt["policies"]`` over ``seeds``: ``{row name: summary}`` (closes ``env``)."""
     results: dict[str, dict] = {}
-    models = model_folders(opt["model"]) if "ppo" in policies else []
+    models = model_folders(opt["model"]) if "ppo" in opt["policies"] else []
     try:  # the model folders are read (and refused) before any episode runs
         ppos = [PpoPolicy(m, env, trust_pickle=opt["trust_pickle"]) for m in models]
     except BaseException:
         env.close()
         raise
-    for name in policies:
+    for name in opt["policies"]:
         if name != "ppo":
             t0 = time.perf_counter()
             rec = run_policy(make_baseline(name, env, seed=opt["seed"]), env, seeds)
@@ -504,13 +506,36 @@ def main(**kwargs: Any) -> dict[str, Any]:
             results["ppo"]["across_runs"] = across_runs(
                 [r for n, r in results.items() if n.startswith("ppo:")])
     env.close()
+    return results
+
+
+def main(**kwargs: Any) -> dict[str, Any]:
+    """Evaluate; returns ``{policy: summary}``. Keys: see :data:`DEFAULTS`."""
+    from uav_struct_env.provenance import software
+
+    unknown = sorted(set(kwargs) - set(DEFAULTS))
+    if unknown:
+        raise ValueError(f"unknown options {unknown}; valid: {sorted(DEFAULTS)}")
+    opt = {**DEFAULTS, **kwargs}
+    opt["policies"] = list(opt["policies"])
+    check_options(opt)
+    warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
+    from uav_struct_env.wrappers import make_train_env
+
+    config, source = env_config(opt)
+    print(f"environment: {config.name}, {config.wrapper.get('association')} association ({source})")
+    seeds = [opt["seed"] + i for i in range(opt["episodes"])]
+    head = {"options": opt, "env_config": config.as_dict(), "env_config_source": source, "seeds": seeds,
+            "software": software(), "settings": run_settings(opt, config)}
+    env = make_train_env(config)
+    if opt["checkpoints"]:
+        return _write_curve(opt, env, head)
+    results = compare(opt, env, seeds)
     if opt["plot"]:
-        plot(results, opt["plot"])
+        plot(results, opt["plot"], head["settings"])
     for r in results.values():
         del r["_final"]
-    summary = {"options": {**opt, "policies": policies}, "env_config": config.as_dict(),
-               "env_config_source": source, "seeds": seeds,
-               "results": results}
+    summary = {**head, "results": results}
     if opt["json_out"]:
         atomic_write_json(opt["json_out"], summary, indent=2, default=str)
     print(table(results))

@@ -404,10 +404,18 @@ def atomic_write_json(path: str | Path, obj: Any, **kwargs: Any) -> Path:
     return atomic_write_text(path, json.dumps(obj, **kwargs) + "\n")
 
 
-def save_figure(fig: Any, path: str | Path, **kwargs: Any) -> Path:
-    """``fig.savefig(path, **kwargs)`` atomically (the format follows ``path``'s suffix)."""
+def save_figure(fig: Any, path: str | Path, *, settings: str | None = None, **kwargs: Any) -> Path:
+    """``fig.savefig(path, **kwargs)`` atomically (the format follows ``path``'s suffix).
+
+    ``settings``: the output's settings line (:mod:`uav_struct_env.provenance`), stored in a PNG's
+    ``Settings`` text chunk (read back by :func:`uav_struct_env.provenance.png_settings`).
+    """
+    from uav_struct_env.provenance import PNG_SETTINGS_KEY
+
     path = Path(path)
     kwargs.setdefault("format", path.suffix.lstrip(".") or None)
+    if settings is not None and kwargs["format"] == "png":
+        kwargs["metadata"] = {**kwargs.get("metadata", {}), PNG_SETTINGS_KEY: settings}
     with atomic_path(path) as tmp:
         fig.savefig(tmp, **kwargs)
     return path
