@@ -172,7 +172,7 @@ def main(workers: int = 2, keep: str | None = None, detector_model: str | None =
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    ap.add_argument("--workers", type=int, default=2, help="study processes (default 2)")
+    ap.add_argument("--workers", type=int, default=2, help="study processes")
     ap.add_argument("--keep", default=None, help="also keep every run's outputs in this folder")
     ap.add_argument("--detector", default="learned",
                     help="learned (the default weights) or learned:NAME, a named weight set (learned:active)")
