@@ -25,11 +25,9 @@ from pathlib import Path
 from typing import Any
 
 import uav_struct_env
+from uav_struct_env.outputs import PNG_SETTINGS_KEY
 
 __all__ = ["PNG_SETTINGS_KEY", "git_commit", "png_settings", "settings_line", "software", "version_text"]
-
-#: The PNG text chunk that carries a figure's settings line.
-PNG_SETTINGS_KEY = "Settings"
 
 _ROOT = Path(uav_struct_env.__file__).resolve().parents[1]
 
