@@ -8,13 +8,9 @@ normalization statistics, TensorBoard events) lies in a run folder whose ``train
 import json
 from pathlib import Path
 
-import pytest
-
 import uav_struct_env
 from uav_struct_env.outputs import INSIDE_LOCK
 from uav_struct_env.provenance import git_commit, png_settings, settings_line, version_text
-
-pytest.importorskip("stable_baselines3")
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -35,21 +31,16 @@ def _first_line(path: Path, prefix: str) -> str | None:
     return first[len(prefix):] if first.startswith(prefix) else None
 
 
-def _run_record(path: Path, root: Path) -> str | None:
-    """The settings of the run folder (under ``root``) a library-format file belongs to."""
-    for folder in path.parents:
-        if (folder / "train.json").is_file():
-            return _json_settings(folder / "train.json")
-        if folder == root:
-            return None
-    return None
+def _run_record(path: Path, run: Path) -> str | None:
+    """The settings of the training run folder ``run``, if a library-format file lies in it."""
+    return _json_settings(run / "train.json") if run in path.parents else None
 
 
 def _is_lock(path: Path) -> bool:
     return path.name == INSIDE_LOCK or (path.name.startswith(".") and path.name.endswith(".lock"))
 
 
-def provenance(path: Path, root: Path) -> str | None:
+def provenance(path: Path, run: Path) -> str | None:
     """The settings line ``path`` carries (or its run folder's ``train.json`` does), or None."""
     if path.suffix == ".csv":
         return _first_line(path, "# Settings: ")
@@ -59,7 +50,7 @@ def provenance(path: Path, root: Path) -> str | None:
         return png_settings(path)
     if path.suffix == ".json":
         return _json_settings(path)
-    return _run_record(path, root)
+    return _run_record(path, run)
 
 
 def test_settings_line_lists_what_was_given_after_the_software():
@@ -72,24 +63,18 @@ def test_settings_line_lists_what_was_given_after_the_software():
 
 
 def test_every_file_of_the_study_the_trainer_and_the_evaluator_says_how_it_was_made(
-        tmp_path, load_script, capsys):
-    from uav_struct_env.study.study import main as study
-
-    assert study(["--quick", "--detector", "projection", "--out", str(tmp_path / "study"),
-                  "--no-progress"]) == 0
-    run = tmp_path / "run"
-    load_script(EXAMPLES / "train_viewpoint_ppo.py").main(
-        out=str(run), total_timesteps=128, n_envs=1, num_cpus=0, n_steps=32, batch_size=64, n_epochs=1,
-        max_cycles=4, checkpoint_every=128, progress_bar=False, seed=5)
+        quick_projection_study, tiny_ppo_run, tmp_path, load_script, capsys):
+    study, _ = quick_projection_study  # `uav-struct study --quick --detector projection` (conftest)
+    run, _ = tiny_ppo_run  # the trainer's smallest run: 256 agent-steps, two checkpoints
     evaluate = load_script(EXAMPLES / "evaluate_policy.py")
     ev = tmp_path / "eval"
     evaluate.main(model=str(run), policies=("ppo", "random"), episodes=1, max_cycles=4,
                   plot=str(ev / "evaluation.png"), json_out=str(ev / "eval.json"))
     evaluate.main(checkpoints=(str(run),), episodes=1, max_cycles=4,
                   plot=str(ev / "curve.png"), json_out=str(ev / "curve.json"))
-    # every file but the output locks (``.<name>.lock``: a running command's pid, not an output)
-    files = sorted(p for p in tmp_path.rglob("*") if p.is_file() and not _is_lock(p))
-    # what each command wrote is all here: the study's tables, CSVs and figures, the run, the evaluation
+    # every file each command wrote, but the output locks (``.<name>.lock``: a running command's
+    # pid, not an output)
+    files = sorted(p for root in (study, run, ev) for p in root.rglob("*") if p.is_file() and not _is_lock(p))
     names = {p.name for p in files}
     assert {"table1.md", "per_image.csv", "detections.csv", "results.json", "error_cdf.png", "train.json",
             "model.zip", "normalization.npz", "progress.jsonl", "evaluation.png", "eval.json",
@@ -98,15 +83,14 @@ def test_every_file_of_the_study_the_trainer_and_the_evaluator_says_how_it_was_m
     head = f"uav-struct-env {uav_struct_env.__version__}"
     commit = git_commit()
     for path in files:
-        line = provenance(path, tmp_path)
-        where = path.relative_to(tmp_path)
-        assert line is not None, f"{where} does not say how it was made"
-        assert line.startswith(head), (where, line)
+        line = provenance(path, run)
+        assert line is not None, f"{path} does not say how it was made"
+        assert line.startswith(head), (path, line)
         if commit is not None:
-            assert f"(git {commit[0][:10]}" in line, (where, line)
-    # the evaluator's line names what it was asked; the study's its detector
+            assert f"(git {commit[0][:10]}" in line, (path, line)
+    # the evaluator's line names what it was asked; the study's its detector, the run its seed
     assert "policies ppo,random" in png_settings(ev / "evaluation.png")
     assert "episodes 1" in json.loads((ev / "curve.json").read_text())["settings"]
-    assert "projection detector" in png_settings(tmp_path / "study" / "error_cdf.png")
-    assert "seed 5" in json.loads((run / "train.json").read_text())["settings"]
+    assert "projection detector" in png_settings(study / "error_cdf.png")
+    assert "seed 3" in json.loads((run / "train.json").read_text())["settings"]
     capsys.readouterr()

@@ -26,23 +26,9 @@ def example(load_script):
 
 
 @pytest.fixture(scope="module")
-def trained(example, tmp_path_factory):
-    out = tmp_path_factory.mktemp("ppo")
-    train = example("train_viewpoint_ppo")
-    summary = train.main(
-        out=str(out),
-        total_timesteps=256,
-        n_envs=1,
-        num_cpus=0,
-        n_steps=32,
-        batch_size=64,
-        n_epochs=1,
-        max_cycles=8,
-        checkpoint_every=128,
-        progress_bar=False,
-        seed=3,
-    )
-    return out, summary
+def trained(tiny_ppo_run):
+    """``(out, summary)``: 256 agent-steps, seed 3, checkpoints every 128 (tests/conftest.py)."""
+    return tiny_ppo_run
 
 
 def test_train_writes_model_normalization_logs_and_checkpoints(trained):
