@@ -251,6 +251,7 @@ def plot(results: dict[str, dict], path: str | Path, settings: str | None = None
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     names = list(results)
     fig, axes = plt.subplots(1, 2, figsize=(9.5, 3), dpi=90)
@@ -267,6 +268,7 @@ def plot(results: dict[str, dict], path: str | Path, settings: str | None = None
     axes[0].set_ylabel("localized at final step")
     _error_cdfs(axes[1], results)
     axes[1].set_xscale("log")
+    axes[1].xaxis.set_minor_formatter(NullFormatter())  # labels at the decades only: no overlap
     axes[1].set_xlabel("final-step translation error [m] (legend: localized of agent-episodes)")
     axes[1].set_ylabel("fraction of agent-episodes")
     axes[1].set_ylim(0, 1)
