@@ -385,3 +385,13 @@ def test_the_throughput_benchmark_replays_a_trained_policy_the_same_on_bare_and_
     with pytest.raises(UsageError, match=r"--model '.*nowhere'"):
         bench.record(wrapped, str(out / "nowhere"), 1, seed=5)
     wrapped.close()
+
+
+def test_the_learning_curve_ends_at_the_final_model_where_no_checkpoint_holds_it(example, trained, tmp_path):
+    out, _ = trained
+    run = tmp_path / "run"
+    shutil.copytree(out, run)
+    evaluate = example("evaluate_policy")
+    assert [s for s, _ in evaluate.checkpoint_folders(run)] == [128, 256]  # the last checkpoint is it
+    shutil.rmtree(run / "checkpoints" / "step_000000256")  # a run from before the trainer saved it
+    assert evaluate.checkpoint_folders(run) == [(128, run / "checkpoints" / "step_000000128"), (256, run)]
