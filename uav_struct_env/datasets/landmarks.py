@@ -36,9 +36,9 @@ the pose at the middle row's exposure (the time convention of :mod:`uav_struct_e
 ``"camera"`` passes every delivered full-resolution image (after the lens, before downscaling)
 through :data:`uav_struct_env.sim.imaging.IMAGING_PRESETS` ``["camera"]`` -- optics blur, shot and
 read noise, a JPEG round trip: the env's and the study's ``imaging="camera"``, so that a
-``camera="mavic2pro", imaging="camera"`` view is the study's ``--camera mavic2pro --imaging camera``. ``"mixed"``
-gives it to image ``n`` when ``n // 2`` is odd: with ``camera="mixed"`` a quarter of the images
-each of pinhole / Mavic x ideal / camera imaging. Its noise is drawn from
+``camera="mavic2pro", imaging="camera"`` view is the study's ``--camera mavic2pro --imaging
+camera``. ``"mixed"`` gives it to image ``n`` when ``n // 2`` is odd: with ``camera="mixed"`` a
+quarter of the images each of pinhole / Mavic x ideal / camera imaging. Its noise is drawn from
 ``numpy.random.default_rng([seed, layout, 3])`` (its own stream again), recorded as each such
 image's ``"imaging": "camera"``.
 
