@@ -197,29 +197,32 @@ def _timed(det: LearnedDetector, rgb: np.ndarray) -> tuple[float, tuple]:
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     ap.add_argument("--seed", type=int, default=2,
                     help=f"held-out dataset seed (not a training seed: {sorted(SEEN_SEEDS)})")
     ap.add_argument("--allow-seen-seed", action="store_true",
                     help="accept a seed the committed weights were trained or selected on")
-    ap.add_argument("--layouts", type=int, default=20)
-    ap.add_argument("--views", type=int, default=5)
-    ap.add_argument("--match-px", type=float, default=3.0)
+    ap.add_argument("--layouts", type=int, default=20, help="random sites rendered")
+    ap.add_argument("--views", type=int, default=5, help="viewpoints per site")
+    ap.add_argument("--match-px", type=float, default=3.0,
+                    help="a detection within this many pixels of a visible landmark is a hit")
     ap.add_argument("--threshold", type=float, default=None, help="keypoint-network score")
-    ap.add_argument("--model", default=None, help="keypoint-network ONNX (default: committed)")
+    ap.add_argument("--model", default=None, help="keypoint-network ONNX; None: the committed weights")
     ap.add_argument("--refiner", default=None,
-                    help="refiner ONNX, or 'none' for the network alone (default: committed)")
+                    help="refiner ONNX, or 'none' for the network alone; None: the committed one")
     ap.add_argument("--iterations", type=int, default=None, help="refinement passes")
-    ap.add_argument("--refine-threshold", type=float, default=None)
+    ap.add_argument("--refine-threshold", type=float, default=None,
+                    help="refiner score; None: the operating point's")
     ap.add_argument("--operating-point", default=None, choices=["balanced", "recall"],
-                    help="default thresholds (default: balanced; the study with robust "
+                    help="default thresholds (None: balanced; the study with robust "
                          "association uses recall)")
     ap.add_argument("--vote-threshold", type=float, default=None,
                     help="minimum score of a non-peak heatmap cell that proposes a candidate")
     ap.add_argument("--no-votes", action="store_true",
                     help="candidates from heatmap peaks only (the decoding before votes)")
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--json", dest="json_out", default=None)
+    ap.add_argument("--threads", type=int, default=1, help="ONNX Runtime threads")
+    ap.add_argument("--json", dest="json_out", default=None, help="also write the figures to this JSON file")
     ap.add_argument("--activity", default="none", choices=ACTIVITIES, help="site activity per layout")
     ap.add_argument("--camera", default="paper", choices=CAMERAS, help="camera per image")
     ap.add_argument("--imaging", default="ideal", choices=IMAGINGS,

@@ -154,10 +154,13 @@ def compare_cameras(steps: int = 20, renderer: str = "auto", camera: str = "mavi
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=20)
-    parser.add_argument("--renderer", default="auto", choices=["auto", "tiny", "egl"])
-    parser.add_argument("--config", action="append", choices=list(CONFIGS), dest="configs")
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--steps", type=int, default=20, help="env steps timed per configuration")
+    parser.add_argument("--renderer", default="auto", choices=["auto", "tiny", "egl"],
+                        help="pybullet renderer")
+    parser.add_argument("--config", action="append", choices=list(CONFIGS), dest="configs",
+                        help="a configuration to time (repeatable; default: all)")
     parser.add_argument("--compare-camera", default=None, metavar="CAMERA",
                         help="instead: the paper preset with camera='paper' and with CAMERA, "
                         "stepped alternately (median wall and CPU per step, and their ratio)")

@@ -253,9 +253,10 @@ def main(images: int = 200, aruco_images: int = 40, seed: int = 0, json_out: str
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     ap.add_argument("--images", type=int, default=200, help="viewpoints per configuration")
     ap.add_argument("--aruco-images", type=int, default=40, help="rendered ArUco views (0: skip)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="seed of the synthetic scenes")
     ap.add_argument("--json", dest="json_out", default=None, help="also write results here")
     main(**vars(ap.parse_args()))

@@ -86,8 +86,9 @@ def main(check: bool = False, workers: int = 2, keep: str | None = None) -> int:
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     ap.add_argument("--check", action="store_true", help="compare only; exit 1 when the card differs")
-    ap.add_argument("--workers", type=int, default=2, help="study processes (default 2)")
+    ap.add_argument("--workers", type=int, default=2, help="study processes")
     ap.add_argument("--keep", default=None, help="also keep both runs' outputs in this folder")
     sys.exit(main(**vars(ap.parse_args())))

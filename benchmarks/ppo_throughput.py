@@ -107,9 +107,10 @@ def main(minutes: float = 2.0, seed: int = 9, trainer_args: list[str] | None = N
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--minutes", type=float, default=2.0, help="training wall clock")
-    p.add_argument("--seed", type=int, default=9)
+    p.add_argument("--seed", type=int, default=9, help="the trainer's --seed")
     p.add_argument("trainer_args", nargs="*", help="more train_viewpoint_ppo.py options, after --")
     a = p.parse_args()
     main(a.minutes, a.seed, a.trainer_args)

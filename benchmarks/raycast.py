@@ -88,7 +88,9 @@ def main(views: int = 60, renderer: str = "tiny") -> dict:
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--views", type=int, default=60, help="random views per site")
-    p.add_argument("--renderer", default="tiny", choices=("tiny", "egl"))
+    p.add_argument("--renderer", default="tiny", choices=("tiny", "egl"),
+                   help="pybullet renderer of the depth-tested reference")
     main(**vars(p.parse_args()))

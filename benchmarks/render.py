@@ -88,12 +88,15 @@ def _size(text: str) -> tuple[int, int]:
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--repeats", type=int, default=10, help="frames timed per cell")
-    parser.add_argument("--backends", nargs="+", default=["tiny", "egl"], choices=["tiny", "egl"])
+    parser.add_argument("--backends", nargs="+", default=["tiny", "egl"], choices=["tiny", "egl"],
+                        help="renderers to time")
     parser.add_argument("--sizes", nargs="+", type=_size, default=list(SIZES),
-                        help="image sizes as WxH (default: 1280x720 640x360 128x72)")
-    parser.add_argument("--stage", default="columns", choices=["slab", "columns"])
+                        help="image sizes as WxH")
+    parser.add_argument("--stage", default="columns", choices=["slab", "columns"],
+                        help="the paper building's stage")
     args = parser.parse_args()
     main(repeats=args.repeats, backends=tuple(args.backends), sizes=tuple(args.sizes),
          stage=args.stage)

@@ -1,13 +1,13 @@
 """The active-site x real-camera table of docs/study.md, from a run instead of by hand.
 
 Runs the paper's study (learned detector, seed 0, 40 images per landmark type) for every site
-activity (``none``, ``light``, ``busy``) and imaging:
+activity (``none``, ``light``, ``busy``) and camera / imaging pair, named as the study's options:
 
-- ``ideal``: the paper's ideal pinhole (``--camera paper``), no image effects;
-- ``camera``: the Mavic 2 Pro preset (``--camera mavic2pro``: lens distortion, rolling shutter,
-  motion blur; the localizers undistort with its coefficients);
-- ``realistic``: the Mavic 2 Pro plus the study's sensor effects (``--imaging camera``: blur,
-  sensor noise, JPEG).
+- camera ``paper``, imaging ``ideal``: the paper's ideal pinhole, no image effects;
+- camera ``mavic2pro``, imaging ``ideal``: the Mavic 2 Pro preset (lens distortion, rolling
+  shutter, motion blur; the localizers undistort with its coefficients);
+- camera ``mavic2pro``, imaging ``camera``: the Mavic 2 Pro plus the sensor effects (blur, sensor
+  noise, JPEG).
 
 and prints two Markdown tables: every figure (detection, association F1, poses, poses of the views
 with at least four visible landmarks, how many of those got no pose with fewer than four of their
@@ -42,9 +42,8 @@ from uav_struct_env.study import StudyConfig, run_study
 from uav_struct_env.study.cells import read_records_csv
 
 ACTIVITIES = ("none", "light", "busy")
-#: imaging name -> (StudyConfig.camera, StudyConfig.imaging)
-IMAGING = {"ideal": ("paper", "ideal"), "camera": ("mavic2pro", "ideal"),
-           "realistic": ("mavic2pro", "camera")}
+#: (StudyConfig.camera, StudyConfig.imaging) of each row, the study's --camera / --imaging words
+CONDITIONS = (("paper", "ideal"), ("mavic2pro", "ideal"), ("mavic2pro", "camera"))
 METHODS = ("slab_corners", "opening_corners", "column_tops", "all")
 SUMMARY_METHODS = ("slab_corners", "opening_corners", "column_tops")
 
@@ -84,16 +83,15 @@ def exact_f1(rows: list[dict], method: str, at_least: int = 4) -> float:
 
 def run_all(workers: int, keep: Path | None, detector_model: str | None,
             refiner_model: str | None, detector: str = "learned") -> list[dict]:
-    """Every (activity, imaging) run: dicts with the settings, results.json and the posed counts."""
+    """Every (activity, camera, imaging) run: dicts with the settings, results.json and the posed counts."""
     from tqdm import tqdm
 
     runs = []
-    cells = [(a, i) for a in ACTIVITIES for i in IMAGING]
+    cells = [(a, c, i) for a in ACTIVITIES for c, i in CONDITIONS]
     with tempfile.TemporaryDirectory() as tmp:
-        for activity, imaging in tqdm(cells, unit="study", desc="site conditions"):
-            camera, effects = IMAGING[imaging]
-            out = (keep or Path(tmp)) / f"{activity}-{imaging}"
-            config = StudyConfig(detector=detector, activity=activity, camera=camera, imaging=effects,
+        for activity, camera, imaging in tqdm(cells, unit="study", desc="site conditions"):
+            out = (keep or Path(tmp)) / f"{activity}-{camera}-{imaging}"
+            config = StudyConfig(detector=detector, activity=activity, camera=camera, imaging=imaging,
                                  workers=workers, methods=METHODS, detector_model=detector_model,
                                  refiner_model=refiner_model)
             results = run_study(config, out, progress=False, figures=keep is not None, overwrite=True)
@@ -101,8 +99,8 @@ def run_all(workers: int, keep: Path | None, detector_model: str | None,
             posed = {m: posable_views(rows, m) for m in METHODS}
             short = {m: unposed_short(rows, m) for m in METHODS}
             exact = {m: exact_f1(rows, m) for m in METHODS}
-            runs.append({"activity": activity, "imaging": imaging, "results": results, "posed": posed,
-                         "short": short, "exact_f1": exact})
+            runs.append({"activity": activity, "camera": camera, "imaging": imaging, "results": results,
+                         "posed": posed, "short": short, "exact_f1": exact})
     return runs
 
 
@@ -114,20 +112,25 @@ def _ratio(x: float | None) -> str:
     return "—" if x is None else f"{x:.2f}"
 
 
+def _condition(run: dict) -> str:
+    """The activity, camera and imaging cells of a row."""
+    return f"{run['activity']} | {run['camera']} | {run['imaging']}"
+
+
 def full_block(runs: list[dict]) -> str:
     """Every figure, a Markdown table."""
     lines = [
-        "| activity | imaging | landmarks | detection (%) | assoc. F1 (%) | exact F1 (%) | poses | "
+        "| activity | camera | imaging | landmarks | detection (%) | assoc. F1 (%) | exact F1 (%) | poses | "
         "views with >= 4 visible: posed | not posed, < 4 found | their assoc. F1 (%) | median / P90 (m) | "
         "bound median (m) | median / bound |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for run in runs:
         for m in METHODS:
             r = run["results"]["methods"][m]
             posed, views, f1 = run["posed"][m]
             lines.append(
-                f"| {run['activity']} | {run['imaging']} | {r['label']} | {100 * r['detection_rate']:.1f} | "
+                f"| {_condition(run)} | {r['label']} | {100 * r['detection_rate']:.1f} | "
                 f"{100 * r['association_f1']:.1f} | {100 * run['exact_f1'][m]:.1f} | "
                 f"{r['successful']}/{r['total']} | {posed}/{views} | {run['short'][m]} | "
                 f"{100 * f1:.1f} | "
@@ -140,9 +143,9 @@ def full_block(runs: list[dict]) -> str:
 def summary_block(runs: list[dict]) -> str:
     """Three landmark types per row, a Markdown table."""
     lines = [
-        "| activity | imaging | slab corners: det. / F1 (%), poses, median / bound (m) | opening corners "
-        "| column tops |",
-        "|---|---|---|---|---|",
+        "| activity | camera | imaging | slab corners: det. / F1 (%), poses, median / bound (m) "
+        "| opening corners | column tops |",
+        "|---|---|---|---|---|---|",
     ]
     for run in runs:
         cells = []
@@ -153,7 +156,7 @@ def summary_block(runs: list[dict]) -> str:
                          f"{r['successful']}/{r['total']}, "
                          f"{'—' if median is None else f'{median:.3f}'} / "
                          f"{r['cramer_rao_translation_m']['median']:.3f}")
-        lines.append(f"| {run['activity']} | {run['imaging']} | " + " | ".join(cells) + " |")
+        lines.append(f"| {_condition(run)} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -167,8 +170,9 @@ def main(workers: int = 2, keep: str | None = None, detector_model: str | None =
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--workers", type=int, default=2, help="study processes (default 2)")
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    ap.add_argument("--workers", type=int, default=2, help="study processes")
     ap.add_argument("--keep", default=None, help="also keep every run's outputs in this folder")
     ap.add_argument("--detector", default="learned",
                     help="learned (the default weights) or learned:NAME, a named weight set (learned:active)")

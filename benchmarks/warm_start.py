@@ -91,10 +91,12 @@ def main(policy: str = "hold", steps: int = 4000, seed: int = 0, model: str | No
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--policy", default="hold", choices=("hold", "random"))
-    p.add_argument("--steps", type=int, default=4000)
-    p.add_argument("--seed", type=int, default=0)
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--policy", default="hold", choices=("hold", "random"),
+                   help="the flights replayed (without --model)")
+    p.add_argument("--steps", type=int, default=4000, help="env steps recorded")
+    p.add_argument("--seed", type=int, default=0, help="env seed")
     p.add_argument("--model", default=None, help="a trained policy's folder: its flights, replayed")
     p.add_argument("--episodes", type=int, default=20, help="episodes recorded with --model")
     args = p.parse_args()

@@ -58,9 +58,10 @@ def main(viewpoints: int = 6, repeats: int = 3, upright: bool = False) -> dict:
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--viewpoints", type=int, default=6)
-    p.add_argument("--repeats", type=int, default=3)
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--viewpoints", type=int, default=6, help="viewpoints per UAV")
+    p.add_argument("--repeats", type=int, default=3, help="timed repeats (the median is reported)")
     p.add_argument("--upright", action="store_true", help="triangulate workers standing")
     a = p.parse_args()
     main(a.viewpoints, a.repeats, a.upright)

@@ -127,20 +127,22 @@ def main(config: str = "state", steps: int = 400, policy: str = "hold", seed: in
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--config", default="state")
-    p.add_argument("--steps", type=int, default=400)
-    p.add_argument("--policy", default="hold", choices=("hold", "random"))
-    p.add_argument("--seed", type=int, default=0)
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--config", default="state", help="TRAIN_CONFIGS name")
+    p.add_argument("--steps", type=int, default=400, help="env steps timed")
+    p.add_argument("--policy", default="hold", choices=("hold", "random"),
+                   help="actions: hold (hover) or random")
+    p.add_argument("--seed", type=int, default=0, help="env seed")
     p.add_argument("--render-images", action="store_true",
                    help="render every frame even if the config drops it (the depth-tested truth)")
     p.add_argument("--mode", default=None, choices=("paper", "robust"),
-                   help="association mode (default: the config's)")
+                   help="association mode; None: the config's")
     p.add_argument("--model", default=None,
                    help="a trained policy's folder (train_viewpoint_ppo.py --out): its actions, replayed")
     p.add_argument("--episodes", type=int, default=20, help="episodes recorded with --model")
     p.add_argument("--warm-start", action=argparse.BooleanOptionalAction, default=None,
-                   help="start each association from the last pose and the action (default: the config's)")
+                   help="start each association from the last pose and the action ; None: the config's")
     args = p.parse_args()
     if args.episodes < 1:
         p.error(f"--episodes must be at least 1, got {args.episodes}")

@@ -34,8 +34,9 @@ parametric building (``site="random"`` of the env, from its ``texture_seed``), `
 my_site.json`` or ``--site model.ifc`` reads one; the starts are placed around that building.
 
 Learning curve: ``--checkpoints RUN [RUN ...]`` evaluates every checkpoint folder
-(``RUN/checkpoints/step_<N>/``, written by ``train_viewpoint_ppo.py``) of each training run (one
-per training seed) deterministically on the same episodes, and plots the final-step success rate,
+(``RUN/checkpoints/step_<N>/``, written by ``train_viewpoint_ppo.py``, and the run's final
+``model.zip`` where no checkpoint holds it) of each training run (one per training seed)
+deterministically on the same episodes, and plots the final-step success rate,
 median translation error and mean return against agent-steps: the median over runs with a band
 from the lowest to the highest run where several are given.
 
@@ -43,6 +44,10 @@ from the lowest to the highest run where several are given.
         --episodes 10 --plot curve.png --json-out curve.json
 
 Nothing is written unless asked: ``--plot`` and ``--json-out`` name the files (no default path).
+Each says how it was made: the JSON has ``"software"`` (version, git commit) and ``"settings"``,
+the settings line (:func:`uav_struct_env.provenance.settings_line`: the software, then every
+option given); the figure carries the same line in its PNG ``Settings`` text chunk
+(:func:`uav_struct_env.provenance.png_settings` reads it).
 
 A model folder is read without unpickling anything from it (unpickling runs whatever code the
 file names): ``model.zip`` through :func:`uav_struct_env.training.policy_files.load_ppo` and the
@@ -52,6 +57,7 @@ holds only SB3's ``vecnormalize.pkl``; it is read only with ``--trust-pickle``.
 
 from __future__ import annotations
 
+import json
 import pickle
 import sys
 import time
@@ -182,6 +188,7 @@ def summarize(records: list[dict]) -> dict[str, float]:
     err = np.array([r["translation_error_m"] for r in records], float)[ok]
     return {
         "n": len(records),
+        "successes": int(ok.sum()),
         "success_rate": float(ok.mean()) if len(ok) else float("nan"),
         "translation_median_m": float(np.median(err)) if len(err) else float("nan"),
         "translation_p90_m": float(np.percentile(err, 90)) if len(err) else float("nan"),
@@ -221,11 +228,30 @@ def across_runs(results: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
     return out
 
 
-def plot(results: dict[str, dict], path: str | Path) -> None:
+def _error_cdfs(ax, results: dict[str, dict]) -> None:
+    """Each policy's final-step error CDF over all its agent-episodes, ``k of N`` localized.
+
+    Every policy gets a line that spans the axis (a CDF from a single success, or none, would
+    otherwise be an invisible step of zero length), with a dot at each success.
+    """
+    errors = {n: np.sort([r["translation_error_m"] for r in results[n]["_final"] if r["success"]])
+              for n in results}
+    found = np.concatenate([e for e in errors.values() if len(e)] or [np.array([1.0])])
+    lo, hi = float(found.min()) / 1.5, float(found.max()) * 1.5
+    for i, (n, err) in enumerate(errors.items()):
+        total = results[n]["final_step"]["n"]
+        frac = np.arange(1, len(err) + 1) / total
+        xs, ys = np.r_[lo, err, hi], np.r_[0.0, frac, frac[-1] if len(frac) else 0.0]
+        ax.step(xs, ys, where="post", color=f"C{i}", label=f"{n} ({len(err)} of {total})")
+        ax.plot(err, frac, ".", color=f"C{i}", ms=3)
+
+
+def plot(results: dict[str, dict], path: str | Path, settings: str | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     names = list(results)
     fig, axes = plt.subplots(1, 2, figsize=(9.5, 3), dpi=90)
@@ -240,33 +266,36 @@ def plot(results: dict[str, dict], path: str | Path) -> None:
     axes[0].tick_params(axis="x", labelrotation=30, labelsize=8)
     axes[0].set_ylim(0, 1)
     axes[0].set_ylabel("localized at final step")
-    for n in names:
-        err = np.sort([r["translation_error_m"] for r in results[n]["_final"] if r["success"]])
-        if len(err):
-            axes[1].step(err, np.arange(1, len(err) + 1) / results[n]["final_step"]["n"], label=n)
+    _error_cdfs(axes[1], results)
     axes[1].set_xscale("log")
-    axes[1].set_xlabel("final-step translation error [m]")
+    axes[1].xaxis.set_minor_formatter(NullFormatter())  # labels at the decades only: no overlap
+    axes[1].set_xlabel("final-step translation error [m] (legend: localized of agent-episodes)")
     axes[1].set_ylabel("fraction of agent-episodes")
     axes[1].set_ylim(0, 1)
     axes[1].legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))  # beside the curves
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    save_figure(fig, path)
+    save_figure(fig, path, settings=settings)
     plt.close(fig)
+
+
+def _of(summary: dict[str, float]) -> str:
+    """``k of N``: the successes a median is taken over, of all records."""
+    return f"{summary['successes']} of {summary['n']}"
 
 
 def table(results: dict[str, dict]) -> str:
     rows = [
-        "| policy | success (final) | median / P90 t-error final [m] | success (all steps) "
-        "| median / P90 t-error all steps [m] | mean return | distance start -> end [m] |",
+        "| policy | success (final) | median / P90 t-error final [m] (of n) | success (all steps) "
+        "| median / P90 t-error all steps [m] (of n) | mean return | distance start -> end [m] |",
         "|---|---|---|---|---|---|---|",
     ]
     for n, r in results.items():
         f, s = r["final_step"], r["all_steps"]
         rows.append(
             f"| {n} | {f['success_rate']:.2f} | {f['translation_median_m']:.3f} / "
-            f"{f['translation_p90_m']:.3f} | {s['success_rate']:.2f} | "
-            f"{s['translation_median_m']:.3f} / {s['translation_p90_m']:.3f} | "
+            f"{f['translation_p90_m']:.3f} ({_of(f)}) | {s['success_rate']:.2f} | "
+            f"{s['translation_median_m']:.3f} / {s['translation_p90_m']:.3f} ({_of(s)}) | "
             f"{r['mean_return']:.2f} | {r['start_distance_median_m']:.1f} -> "
             f"{r['end_distance_median_m']:.1f} |"
         )
@@ -280,14 +309,30 @@ def table(results: dict[str, dict]) -> str:
 
 
 def checkpoint_folders(run: str | Path) -> list[tuple[int, Path]]:
-    """``(agent_steps, folder)`` of every checkpoint of a training run, in step order."""
-    root = Path(run)
-    root = root / "checkpoints" if (root / "checkpoints").is_dir() else root
+    """``(agent_steps, folder)`` of every checkpoint of a training run, in step order.
+
+    The run's final model (``RUN/model.zip``, at the steps its ``train.json`` records) is the
+    last point when no checkpoint holds it (a run from before the trainer saved a last checkpoint).
+    """
+    run = Path(run)
+    root = run / "checkpoints" if (run / "checkpoints").is_dir() else run
     found = []
     for d in root.glob("step_*"):
         if (d / "model.zip").is_file() and d.name[5:].isdigit():
             found.append((int(d.name[5:]), d))
+    final = _final_steps(run)
+    if final is not None and found and final not in {steps for steps, _ in found}:
+        found.append((final, run))
     return sorted(found)
+
+
+def _final_steps(run: Path) -> int | None:
+    """The agent-steps of a run folder's own ``model.zip`` (its ``train.json``), or None."""
+    try:
+        steps = json.loads((run / "train.json").read_text())["agent_steps"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return int(steps) if (run / "model.zip").is_file() and isinstance(steps, int) and steps > 0 else None
 
 
 def learning_curve(runs: list[str], env, seeds: list[int]) -> dict[str, list[dict]]:
@@ -310,12 +355,13 @@ CURVE_METRICS = (("final_success_rate", "localized at final step"),
                  ("mean_return", "deterministic episode return"))
 
 
-def plot_curve(curves: dict[str, list[dict]], path: str | Path) -> None:
+def plot_curve(curves: dict[str, list[dict]], path: str | Path, settings: str | None = None) -> None:
     """Each metric against agent-steps: the median over runs, a min-max band over runs."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import EngFormatter, MaxNLocator
 
     fig, axes = plt.subplots(1, len(CURVE_METRICS), figsize=(11, 3), dpi=90)
     steps = sorted({p["agent_steps"] for c in curves.values() for p in c})
@@ -331,11 +377,13 @@ def plot_curve(curves: dict[str, list[dict]], path: str | Path) -> None:
         if len(curves) > 1:
             ax.fill_between(steps, lo, hi, color="C0", alpha=0.25, label="min-max over runs")
         ax.set_xlabel("agent-steps")
+        ax.xaxis.set_major_locator(MaxNLocator(nbins=4, integer=True))  # labels that do not overlap
+        ax.xaxis.set_major_formatter(EngFormatter(sep=""))  # 250k, 1.5M
         ax.set_ylabel(label)
     axes[0].set_ylim(0, 1.02)
     axes[0].legend(fontsize=8)
     fig.tight_layout()
-    save_figure(fig, path)
+    save_figure(fig, path, settings=settings)
     plt.close(fig)
 
 
@@ -448,46 +496,44 @@ def env_config(opt: dict[str, Any]) -> tuple[Any, str]:
     return config, source
 
 
-def main(**kwargs: Any) -> dict[str, Any]:
-    """Evaluate; returns ``{policy: summary}``. Keys: see :data:`DEFAULTS`."""
-    unknown = sorted(set(kwargs) - set(DEFAULTS))
-    if unknown:
-        raise ValueError(f"unknown options {unknown}; valid: {sorted(DEFAULTS)}")
-    opt = {**DEFAULTS, **kwargs}
-    policies = list(opt["policies"])
-    check_options({**opt, "policies": policies})
-    warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
-    from uav_struct_env.wrappers import make_train_env
+def run_settings(opt: dict[str, Any], config: Any) -> str:
+    """The settings line of an evaluation: the software, the env configuration, every option given."""
+    from uav_struct_env.provenance import settings_line
 
-    config, source = env_config({**opt, "policies": policies})
-    print(f"environment: {config.name}, {config.wrapper.get('association')} association ({source})")
-    env = make_train_env(config)
-    seeds = [opt["seed"] + i for i in range(opt["episodes"])]
-    if opt["checkpoints"]:
-        try:
-            curves = learning_curve(list(opt["checkpoints"]), env, seeds)
-        finally:
-            env.close()
-        if opt["plot"]:
-            plot_curve(curves, opt["plot"])
-        summary = {"options": opt, "env_config": config.as_dict(), "env_config_source": source,
-                   "seeds": seeds, "learning_curve": curves}
-        if opt["json_out"]:
-            atomic_write_json(opt["json_out"], summary, indent=2, default=str)
-        for run, points in curves.items():
-            print(run)
-            for q in points:
-                print(f"  {q['agent_steps']:>9d} steps: localized {q['final_success_rate']:.2f}, "
-                      f"median {q['final_translation_median_m']:.3f} m, return {q['mean_return']:.2f}")
-        return summary
+    shown = {k: v for k, v in opt.items()
+             if k not in ("plot", "json_out", "overwrite", "config") and v not in (None, False)}
+    return settings_line({"env": config.name, "association": config.wrapper.get("association"), **shown})
+
+
+def _write_curve(opt: dict[str, Any], env, head: dict[str, Any]) -> dict[str, Any]:
+    """``--checkpoints``: the learning curve, its figure and JSON; returns the summary."""
+    try:
+        curves = learning_curve(list(opt["checkpoints"]), env, head["seeds"])
+    finally:
+        env.close()
+    if opt["plot"]:
+        plot_curve(curves, opt["plot"], head["settings"])
+    summary = {**head, "learning_curve": curves}
+    if opt["json_out"]:
+        atomic_write_json(opt["json_out"], summary, indent=2, default=str)
+    for run, points in curves.items():
+        print(run)
+        for q in points:
+            print(f"  {q['agent_steps']:>9d} steps: localized {q['final_success_rate']:.2f}, "
+                  f"median {q['final_translation_median_m']:.3f} m, return {q['mean_return']:.2f}")
+    return summary
+
+
+def compare(opt: dict[str, Any], env, seeds: list[int]) -> dict[str, dict]:
+    """Every policy of ``opt["policies"]`` over ``seeds``: ``{row name: summary}`` (closes ``env``)."""
     results: dict[str, dict] = {}
-    models = model_folders(opt["model"]) if "ppo" in policies else []
+    models = model_folders(opt["model"]) if "ppo" in opt["policies"] else []
     try:  # the model folders are read (and refused) before any episode runs
         ppos = [PpoPolicy(m, env, trust_pickle=opt["trust_pickle"]) for m in models]
     except BaseException:
         env.close()
         raise
-    for name in policies:
+    for name in opt["policies"]:
         if name != "ppo":
             t0 = time.perf_counter()
             rec = run_policy(make_baseline(name, env, seed=opt["seed"]), env, seeds)
@@ -504,13 +550,36 @@ def main(**kwargs: Any) -> dict[str, Any]:
             results["ppo"]["across_runs"] = across_runs(
                 [r for n, r in results.items() if n.startswith("ppo:")])
     env.close()
+    return results
+
+
+def main(**kwargs: Any) -> dict[str, Any]:
+    """Evaluate; returns ``{policy: summary}``. Keys: see :data:`DEFAULTS`."""
+    from uav_struct_env.provenance import software
+
+    unknown = sorted(set(kwargs) - set(DEFAULTS))
+    if unknown:
+        raise ValueError(f"unknown options {unknown}; valid: {sorted(DEFAULTS)}")
+    opt = {**DEFAULTS, **kwargs}
+    opt["policies"] = list(opt["policies"])
+    check_options(opt)
+    warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
+    from uav_struct_env.wrappers import make_train_env
+
+    config, source = env_config(opt)
+    print(f"environment: {config.name}, {config.wrapper.get('association')} association ({source})")
+    seeds = [opt["seed"] + i for i in range(opt["episodes"])]
+    head = {"options": opt, "env_config": config.as_dict(), "env_config_source": source, "seeds": seeds,
+            "software": software(), "settings": run_settings(opt, config)}
+    env = make_train_env(config)
+    if opt["checkpoints"]:
+        return _write_curve(opt, env, head)
+    results = compare(opt, env, seeds)
     if opt["plot"]:
-        plot(results, opt["plot"])
+        plot(results, opt["plot"], head["settings"])
     for r in results.values():
         del r["_final"]
-    summary = {"options": {**opt, "policies": policies}, "env_config": config.as_dict(),
-               "env_config_source": source, "seeds": seeds,
-               "results": results}
+    summary = {**head, "results": results}
     if opt["json_out"]:
         atomic_write_json(opt["json_out"], summary, indent=2, default=str)
     print(table(results))

@@ -18,8 +18,10 @@ as plain arrays, which ``evaluate_policy.py`` reads without unpickling anything;
     .venv/bin/tensorboard --logdir runs/ppo_state/tb
 
 Writes ``model.zip``, ``normalization.npz``, ``vecnormalize.pkl``, ``train.json`` (options, steps,
-wall clock, agent-steps per second), ``progress.jsonl`` (per rollout: training episode return and
-final-step localization, also on the progress bar and in TensorBoard), ``checkpoints/step_<N>/``
+wall clock, agent-steps per second, and how the run was made: ``software`` and the ``settings``
+line, which describe every other file of the folder too), ``progress.jsonl`` (per rollout:
+training episode return and final-step localization, also on the progress bar and in
+TensorBoard), ``checkpoints/step_<N>/``
 (model folders every ``--checkpoint-every`` agent-steps, for ``evaluate_policy.py
 --checkpoints``' learning curve) and ``tb/`` under ``--out`` only (every option is checked, and
 ``--out`` too, before training starts).
@@ -154,83 +156,96 @@ class _Progress:
     """
 
     def __new__(cls, total: int, minutes: float | None, show: bool, log_path, start: int = 0):
-        from collections import deque
-
-        import numpy as np
         from stable_baselines3.common.callbacks import BaseCallback
 
-        class Progress(BaseCallback):
-            def _on_training_start(self) -> None:
-                self.t0 = time.perf_counter()
-                self.collect_s, self.update_total_s = 0.0, 0.0
-                self.rollout_t0, self.update_t0, self.update_s = self.t0, None, None
-                self.finals: deque = deque(maxlen=100)
-                if not start:
-                    log_path.unlink(missing_ok=True)  # a new file, never through a planted link
-                self.bar = None
-                if show:
-                    from tqdm.auto import tqdm
+        class Progress(_ProgressSteps, BaseCallback):
+            pass
 
-                    self.bar = tqdm(total=total, initial=start, unit="step", smoothing=0.05)
+        return Progress(total, minutes, show, log_path, start)
 
-            def _on_step(self) -> bool:
-                for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
-                    if done and "localization" in info:
-                        loc = info["localization"]
-                        self.finals.append((loc["success"], loc["translation_error_m"]))
-                if self.bar is not None:
-                    self.bar.update(self.training_env.num_envs)
-                if minutes is not None and time.perf_counter() - self.t0 > 60.0 * minutes:
-                    return False
-                return True
 
-            def _on_rollout_start(self) -> None:
-                self.rollout_t0 = time.perf_counter()
-                if self.update_t0 is not None:  # the update since the last rollout ended
-                    self.update_s = self.rollout_t0 - self.update_t0
-                    self.update_total_s += self.update_s
+class _ProgressSteps:
+    """The steps of :class:`_Progress` (mixed into SB3's ``BaseCallback``, imported when training)."""
 
-            def _on_rollout_end(self) -> None:
-                now = time.perf_counter()
-                rollout_s = now - self.rollout_t0
-                self.collect_s += rollout_s
-                self.update_t0 = now
-                returns = [e["r"] for e in self.model.ep_info_buffer]
-                ok = [e for s, e in self.finals if s]
-                row = {
-                    "agent_steps": int(self.num_timesteps),
-                    "wall_clock_s": round(now - self.t0, 2),
-                    "rollout_s": round(rollout_s, 3),
-                    "update_s": None if self.update_s is None else round(self.update_s, 3),
-                    "episode_return_mean": float(np.mean(returns)) if returns else None,
-                    "final_success_rate": len(ok) / len(self.finals) if self.finals else None,
-                    "final_translation_median_m": float(np.median(ok)) if ok else None,
-                }
-                for key, value in row.items():
-                    if key not in ("agent_steps", "rollout_s", "update_s") and value is not None:
-                        self.logger.record(f"uav/{key}", value)
-                with open(log_path, "a") as log:
-                    log.write(json.dumps(row) + "\n")
-                self._bar_total(now)
-                if self.bar is not None and row["episode_return_mean"] is not None:
-                    self.bar.set_postfix(ret=f"{row['episode_return_mean']:.2f}",
-                                         loc=f"{row['final_success_rate'] or 0:.2f}",
-                                         err=f"{row['final_translation_median_m'] or float('nan'):.2f}m")
+    def __init__(self, total: int, minutes: float | None, show: bool, log_path, start: int) -> None:
+        super().__init__()
+        self.total, self.minutes, self.show, self.log_path, self.start = total, minutes, show, log_path, start
 
-            def _bar_total(self, now: float) -> None:
-                """With ``minutes``: the bar ends where the time budget is projected to end the run."""
-                if self.bar is None or minutes is None or self.num_timesteps <= start:
-                    return
-                rate = (self.num_timesteps - start) / max(now - self.t0, 1e-9)
-                left_s = max(60.0 * minutes - (now - self.t0), 0.0)
-                self.bar.total = int(min(total, self.num_timesteps + rate * left_s))
-                self.bar.refresh()
+    def _on_training_start(self) -> None:
+        from collections import deque
 
-            def _on_training_end(self) -> None:
-                if self.bar is not None:
-                    self.bar.close()
+        self.t0 = time.perf_counter()
+        self.collect_s, self.update_total_s = 0.0, 0.0
+        self.rollout_t0, self.update_t0, self.update_s = self.t0, None, None
+        self.finals: deque = deque(maxlen=100)
+        if not self.start:
+            self.log_path.unlink(missing_ok=True)  # a new file, never through a planted link
+        self.bar = None
+        if self.show:
+            from tqdm.auto import tqdm
 
-        return Progress()
+            self.bar = tqdm(total=self.total, initial=self.start, unit="step", smoothing=0.05)
+
+    def _on_step(self) -> bool:
+        for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
+            if done and "localization" in info:
+                loc = info["localization"]
+                self.finals.append((loc["success"], loc["translation_error_m"]))
+        if self.bar is not None:
+            self.bar.update(self.training_env.num_envs)
+        return self.minutes is None or time.perf_counter() - self.t0 <= 60.0 * self.minutes
+
+    def _on_rollout_start(self) -> None:
+        self.rollout_t0 = time.perf_counter()
+        if self.update_t0 is not None:  # the update since the last rollout ended
+            self.update_s = self.rollout_t0 - self.update_t0
+            self.update_total_s += self.update_s
+
+    def _row(self, now: float, rollout_s: float) -> dict[str, Any]:
+        """The ``progress.jsonl`` row of the rollout that just ended."""
+        import numpy as np
+
+        returns = [e["r"] for e in self.model.ep_info_buffer]
+        ok = [e for s, e in self.finals if s]
+        return {
+            "agent_steps": int(self.num_timesteps),
+            "wall_clock_s": round(now - self.t0, 2),
+            "rollout_s": round(rollout_s, 3),
+            "update_s": None if self.update_s is None else round(self.update_s, 3),
+            "episode_return_mean": float(np.mean(returns)) if returns else None,
+            "final_success_rate": len(ok) / len(self.finals) if self.finals else None,
+            "final_translation_median_m": float(np.median(ok)) if ok else None,
+        }
+
+    def _on_rollout_end(self) -> None:
+        now = time.perf_counter()
+        rollout_s = now - self.rollout_t0
+        self.collect_s += rollout_s
+        self.update_t0 = now
+        row = self._row(now, rollout_s)
+        for key, value in row.items():
+            if key not in ("agent_steps", "rollout_s", "update_s") and value is not None:
+                self.logger.record(f"uav/{key}", value)
+        with open(self.log_path, "a") as log:
+            log.write(json.dumps(row) + "\n")
+        self._bar_total(now)
+        if self.bar is not None and row["episode_return_mean"] is not None:
+            self.bar.set_postfix(ret=f"{row['episode_return_mean']:.2f}",
+                                 loc=f"{row['final_success_rate'] or 0:.2f}",
+                                 err=f"{row['final_translation_median_m'] or float('nan'):.2f}m")
+
+    def _bar_total(self, now: float) -> None:
+        """With ``minutes``: the bar ends where the time budget is projected to end the run."""
+        if self.bar is None or self.minutes is None or self.num_timesteps <= self.start:
+            return
+        rate = (self.num_timesteps - self.start) / max(now - self.t0, 1e-9)
+        left_s = max(60.0 * self.minutes - (now - self.t0), 0.0)
+        self.bar.total = int(min(self.total, self.num_timesteps + rate * left_s))
+        self.bar.refresh()
+
+    def _on_training_end(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
 
 
 #: Test hook: with ``UAV_STRUCT_TRAIN_INTERRUPT_AT=N`` in the environment the trainer sends itself
@@ -581,11 +596,15 @@ def _save_final(out: Path, model, vec) -> None:
 def _write_summary(out: Path, opt: dict[str, Any], made_by: Any, record: dict[str, Any]) -> dict[str, Any]:
     """``train.json``: the options, ``record`` and, so that a later change of the named config
     does not change this record, what ``--config`` named when this run trained and the code."""
+    from uav_struct_env.provenance import settings_line
+
+    shown = {k: v for k, v in opt.items() if k not in ("out", "overwrite", "progress_bar")}
     summary = {
         "options": {k: (list(v) if isinstance(v, tuple) else v) for k, v in opt.items()},
         **record,
         "train_config": _resolved_config(opt["config"], opt["max_cycles"]),
         "software": made_by,
+        "settings": settings_line(shown, made_by),
     }
     atomic_write_json(out / "train.json", summary, indent=2)
     return summary

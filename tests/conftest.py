@@ -1,13 +1,20 @@
-"""Shared fixtures: a seeded ``rng`` (every test that needs randomness takes it from here) and
-``load_script`` (a script of ``benchmarks/`` or ``examples/`` as a module)."""
+"""Shared fixtures: a seeded ``rng`` (every test that needs randomness takes it from here),
+``load_script`` (a script of ``benchmarks/`` or ``examples/`` as a module) and ``shared_output``
+(an expensive run made once per test session, however many pytest-xdist workers read it)."""
 
 from __future__ import annotations
 
+import fcntl
 import importlib.util
+import os
+import pickle
+import shutil
+import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import numpy as np
 import pytest
@@ -34,3 +41,62 @@ def load_script() -> Callable[[Path], ModuleType]:
         return module
 
     return load
+
+
+@pytest.fixture(scope="session")
+def shared_output(tmp_path_factory) -> Callable[[str, Callable[[Path], Any]], tuple[Path, Any]]:
+    """``shared_output(name, make)``: ``(folder, value)`` of ``value = make(folder)``, run once.
+
+    Once per test session, not once per module and worker: under pytest-xdist the first worker to
+    ask runs ``make`` under a file lock in the session's shared temporary folder, and the others
+    wait for it and read the same folder (and ``value``, pickled). Tests only read the folder.
+    """
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # the session's folder, above each worker's own
+
+    def get(name: str, make: Callable[[Path], Any]) -> tuple[Path, Any]:
+        folder, value = root / f"shared-{name}", root / f"shared-{name}.pkl"
+        with open(root / f"shared-{name}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+            if not value.exists():
+                shutil.rmtree(folder, ignore_errors=True)  # a failed attempt's leftovers
+                folder.mkdir()
+                made = make(folder)
+                value.write_bytes(pickle.dumps(made))
+            return folder, pickle.loads(value.read_bytes())
+
+    return get
+
+
+def _quick_projection_study(folder: Path) -> tuple[Path, str]:
+    out = folder / "study"
+    proc = subprocess.run(
+        [sys.executable, "-m", "uav_struct_env.study", "--quick", "--detector", "projection", "--out",
+         str(out), "--no-progress"],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return out, proc.stdout
+
+
+@pytest.fixture(scope="session")
+def quick_projection_study(shared_output) -> tuple[Path, str]:
+    """``(out, stdout)`` of ``uav-struct study --quick --detector projection``, run once a session."""
+    return shared_output("quick-projection-study", _quick_projection_study)[1]
+
+
+def _tiny_ppo_run(folder: Path, load_script) -> tuple[Path, dict]:
+    train = load_script(Path(__file__).resolve().parents[1] / "examples" / "train_viewpoint_ppo.py")
+    out = folder / "ppo"
+    summary = train.main(out=str(out), total_timesteps=256, n_envs=1, num_cpus=0, n_steps=32,
+                         batch_size=64, n_epochs=1, max_cycles=8, checkpoint_every=128,
+                         progress_bar=False, seed=3)
+    return out, summary
+
+
+@pytest.fixture(scope="session")
+def tiny_ppo_run(shared_output, load_script) -> tuple[Path, dict]:
+    """``(out, summary)`` of a 256-agent-step PPO training run (seed 3), run once a session."""
+    pytest.importorskip("stable_baselines3")
+    return shared_output("tiny-ppo-run", lambda folder: _tiny_ppo_run(folder, load_script))[1]

@@ -46,6 +46,7 @@ __all__ = [
     "OutputBusyError",
     "OutputExistsError",
     "OutputLock",
+    "PNG_SETTINGS_KEY",
     "StagedOutput",
     "atomic_path",
     "atomic_write_bytes",
@@ -60,6 +61,9 @@ __all__ = [
     "remove_earlier_run",
     "save_figure",
 ]
+
+#: The PNG text chunk that carries a figure's settings line (:func:`save_figure`).
+PNG_SETTINGS_KEY = "Settings"
 
 #: Name prefix of the hidden staging folders and temporary files this module creates.
 PARTIAL_PREFIX = ".partial-"
@@ -404,10 +408,16 @@ def atomic_write_json(path: str | Path, obj: Any, **kwargs: Any) -> Path:
     return atomic_write_text(path, json.dumps(obj, **kwargs) + "\n")
 
 
-def save_figure(fig: Any, path: str | Path, **kwargs: Any) -> Path:
-    """``fig.savefig(path, **kwargs)`` atomically (the format follows ``path``'s suffix)."""
+def save_figure(fig: Any, path: str | Path, *, settings: str | None = None, **kwargs: Any) -> Path:
+    """``fig.savefig(path, **kwargs)`` atomically (the format follows ``path``'s suffix).
+
+    ``settings``: the output's settings line (:mod:`uav_struct_env.provenance`), stored in a PNG's
+    ``Settings`` text chunk (read back by :func:`uav_struct_env.provenance.png_settings`).
+    """
     path = Path(path)
     kwargs.setdefault("format", path.suffix.lstrip(".") or None)
+    if settings is not None and kwargs["format"] == "png":
+        kwargs["metadata"] = {**kwargs.get("metadata", {}), PNG_SETTINGS_KEY: settings}
     with atomic_path(path) as tmp:
         fig.savefig(tmp, **kwargs)
     return path

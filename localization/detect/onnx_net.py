@@ -13,10 +13,19 @@ from pathlib import Path
 import numpy as np
 import onnxruntime as ort
 from numpy.typing import ArrayLike, NDArray
+from onnxruntime.capi import onnxruntime_pybind11_state as _ort_state
 
 from localization.checks import check_number
 
 __all__ = ["OnnxNet"]
+
+#: What ONNX Runtime raises for a file it cannot load (its error types derive from Exception only).
+_LOAD_ERRORS = tuple(
+    getattr(_ort_state, name)
+    for name in ("Fail", "InvalidProtobuf", "InvalidGraph", "InvalidArgument", "NoModel", "NoSuchFile",
+                 "RuntimeException", "NotImplemented", "EPFail")
+    if hasattr(_ort_state, name)
+)
 
 
 class OnnxNet:
@@ -27,7 +36,8 @@ class OnnxNet:
         threads: intra-op threads (>= 1).
 
     Raises:
-        FileNotFoundError: if ``path`` is not a file; ValueError for a bad ``threads``.
+        FileNotFoundError: if ``path`` is not a file; ValueError for a bad ``threads`` or a file
+            that is not a model ONNX Runtime can load (a corrupt or truncated file), naming it.
     """
 
     def __init__(self, path: str | Path, threads: int = 1) -> None:
@@ -39,9 +49,13 @@ class OnnxNet:
         options.intra_op_num_threads = threads
         options.inter_op_num_threads = 1
         options.log_severity_level = 3  # errors only
-        self._session = ort.InferenceSession(
-            str(self.path), sess_options=options, providers=["CPUExecutionProvider"]
-        )
+        try:
+            self._session = ort.InferenceSession(
+                str(self.path), sess_options=options, providers=["CPUExecutionProvider"]
+            )
+        except _LOAD_ERRORS as err:
+            why = str(err).splitlines()[0] if str(err) else type(err).__name__
+            raise ValueError(f"{str(self.path)!r} is not a model ONNX Runtime can load: {why}") from None
         self._input = self._session.get_inputs()[0].name
 
     def __call__(self, x: ArrayLike) -> NDArray[np.float32]:

@@ -59,8 +59,9 @@ def test_random_n_is_the_site_the_study_draws_from_seed_n():
 
 
 @pytest.fixture(scope="module")
-def pooled():
-    return run_sweep(TINY, ["paper", "random:1"], [0, 1], workers=2)
+def pooled(shared_output):
+    """Four runs on a pool of two, made once a session however many xdist workers read them."""
+    return shared_output("tiny-sweep", lambda _: run_sweep(TINY, ["paper", "random:1"], [0, 1], workers=2))[1]
 
 
 def test_the_pool_merges_runs_that_equal_the_study_run_alone(pooled):
@@ -113,7 +114,11 @@ def test_the_command_writes_one_table_and_refuses_study_only_options(tmp_path, c
     assert results["config"]["association"] == "paper" and results["config"]["backend"] == "process pool"
     table = (out / "table.md").read_text()
     assert "| Column tops | 1 |" in table and table in capsys.readouterr().out
-    header, first = (out / "per_image.csv").read_text().splitlines()[:2]
+    # each file says how it was made: the study's settings line over the sweep's sites and seeds
+    made, header, first = (out / "per_image.csv").read_text().splitlines()[:3]
+    line = results["settings"]
+    assert made == f"# Settings: {line}" and table.startswith(f"Settings: {line}\n")
+    assert "site random:2" in made and "seed 3" in made and "paper association" in made
     assert header.startswith("site,seed,method,uav,viewpoint")
     assert first.startswith("random:2,3,")  # each row names the run it came from
     assert main(["--sites", "paper", "--site", "paper", "--out", str(tmp_path / "x")]) == 2

@@ -26,23 +26,9 @@ def example(load_script):
 
 
 @pytest.fixture(scope="module")
-def trained(example, tmp_path_factory):
-    out = tmp_path_factory.mktemp("ppo")
-    train = example("train_viewpoint_ppo")
-    summary = train.main(
-        out=str(out),
-        total_timesteps=256,
-        n_envs=1,
-        num_cpus=0,
-        n_steps=32,
-        batch_size=64,
-        n_epochs=1,
-        max_cycles=8,
-        checkpoint_every=128,
-        progress_bar=False,
-        seed=3,
-    )
-    return out, summary
+def trained(tiny_ppo_run):
+    """``(out, summary)``: 256 agent-steps, seed 3, checkpoints every 128 (tests/conftest.py)."""
+    return tiny_ppo_run
 
 
 def test_train_writes_model_normalization_logs_and_checkpoints(trained):
@@ -399,3 +385,13 @@ def test_the_throughput_benchmark_replays_a_trained_policy_the_same_on_bare_and_
     with pytest.raises(UsageError, match=r"--model '.*nowhere'"):
         bench.record(wrapped, str(out / "nowhere"), 1, seed=5)
     wrapped.close()
+
+
+def test_the_learning_curve_ends_at_the_final_model_where_no_checkpoint_holds_it(example, trained, tmp_path):
+    out, _ = trained
+    run = tmp_path / "run"
+    shutil.copytree(out, run)
+    evaluate = example("evaluate_policy")
+    assert [s for s, _ in evaluate.checkpoint_folders(run)] == [128, 256]  # the last checkpoint is it
+    shutil.rmtree(run / "checkpoints" / "step_000000256")  # a run from before the trainer saved it
+    assert evaluate.checkpoint_folders(run) == [(128, run / "checkpoints" / "step_000000128"), (256, run)]

@@ -138,3 +138,71 @@ def test_overwrite_replaces_the_earlier_study_and_removes_its_stale_files(tmp_pa
     # --no-figures: the earlier figure is not left beside the new results; the user's file stays
     assert names == ["detections.csv", "notes.txt", "per_image.csv", "results.json", "table1.md", "table2.md"]
     assert b"earlier" not in (out / "results.json").read_bytes()
+
+
+def test_sigterm_ends_the_study_like_ctrl_c_with_status_143(tmp_path):
+    out = tmp_path / "out"
+    before = _previous_run(out)
+    proc = _study(out, 2, "--overwrite")
+    pids = _wait_for_workers(proc, 2) + _children(proc.pid)
+    proc.send_signal(signal.SIGTERM)  # to the study alone, as `kill PID` sends it
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143, err[-2000:]
+    assert "Traceback" not in err, err[-2000:]
+    ours = [line for line in err.splitlines() if line.startswith("uav-struct")]
+    assert len(ours) == 1 and "interrupted" in ours[0] and "nothing written" in ours[0], err[-2000:]
+    time.sleep(0.5)
+    assert [p for p in pids if _running(p)] == []  # the workers went with it
+    # the earlier run as it was: no .partial-* staging folder left beside it
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_two_studies_into_one_new_folder_one_writes_the_other_is_refused(tmp_path):
+    out = tmp_path / "new"
+    procs = [_study(out, 1, "--quick") for _ in range(2)]
+    done = [p.communicate(timeout=600) for p in procs]
+    codes = sorted(p.returncode for p in procs)
+    assert codes == [0, 2], [err[-2000:] for _, err in done]
+    refused = next(err for p, (_, err) in zip(procs, done, strict=True) if p.returncode == 2)
+    ours = [line for line in refused.splitlines() if line.strip()]
+    # refused while the other writes (or, had it finished first, because the folder holds its results)
+    why = ("being written by another run", "already holds results")
+    assert len(ours) == 1 and any(w in ours[0] for w in why), refused[-2000:]
+    assert (out / "results.json").is_file() and not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
+def test_a_corrupt_detector_model_is_one_line_and_status_2(tmp_path, capsys):
+    from uav_struct_env.study.study import main
+
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(b"\x08\x07not a protobuf at all" * 40)
+    out = tmp_path / "out"
+    assert main(["--detector-model", str(bad), "--out", str(out), "--quick", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "detector_model" in err, err
+    assert "not a model ONNX Runtime can load" in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("when", ["at the check", "after the check"])
+def test_a_sweep_into_a_folder_another_run_writes_is_refused_with_status_2(when, tmp_path, capsys,
+                                                                            monkeypatch):
+    import uav_struct_env.validate
+    from uav_struct_env.study.sweep import main
+
+    if when == "after the check":  # the other run takes --out between the check and the sweep's start
+        monkeypatch.setattr(uav_struct_env.validate, "check_output_dir", lambda *a, **k: None)
+    out = tmp_path / "sweep"
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time\n"
+                               "from uav_struct_env.outputs import prepare_output_dir\n"
+                               "prepare_output_dir(sys.argv[1]); print('locked', flush=True); time.sleep(30)",
+                               str(out)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        assert main(["--sites", "paper", "--out", str(out), "--quick", "--detector", "projection",
+                     "--no-progress"]) == 2
+    finally:
+        holder.kill()
+        holder.wait()
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"being written by another run (pid {holder.pid}" in err, err

@@ -1,7 +1,5 @@
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -35,26 +33,9 @@ def _numbers(obj, path=""):
 
 
 @pytest.fixture(scope="module")
-def quick_study(tmp_path_factory):
-    out = tmp_path_factory.mktemp("study")
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "uav_struct_env.study",
-            "--quick",
-            "--detector",
-            "projection",
-            "--out",
-            str(out),
-            "--no-progress",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return out, proc.stdout
+def quick_study(quick_projection_study):
+    """``(out, stdout)`` of ``uav-struct study --quick --detector projection`` (tests/conftest.py)."""
+    return quick_projection_study
 
 
 def test_quick_study_writes_the_schema_with_finite_computed_numbers(quick_study):

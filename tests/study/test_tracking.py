@@ -10,12 +10,17 @@ from uav_struct_env.study.study import run_study
 from uav_struct_env.study.tracking import TRACKING_ACTIVITY
 
 
-@pytest.fixture(scope="module")
-def tracked(tmp_path_factory):
-    out = tmp_path_factory.mktemp("tracked")
+def _tracked(folder):
+    out = folder / "study"
     config = StudyConfig(track_workers=True, n_viewpoints=2, methods=("slab_corners", "all"),
                          image_size=(640, 360))
     return run_study(config, out, progress=False, figures=True), out
+
+
+@pytest.fixture(scope="module")
+def tracked(shared_output):
+    """The study with worker tracking, run once a session however many xdist workers read it."""
+    return shared_output("tracked-study", _tracked)[1]
 
 
 def test_worker_tracking_entry_with_the_three_pose_sources(tracked):

@@ -7,6 +7,7 @@ import sys
 from uav_struct_env.datasets.landmarks import ACTIVITIES, CAMERAS, IMAGINGS, DatasetConfig, generate
 from uav_struct_env.outputs import OutputExistsError
 from uav_struct_env.processes import WorkerDied, interrupted_status, stop_on_sigterm
+from uav_struct_env.sim.imaging import imaging_argument
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_option, check_output_dir, refuse
 
 
@@ -30,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
                          "(lens distortion, rolling shutter "
                          "and motion blur of the DJI Mavic 2 Pro, the camera moving within the UAV's "
                          "flight limits) or mixed (every other image mavic2pro)")
-    ap.add_argument("--imaging", default="ideal", choices=IMAGINGS,
+    ap.add_argument("--imaging", default="ideal", choices=IMAGINGS, type=imaging_argument,
                     help="ideal (the render as it is), camera (optics blur, sensor noise and a JPEG "
                          "round trip on every image, as the env's imaging='camera') or mixed (every "
                          "other pair of images)")

@@ -36,9 +36,9 @@ the pose at the middle row's exposure (the time convention of :mod:`uav_struct_e
 ``"camera"`` passes every delivered full-resolution image (after the lens, before downscaling)
 through :data:`uav_struct_env.sim.imaging.IMAGING_PRESETS` ``["camera"]`` -- optics blur, shot and
 read noise, a JPEG round trip: the env's and the study's ``imaging="camera"``, so that a
-``camera="mavic2pro", imaging="camera"`` view is the study's *realistic* imaging. ``"mixed"``
-gives it to image ``n`` when ``n // 2`` is odd: with ``camera="mixed"`` a quarter of the images
-each of pinhole / Mavic x ideal / camera imaging. Its noise is drawn from
+``camera="mavic2pro", imaging="camera"`` view is the study's ``--camera mavic2pro --imaging
+camera``. ``"mixed"`` gives it to image ``n`` when ``n // 2`` is odd: with ``camera="mixed"`` a
+quarter of the images each of pinhole / Mavic x ideal / camera imaging. Its noise is drawn from
 ``numpy.random.default_rng([seed, layout, 3])`` (its own stream again), recorded as each such
 image's ``"imaging": "camera"``.
 
@@ -53,6 +53,8 @@ images come from the same pipeline.
                              "types": ["column_tops", "slab_corners", "opening_corners"],
                              "image_size": [W', H'], "source_size": [1280, 720], "scale": 0.5,
                              "config": {...generator arguments...},
+                             "software": {"package", "version", "git_commit", "git_modified"},
+                             "settings": "uav-struct-env 0.1.0 (git ...) · n_layouts 200 · ...",
                              "images": [{"file": "images/000000.png", "layout": 0,
                                          "stage": "columns", "K": 3x3 (of the saved image),
                                          "cam_from_world": 4x4,
@@ -64,9 +66,11 @@ images come from the same pipeline.
                                          ...camera imaging only: "imaging": "camera"},
                                         ...]}
 
-The real-camera keys (world velocities, m/s and rad/s) appear only on such views, so a
-``paper`` dataset is byte for byte what the generator wrote before it had cameras (its
-``config`` has no ``camera`` either; likewise ``imaging`` for an ``ideal`` one);
+``software`` and ``settings`` say how the dataset was made (:mod:`uav_struct_env.provenance`;
+the images are described by the ``labels.json`` beside them). The real-camera keys (world
+velocities, m/s and rad/s) appear only on such views, so a ``paper`` dataset's images and
+keypoints are what the generator wrote before it had cameras (its ``config`` has no ``camera``
+either; likewise ``imaging`` for an ``ideal`` one);
 :func:`load_labels` fills in ``"camera": "paper"``, ``"imaging": "ideal"`` and zero distortion and
 motion for such views and configs, so readers need no special case.
 
@@ -96,6 +100,7 @@ from localization.checks import check_choice, check_number
 from localization.geometry.camera import PAPER_IMAGE_SIZE
 from localization.geometry.transforms import look_at
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.provenance import settings_line, software
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.imaging import IMAGING_PRESETS
 from uav_struct_env.sim.lens import CAMERA_MODELS, LensView, Motion
@@ -446,10 +451,12 @@ def _write_labels(path: Path, config: DatasetConfig, records: list[dict]) -> Non
     for key, default in (("camera", "paper"), ("imaging", "ideal")):
         if settings[key] == default:  # as written before the generator had them (load_labels fills it in)
             del settings[key]
+    made_by = software()
     labels = {
         "format": FORMAT, "types": list(LANDMARK_TYPES), "image_size": list(config.image_size),
         "source_size": list(config.source_size), "scale": config.scale,
-        "config": settings, "images": records,
+        "config": settings, "software": made_by, "settings": settings_line(asdict(config), made_by),
+        "images": records,
     }
     path.write_text(json.dumps(labels))
 

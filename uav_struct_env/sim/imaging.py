@@ -27,7 +27,7 @@ from localization.checks import check_number
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.named import resolve_named
 
-__all__ = ["IMAGING_PRESETS", "ImagingModel", "make_imaging"]
+__all__ = ["FORMER_IMAGING_NAMES", "IMAGING_PRESETS", "ImagingModel", "imaging_argument", "make_imaging"]
 
 _REFERENCE_WIDTH = 1280
 
@@ -94,10 +94,39 @@ IMAGING_PRESETS: dict[str, ImagingModel] = {
 }
 
 
+#: Imaging names the docs once used, and the settings they meant (refused, naming these).
+FORMER_IMAGING_NAMES = {
+    "realistic": "camera mavic2pro with imaging camera (--camera mavic2pro --imaging camera)",
+}
+
+
+def _former(name: object) -> str | None:
+    if isinstance(name, str) and name in FORMER_IMAGING_NAMES:
+        return (f"imaging {name!r} is not a setting: it was the docs' name for "
+                f"{FORMER_IMAGING_NAMES[name]}; imaging is one of {sorted(IMAGING_PRESETS)}")
+    return None
+
+
+def imaging_argument(text: str) -> str:
+    """The ``--imaging`` value of a command line (an ``argparse`` ``type``).
+
+    A former name is refused with a line naming the settings it meant.
+    """
+    import argparse
+
+    why = _former(text)
+    if why is not None:
+        raise argparse.ArgumentTypeError(why)
+    return text
+
+
 def make_imaging(imaging: str | ImagingModel) -> ImagingModel:
     """Resolve a preset name or pass an :class:`ImagingModel` through.
 
     Raises:
-        ConfigError: for an unknown name or another type.
+        ConfigError: for an unknown name (a former one: naming what it meant) or another type.
     """
+    why = _former(imaging)
+    if why is not None:
+        raise ConfigError(why)
     return resolve_named("imaging", imaging, IMAGING_PRESETS, ImagingModel, "an ImagingModel")

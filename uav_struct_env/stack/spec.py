@@ -23,6 +23,7 @@ Layers: this package imports :mod:`localization` and :mod:`uav_struct_env.site` 
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -104,7 +105,23 @@ def check_weights(name: str, path: Any, detector: Any) -> str | Path | None:
         raise ConfigError(f"{name} applies to detector='learned' only, got detector={detector!r}")
     if not isinstance(path, (str, Path)) or not Path(path).is_file():
         raise ConfigError(f"{name} must be an existing ONNX file, got {path!r}")
+    stat = Path(path).stat()
+    why = _onnx_load_error(str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size)
+    if why is not None:  # a corrupt file is refused with the options, not mid-run with a traceback
+        raise ConfigError(f"{name}: {why}")
     return path
+
+
+@functools.lru_cache(maxsize=16)
+def _onnx_load_error(path: str, mtime_ns: int, size: int) -> str | None:
+    """Why ONNX Runtime cannot load ``path`` (as it stands: ``mtime_ns``, ``size``), or None."""
+    from localization.detect.onnx_net import OnnxNet
+
+    try:
+        OnnxNet(path)
+    except ValueError as err:
+        return str(err)
+    return None
 
 
 @dataclass(frozen=True)

@@ -114,7 +114,7 @@ def plot_fig2(overlays: Sequence[Overlay], path: Path, settings: str | None = No
         fontsize=8,
     )
     fig.tight_layout(rect=(0, 0.04 + foot, 1, 1))
-    save_figure(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110, settings=settings)
     plt.close(fig)
 
 
@@ -144,7 +144,7 @@ def plot_error_cdfs(rows: Sequence[ImageResult], path: Path, settings: str | Non
         ax.grid(True, which="both", alpha=0.3)
     ax_t.legend(fontsize=7, loc="lower right")
     fig.tight_layout(rect=(0, _stamp(fig, settings), 1, 1))
-    save_figure(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110, settings=settings)
     plt.close(fig)
 
 
@@ -182,7 +182,7 @@ def plot_viewpoint_map(
     ax.legend(loc="upper right", fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout(rect=(0, _stamp(fig, settings), 1, 1))
-    save_figure(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110, settings=settings)
     plt.close(fig)
 
 
@@ -218,5 +218,5 @@ def plot_worker_tracking(
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout(rect=(0, _stamp(fig, settings), 1, 1))
-    save_figure(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110, settings=settings)
     plt.close(fig)

@@ -24,7 +24,7 @@ from localization.metrics import (
     summarize_errors,
 )
 from uav_struct_env.outputs import atomic_write_json
-from uav_struct_env.provenance import software
+from uav_struct_env.provenance import software, version_text
 from uav_struct_env.study.cells import cell, json_ready, pct_cell, write_records_csv
 from uav_struct_env.study.protocol import METHODS, Method, PaperFigures, StudyConfig
 from uav_struct_env.study.run import ImageResult, bound_source
@@ -203,11 +203,8 @@ def settings_line(results: dict) -> str:
     building = "as designed" if as_built is None else f"as built {as_built} x {scale:g}"
     building += f", site activity {c.pop('activity', 'none')}"
     w, h = c.pop("image_size")
-    version = f"{sw.get('package', 'uav-struct-env')} {sw.get('version', '?')}"
-    if sw.get("git_commit"):
-        version += f" (git {sw['git_commit'][:10]}{', modified' if sw.get('git_modified') else ''})"
     parts = [
-        version,
+        version_text(sw),
         f"site {site if site in ('paper', 'random') else Path(site).name}"
         + (f", stage {stage}" if stage else "") + f", {building}",
         detector,

@@ -14,6 +14,7 @@ from localization.detect.weights import WEIGHT_NAMES
 from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.outputs import OutputExistsError, StagedOutput
 from uav_struct_env.processes import WorkerDied
+from uav_struct_env.sim.imaging import imaging_argument
 from uav_struct_env.sim.lens import CAMERA_MODELS
 from uav_struct_env.site import make_site
 from uav_struct_env.site.activity import ACTIVITY_PRESETS
@@ -181,6 +182,7 @@ def _parser() -> CommandParser:
     p.add_argument(
         "--imaging",
         default="ideal",
+        type=imaging_argument,
         choices=("ideal", "camera"),
         help="camera effects on the rendered images: ideal (none) or camera (blur, noise, JPEG)",
     )

@@ -4,7 +4,9 @@
 study (:func:`uav_struct_env.study.run.run_units`, one process per run) for every (site, seed)
 pair and merges the per-image rows of all runs into one ``results.json`` (each method pooled
 over every run, plus each run's own summary), ``table.md`` and ``per_image.csv`` (with ``site``
-and ``seed`` columns).
+and ``seed`` columns). Each says how it was made: ``table.md`` opens with the settings line
+(:func:`sweep_settings_line`: the study's, over every site and seed), ``per_image.csv`` with it as
+a ``# Settings: ...`` comment, and ``results.json`` has it as ``"settings"``.
 
 Sites: ``paper``, ``random:N`` (the random site drawn from seed N, the one
 ``uav-struct study --site random --seed N`` renders), ``random:A-B`` (A to B inclusive), a site
@@ -33,12 +35,12 @@ from tqdm import tqdm
 
 from localization.metrics import median_p90
 from uav_struct_env.errors import ConfigError
-from uav_struct_env.outputs import StagedOutput, atomic_write_text
+from uav_struct_env.outputs import OutputExistsError, StagedOutput, atomic_write_text
 from uav_struct_env.processes import run_chunks
 from uav_struct_env.provenance import software
 from uav_struct_env.study.cells import cell, json_ready, write_records_csv
 from uav_struct_env.study.protocol import METHODS, StudyConfig
-from uav_struct_env.study.report import summarize, write_results_json
+from uav_struct_env.study.report import settings_line, summarize, write_results_json
 from uav_struct_env.study.run import ImageResult, bound_source, run_units
 from uav_struct_env.validate import CommandParser
 
@@ -53,6 +55,7 @@ __all__ = [
     "run_sweep",
     "sweep",
     "sweep_results",
+    "sweep_settings_line",
     "table_markdown",
     "write_rows_csv",
 ]
@@ -268,7 +271,22 @@ def sweep_results(base: StudyConfig, runs: Sequence[SweepRun], extra_config: dic
                 s = summarize(m, rows)
                 methods[m.key] = {k: s[k] for k in _RUN_KEYS}
         per_run.append({"site": run.site, "seed": run.seed, "methods": methods})
-    return {"config": cfg, "software": software(), "methods": json_ready(pooled), "runs": json_ready(per_run)}
+    results = {"config": cfg, "software": software(), "methods": json_ready(pooled),
+               "runs": json_ready(per_run)}
+    return {**results, "settings": sweep_settings_line(results)}
+
+
+def sweep_settings_line(results: dict) -> str:
+    """The study's settings line of a sweep's ``results`` (the ``config`` and ``software`` entries).
+
+    It names every site (file names) and seed where the study's names one.
+    """
+    cfg = dict(results["config"])
+    sites, seeds = cfg.pop("sites"), cfg.pop("seeds")
+    cfg["site"] = ", ".join(s if s in ("paper",) or s.startswith("random:") else Path(s).name for s in sites)
+    cfg["seed"] = ", ".join(str(s) for s in seeds)
+    cfg.pop("methods", None)
+    return settings_line({"config": cfg, "software": results.get("software") or {}})
 
 
 def _finite_min(values: Sequence[float]) -> float:
@@ -283,7 +301,7 @@ def _finite_max(values: Sequence[float]) -> float:
 
 def comparable(results: dict) -> dict:
     """``results`` without what the wall clock decides (latency, elapsed time, the backend)."""
-    out = {k: v for k, v in results.items() if k != "software"}
+    out = {k: v for k, v in results.items() if k not in ("software", "settings")}
     out["config"] = {k: v for k, v in results["config"].items() if k not in ("elapsed_s", "backend")}
     out["methods"] = {
         k: {f: v for f, v in s.items() if f != "latency_s"} for k, s in results["methods"].items()
@@ -295,6 +313,8 @@ def table_markdown(results: dict) -> str:
     """One table: each method pooled over every run, with the spread of the runs' medians."""
     c = results["config"]
     lines = [
+        f"Settings: {results['settings']}",
+        "",
         f"Sweep: {len(c['sites'])} sites x {len(c['seeds'])} seeds ({len(results['runs'])} runs), "
         f"{c['detector']} detector, {c['association']} association, {c['noise']} prior, "
         f"{c['n_viewpoints']} viewpoints x {c['n_agents']} UAVs per run, {c.get('backend', '?')}.",
@@ -319,11 +339,15 @@ def table_markdown(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_rows_csv(path: Path, runs: Sequence[SweepRun]) -> None:
-    """Every per-image row of every run, with its ``site`` and ``seed`` first."""
+def write_rows_csv(path: Path, runs: Sequence[SweepRun], settings: str | None = None) -> None:
+    """Every per-image row of every run, with its ``site`` and ``seed`` first.
+
+    ``settings``: the sweep's settings line, written first as ``# Settings: ...``.
+    """
     rows = [r for run in runs for r in run.rows]
     which = [(run.site, run.seed) for run in runs for _ in run.rows]
-    write_records_csv(path, ImageResult, rows, lead=(("site", "seed"), which))
+    write_records_csv(path, ImageResult, rows, lead=(("site", "seed"), which),
+                      comment=None if settings is None else f"Settings: {settings}")
 
 
 def sweep(
@@ -353,7 +377,7 @@ def sweep(
                                              "backend": backend})
         write_results_json(staged.stage / "results.json", results)
         atomic_write_text(staged.stage / "table.md", table_markdown(results))
-        write_rows_csv(staged.stage / "per_image.csv", runs)
+        write_rows_csv(staged.stage / "per_image.csv", runs, results["settings"])
     return results
 
 
@@ -415,6 +439,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         results = sweep(base, sites, seeds, args.out, workers=args.workers, ray=args.ray,
                         progress=not args.no_progress, overwrite=args.overwrite)
+    except (OutputExistsError, NotADirectoryError) as err:  # another run took --out since the check
+        return refuse(prog, err)
     except (WorkerDied, OSError) as err:
         return refuse(prog, f"{err}; nothing written to {args.out}", status=1)
     out = Path(args.out)
