@@ -88,7 +88,8 @@ from numpy.typing import ArrayLike, NDArray
 from uav_struct_env.errors import ConfigError, IfcImportError, SiteGeometryError
 from uav_struct_env.site.elements import Beam, Column, Element, Hole, Slab, Stage, Storey, TriangleMesh, Wall
 from uav_struct_env.site.ifc_export import require_ifcopenshell, write_building
-from uav_struct_env.site.ifc_file import check_complete, check_coordinates, check_size
+from uav_struct_env.site.ifc_file import check_complete, check_coordinates, check_size, star_arguments
+from uav_struct_env.site.landmarks import exposed_landmarks
 from uav_struct_env.site.model import Site
 from uav_struct_env.site.polygons import canonical_outline
 
@@ -146,6 +147,11 @@ _NOT_IMPORTED = (
     ("IfcAnnotation", "annotation"),
     ("IfcGrid", "grid"),
 )
+# The duplicate search's cells (m, wider than DUPLICATE_TOL) and the offsets of a cell's neighbours.
+_DUPLICATE_CELL = 1.0
+#: A stage needs at least this many landmarks of a set for a camera to get a pose from it.
+_MIN_LANDMARKS = 4
+_NEIGHBOURS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
 _KIND_ORDER = {"column": 0, "slab": 1, "beam": 2, "wall": 3}
 _ELEMENT_CLASS = {"column": Column, "slab": Slab, "beam": Beam, "wall": Wall}
 
@@ -167,12 +173,15 @@ class ImportReport:
         kept: ``(guid, ifc class, name, role)`` of every imported IFC element.
         dropped: ``(guid, ifc class, name, reason)`` of every imported-class element left out.
         skipped: ``(ifc class, count, reason)`` of the classes not imported at all.
+        repaired: ``(ifc class, count, what)`` of the instances read other than as written
+            (a ``*`` where the schema wants a value or ``$``: read as unset).
     """
 
     path: str
     kept: tuple[tuple[str, str, str, str], ...]
     dropped: tuple[tuple[str, str, str, str], ...]
     skipped: tuple[tuple[str, int, str], ...]
+    repaired: tuple[tuple[str, int, str], ...] = ()
 
     def __repr__(self) -> str:
         return (f"ImportReport({self.path!r}: kept {len(self.kept)}, dropped {len(self.dropped)}, "
@@ -185,6 +194,7 @@ class ImportReport:
         lines += [f"  kept    {c:<20} {g}  {n!r}: {r}" for g, c, n, r in self.kept]
         lines += [f"  dropped {c:<20} {g}  {n!r}: {r}" for g, c, n, r in self.dropped]
         lines += [f"  skipped {c:<20} x{n}: {r}" for c, n, r in self.skipped]
+        lines += [f"  read    {c:<20} x{n}: {r}" for c, n, r in self.repaired]
         return "\n".join(lines)
 
 
@@ -394,6 +404,27 @@ def _open(path: Path) -> tuple[Any, bytes]:
         raise IfcImportError(f"{str(path)!r} is not a readable IFC file: {exc}") from exc
 
 
+def _unset_star_arguments(f: Any, text: bytes) -> tuple[tuple[str, int, str], ...]:
+    """Read a ``*`` written where the schema wants a value or ``$`` as unset, in the parsed file ``f``.
+
+    Renga writes ``*`` (a derived attribute) for unset optional attributes; the geometry kernel
+    then refuses the element. Returns ``(ifc class, count, what)`` for the report.
+    """
+    import ifcopenshell.ifcopenshell_wrapper as wrapper
+
+    schema = wrapper.schema_by_name(f.schema)
+    counts: Counter[str] = Counter()
+    for entity_id, _, positions in star_arguments(text):
+        inst = f.by_id(entity_id)
+        derived = schema.declaration_by_name(inst.is_a()).as_entity().derived()
+        for k in positions:
+            if k < len(derived) and not derived[k]:
+                inst.unset_attribute_value(k)
+                counts[inst.is_a()] += 1
+    what = "'*' (derived) where the schema wants a value or '$': read as unset"
+    return tuple((c, n, what) for c, n in sorted(counts.items()))
+
+
 def _matrix_m(placement: Any, scale: float) -> NDArray[np.float64]:
     import ifcopenshell.util.placement
 
@@ -562,7 +593,7 @@ def _no_body_geometry(
     dropped: list[_Row] = []
     for order, e in enumerate(include):
         if e.id() not in shapes or len(shapes[e.id()][1]) == 0:
-            dropped.append((e.GlobalId, e.is_a(), e.Name or e.is_a(), "no body geometry"))
+            dropped.append((e.GlobalId, e.is_a(), e.Name or e.is_a(), _no_body_reason(e)))
         elif not np.all(np.isfinite(shapes[e.id()][0])):
             dropped.append((e.GlobalId, e.is_a(), e.Name or e.is_a(), "non-finite body geometry"))
         else:
@@ -570,11 +601,20 @@ def _no_body_geometry(
     return tessellated, dropped
 
 
-def _coincident(u: _Raw, r: _Raw, footprints: _Footprints) -> bool:
+def _no_body_reason(e: Any) -> str:
+    """Why ``e`` has no tessellation: an aggregate whose parts carry the geometry, or no body at all."""
+    parts = [p for rel in getattr(e, "IsDecomposedBy", ()) or () for p in rel.RelatedObjects]
+    if parts:
+        classes = ", ".join(f"{n} {c}" for c, n in sorted(Counter(p.is_a() for p in parts).items()))
+        return f"aggregate without a body of its own: its parts ({classes}) are imported in its place"
+    return "no body geometry"
+
+
+def _coincident(u: _Raw, r: _Raw, boxes: dict[str, NDArray[np.float64]], footprints: _Footprints) -> bool:
     """Whether ``r`` repeats ``u``: same kind, bounding box within DUPLICATE_TOL, same footprint."""
     import shapely
 
-    if u.kind != r.kind or np.max(np.abs(u.bbox() - r.bbox())) > DUPLICATE_TOL:
+    if u.kind != r.kind or np.max(np.abs(boxes[u.guid] - boxes[r.guid])) > DUPLICATE_TOL:
         return False
     fa, fb = footprints[u.guid], footprints[r.guid]
     if fa is None or fb is None:
@@ -586,15 +626,25 @@ def _coincident(u: _Raw, r: _Raw, footprints: _Footprints) -> bool:
 def _coincident_duplicates(
     raws: list[_Raw], footprints: _Footprints
 ) -> tuple[list[_Raw], list[_Row]]:
-    """Rule 2: the elements that repeat no earlier one; the coincident duplicates dropped."""
+    """Rule 2: the elements that repeat no earlier one; the coincident duplicates dropped.
+
+    The earlier elements are binned by their bounding box's lower corner in cells of
+    ``_DUPLICATE_CELL``: a twin's corner lies within DUPLICATE_TOL, so in the same or a
+    neighbouring cell, and only those are compared (the first twin in file order wins).
+    """
+    boxes = {r.guid: r.bbox() for r in raws}
+    cells: dict[tuple[int, ...], list[int]] = {}
     unique: list[_Raw] = []
     dropped: list[_Row] = []
     for r in raws:
-        twin = next((u for u in unique if _coincident(u, r, footprints)), None)
+        cell = np.floor(boxes[r.guid][:3] / _DUPLICATE_CELL).astype(np.int64)
+        near = sorted(k for d in _NEIGHBOURS for k in cells.get(tuple(cell + d), ()))
+        twin = next((unique[k] for k in near if _coincident(unique[k], r, boxes, footprints)), None)
         if twin is not None:
             why = f"coincident duplicate of {twin.guid} ({twin.name!r})"
             dropped.append((r.guid, r.ifc_class, r.name, why))
         else:
+            cells.setdefault(tuple(cell), []).append(len(unique))
             unique.append(r)
     return unique, dropped
 
@@ -870,7 +920,10 @@ def _distinct_prefix(guids: list[str], shortest: int = 8) -> int:
 def _stages(
     elements: tuple[Element, ...], floors: dict[int, list[str]], storeys: _Storeys
 ) -> tuple[Stage, ...]:
-    """``"<storey>/slab"`` and ``"<storey>/columns"`` for each storey with a floor, in build order."""
+    """``"<storey>/slab"`` and ``"<storey>/columns"`` for each storey with a floor, in build order.
+
+    A building without a floor gets :func:`_column_stages` instead.
+    """
     stages: list[Stage] = []
     for s in sorted(floors):
         below = {e.guid for e in elements if e.storey < s}
@@ -880,17 +933,53 @@ def _stages(
         cols = {e.guid for e in elements if isinstance(e, Column) and e.storey == s}
         if cols:
             stages.append(Stage(f"{storeys.name(s)}/columns", built | cols, tuple(floors[s])))
+    return tuple(stages) if stages else _column_stages(elements, storeys)
+
+
+def _column_stages(elements: tuple[Element, ...], storeys: _Storeys) -> tuple[Stage, ...]:
+    """Columns-only stages of a building without a floor (a frame, or slabs only at the terrain).
+
+    ``"<storey>/columns"`` = every kept element of lower storeys plus the storey's columns (not its
+    beams: the column tops are the landmarks), for each storey where at least four column tops
+    stand exposed above the terrain (:data:`GROUND_TOL`): fewer cannot give a camera a pose.
+    """
+    stages: list[Stage] = []
+    for s in sorted({e.storey for e in elements if isinstance(e, Column)}):
+        built = frozenset(e.guid for e in elements
+                          if e.storey < s or (isinstance(e, Column) and e.storey == s))
+        standing = tuple(e for e in elements if e.guid in built)
+        tops = [p for p in exposed_landmarks("column_tops", standing, (), ()) if p[4][2] > GROUND_TOL]
+        if len(tops) >= _MIN_LANDMARKS:
+            stages.append(Stage(f"{storeys.name(s)}/columns", built, ()))
     return tuple(stages)
 
 
+# Short labels of the rules' reasons, for the one-line refusal (first match wins).
+_REASON_LABELS = (
+    ("ground-bearing", "ground-bearing at the terrain"), ("sloped", "sloped or stepped"),
+    ("finish floor", "finish floors"), ("thinner than", "thinner than a structural floor"),
+    ("aggregate", "aggregates of parts"), ("duplicate", "coincident duplicates"),
+    ("no body", "without body geometry"), ("degenerate", "degenerate"),
+)
+
+
+def _reason_label(why: str) -> str:
+    """A rule's reason as a short label (``"sloped or stepped"``) to count in the refusal."""
+    return next((label for key, label in _REASON_LABELS if key in why), why.split(":")[0])
+
+
 def _no_floor(path: Path, by_kind: dict[str, list[Any]], dropped: list[_Row],
-              rendered: list[tuple[_Raw, str]]) -> IfcImportError:
-    """The error for a file without a flat-topped structural floor, naming what was left out and why."""
+              rendered: list[tuple[_Raw, str]], elements: tuple[Element, ...]) -> IfcImportError:
+    """The error for a file without a stage a camera can use: one line, the reasons counted."""
+    reasons = Counter(_reason_label(why) for _, cls, _, why in dropped if cls.startswith("IfcSlab"))
+    reasons.update(_reason_label(why) for _, why in rendered)
+    slabs = "; ".join(f"{n} {why}" for why, n in reasons.most_common()) or "none imported"
+    columns = sum(isinstance(e, Column) for e in elements)
     return IfcImportError(
-        f"{str(path)!r} has no flat-topped structural floor to build stages on: "
-        f"{len(by_kind['slab'])} IfcSlab, {len(by_kind['column'])} IfcColumn; dropped or not "
-        "landmark-bearing: " + "; ".join(f"{g} {n!r}: {why}" for g, _, n, why in dropped[:8])
-        + "; " + "; ".join(f"{r.guid} {r.name!r}: {why}" for r, why in rendered[:8])
+        f"{str(path)!r} has no stage a camera can use: no flat-topped structural floor above the "
+        f"terrain, and no storey with {_MIN_LANDMARKS} column tops exposed above the terrain "
+        f"({len(by_kind['slab'])} IfcSlab: {slabs}; {len(by_kind['column'])} IfcColumn, {columns} kept); "
+        "ifc_report() is not available for it, set logging to DEBUG for every element"
     )
 
 
@@ -921,6 +1010,7 @@ def _parse(path: Path, transform: NDArray[np.float64]) -> _Parsed:
     f, text = _open(path)
     scale = float(ios.util.unit.calculate_unit_scale(f))
     check_coordinates(path, text, scale)
+    repaired = _unset_star_arguments(f, text)
     products = f.by_type("IfcProduct")
     by_kind = _imported_by_kind(f, products, path)
     storeys = _storeys(f, scale, transform)
@@ -941,10 +1031,11 @@ def _parse(path: Path, transform: NDArray[np.float64]) -> _Parsed:
     dropped = no_body + duplicates + finish + floors_dropped + no_footprint + others_dropped
     elements = _in_order(floor_slabs + shown + others)
     stages = _stages(elements, floors, storeys)
-    if not stages:
-        raise _no_floor(path, by_kind, dropped, rendered)
     report = ImportReport(str(path), tuple(floors_kept + shown_kept + others_kept), tuple(dropped),
-                          _not_imported(products, include))
+                          _not_imported(products, include), repaired)
+    if not stages:
+        log.debug("%s", report.summary())
+        raise _no_floor(path, by_kind, dropped, rendered, elements)
     source = {
         "format": "ifc", "path": str(path), "schema": f.schema,
         "units": {"length_unit_in_m": scale},
