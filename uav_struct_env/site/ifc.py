@@ -18,7 +18,13 @@ railings, doors, windows, coverings, furniture and every other non-structural pr
 IfcOpeningElements become slab openings. Real files are messy; the rules, in order (each is a
 function of the same name: :func:`_no_body_geometry`, ... :func:`_columns_beams_walls`):
 
-1. **No body geometry**: an element the iterator cannot tessellate is dropped.
+0. **A ``*`` where a value belongs**: ``*`` marks an attribute a subtype derives; Renga also
+   writes it for unset optional attributes (names, profile names), where ``$`` belongs, and the
+   geometry kernel then refuses the element. Such a ``*`` is read as unset
+   (:func:`_unset_star_arguments`; counted in the report's ``repaired``).
+1. **No body geometry**: an element the iterator cannot tessellate is dropped; an aggregate
+   whose parts carry the geometry (a Revit multi-layer floor exported as IfcSlab parts) is
+   reported as such, its parts imported in its place.
 2. **Coincident duplicates**: an element whose kind, 3D bounding box (within
    :data:`DUPLICATE_TOL`) and plan footprint match an earlier one is dropped.
 3. **Finish floors**: a slab thinner than :data:`MIN_SLAB_THICKNESS` is dropped (said to be a
@@ -62,8 +68,16 @@ where 8 do not tell them apart). The floor of a
 storey is its flat structural slabs. Stages, in build order, for each storey with a floor:
 ``"<storey>/slab"`` = every kept element of lower storeys plus the floors up to this one;
 ``"<storey>/columns"`` (only when the storey contains columns) = plus those columns. Imported
-stages have no short aliases. Landmark ids follow from the element order (columns, slabs, beams,
-walls; by storey, then file order), so they are stable across loads of the same file.
+stages have no short aliases.
+
+A building without a floor (a steel frame; slabs only at the terrain) gets **columns-only
+stages** instead (:func:`_column_stages`): ``"<storey>/columns"`` = every kept element of lower
+storeys plus the storey's columns, for each storey where at least four column tops stand exposed
+above the terrain; the default is the last, where the columns end. A file with neither is
+refused in one line that counts the slabs by the rule that kept them from being a floor
+(``sloped or stepped``, ``ground-bearing at the terrain``, ...). Landmark ids follow from the
+element order (columns, slabs, beams, walls; by storey, then file order), so they are stable
+across loads of the same file.
 
 The parse is cached in-process per (file, mtime, size, transform): loading another stage of the
 same file does not tessellate again. What was kept and dropped is an :class:`ImportReport` in
@@ -1069,7 +1083,8 @@ def ifc_stages(path: str | os.PathLike, *, transform: ArrayLike | None = None) -
 
     Raises:
         FileNotFoundError: if the file does not exist.
-        IfcImportError: if it is not IFC, has no slab or column, or no flat structural floor.
+        IfcImportError: if it is not IFC, has no slab or column, or no stage a camera can use
+            (no flat structural floor above the terrain and no four exposed column tops).
         ImportError: if ifcopenshell is not installed (names the ``ifc`` extra).
     """
     return [st.name for st in _parsed(path, transform).stages]
@@ -1098,7 +1113,8 @@ def load_ifc(
 
     Raises:
         FileNotFoundError: if the file does not exist.
-        IfcImportError: if it is not IFC, has no slab or column, or no flat structural floor.
+        IfcImportError: if it is not IFC, has no slab or column, or no stage a camera can use
+            (no flat structural floor above the terrain and no four exposed column tops).
         ConfigError: for an unknown stage (the message lists the valid ones).
         ValueError: for a transform that is not 4x4 rigid keeping z up.
         ImportError: if ifcopenshell is not installed (names the ``ifc`` extra).
