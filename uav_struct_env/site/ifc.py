@@ -49,7 +49,10 @@ function of the same name: :func:`_no_body_geometry`, ... :func:`_columns_beams_
    covered). A big or L-shaped re-entrant region stays part of the outline. An opening is
    ``Hole(source="void")`` named and identified after the IfcOpeningElement voiding the slab
    there, else ``source="outline"`` with guid ``"<slab guid>/opening <k>"``.
-8. **Columns**: axis = centroid of the top face, outline = plan footprint. **Beams, walls**:
+8. **Columns**: axis = centroid of the top face, outline = plan footprint. An IfcColumn shorter
+   than :data:`MIN_COLUMN_HEIGHT` or squatter than its plan is wide (a plate, a railing post:
+   Tekla exports them as IfcColumn) is rendered as a member and bears no landmark
+   (:func:`_not_a_column`). **Beams, walls**:
    outline = the union of the plan projections of their triangles (its largest part, or the
    convex hull when the union falls apart into comparable parts). All keep their triangles as
    ``mesh``.
@@ -112,6 +115,7 @@ __all__ = [
     "FLAT_FRACTION",
     "GROUND_TOL",
     "IMPORTED_CLASSES",
+    "MIN_COLUMN_HEIGHT",
     "MIN_SLAB_THICKNESS",
     "NOTCH_FRACTION",
     "OUTLINE_TOL",
@@ -144,6 +148,8 @@ OUTLINE_TOL = 0.001
 NOTCH_FRACTION = 0.2
 #: A slab is flat-topped when its top face makes at least this fraction of its upward area.
 FLAT_FRACTION = 0.9
+#: An IfcColumn shorter than this (or squatter than its plan is wide) is a plate or post, m.
+MIN_COLUMN_HEIGHT = 1.5
 #: A slab whose top lies at most this high above the terrain (z = 0 of the project frame, where the
 #: env lays its ground) is ground-bearing: its corners are not seen as structure, m.
 GROUND_TOL = 0.3
@@ -887,22 +893,39 @@ def _columns_beams_walls(
         if fp is None or r.zmax - r.zmin <= 1e-6:
             dropped.append((r.guid, r.ifc_class, r.name, "no plan footprint or no height"))
             continue
+        squat = _not_a_column(r, fp) if r.kind == "column" else None
+        kind = "beam" if squat else r.kind
         extra: dict[str, Any] = {}
-        if r.kind == "column":
+        if kind == "column":
             top = _slab_top(r)
             c = (top.polygon if top.flat and not top.polygon.is_empty else shapely.Polygon(fp)).centroid
             extra = {"axis": (c.x, c.y), "index": columns}
         try:
-            element = _ELEMENT_CLASS[r.kind](guid=r.guid, name=r.name, storey=r.storey, outline=fp,
-                                             z_bottom=r.zmin, z_top=r.zmax, mesh=_mesh_of([r.tri]), **extra)
+            element = _ELEMENT_CLASS[kind](guid=r.guid, name=r.name, storey=r.storey, outline=fp,
+                                           z_bottom=r.zmin, z_top=r.zmax, mesh=_mesh_of([r.tri]), **extra)
         except ValueError as exc:  # SiteGeometryError included
             dropped.append(_degenerate(r.guid, r.ifc_class, r.name, exc))
             continue
-        if r.kind == "column":
-            columns += 1
-        elements.append(((_KIND_ORDER[r.kind], r.storey, r.order, 0), element))
-        kept.append((r.guid, r.ifc_class, r.name, f"{r.kind} of {storeys.name(r.storey)}"))
+        columns += kind == "column"
+        elements.append(((_KIND_ORDER[kind], r.storey, r.order, 0), element))
+        kept.append((r.guid, r.ifc_class, r.name, squat or f"{kind} of {storeys.name(r.storey)}"))
     return elements, kept, dropped
+
+
+def _not_a_column(r: _Raw, footprint: NDArray[np.float64]) -> str | None:
+    """Rule 8b: why an IfcColumn is no column (a plate, a railing post), or None if it is one.
+
+    Such an element (Tekla exports plates and railing posts as IfcColumn) is shorter than
+    :data:`MIN_COLUMN_HEIGHT` or squatter than its plan is wide; it is rendered as a member
+    (a beam) and bears no column-top landmark.
+    """
+    height = r.zmax - r.zmin
+    extent = float(np.max(footprint.max(axis=0) - footprint.min(axis=0)))
+    if height < MIN_COLUMN_HEIGHT or height < extent:
+        return (f"IfcColumn {height:.2f} m tall and {extent:.2f} m wide (a plate or post, not a column "
+                f"at least {MIN_COLUMN_HEIGHT} m tall and taller than wide): rendered as a member, "
+                "no column-top landmark")
+    return None
 
 
 # ----------------------------------------------------------------------------- the site
