@@ -39,7 +39,10 @@ def _frame(n_columns: int = 4) -> Site:
                   z_bottom=2.7, z_top=3.0) for k, y in enumerate((0.0, 6.0))]
     grade = Slab(guid="sog", name="slab on grade", storey=0, outline=rectangle(-1, -1, 9, 7),
                  z_bottom=-0.2, z_top=0.0)
-    elements = (*low, *up, *beams, grade)
+    # a base plate exported as IfcColumn (Tekla does): 0.3 m tall, 0.4 m wide
+    plate = Column(guid="p", name="plate", storey=0, axis=(4.0, 3.0), z_bottom=0.0, z_top=0.3,
+                   outline=rectangle(3.8, 2.99, 4.2, 3.01))
+    elements = (*low, *up, *beams, grade, plate)
     stage = Stage("all", frozenset(e.guid for e in elements), ())
     return Site(elements=elements, storeys=storeys, stages=(stage,), stage="all", name="frame")
 
@@ -57,7 +60,11 @@ def test_a_frame_without_a_floor_gets_columns_only_stages(tmp_path):
     built = {e.name for e in site.built}
     assert {"b0", "b1", "slab on grade", "c0", "u0"} <= built
     ground = load_ifc(path, stage="Ground/columns")
-    assert sorted(np.round(ground.landmarks("column_tops").xyz[:, 2], 6)) == [2.7] * 4
+    assert sorted(np.round(ground.landmarks("column_tops").xyz[:, 2], 6)) == [2.7] * 4  # not the plate
+    plate = next(e for e in site.elements if e.name == "plate")
+    assert plate.kind == "beam" and plate.guid in site.current_stage.built  # rendered, no landmark
+    role = next(role for _, _, name, role in ifc_report(path).kept if name == "plate")
+    assert role.startswith("IfcColumn 0.30 m tall and 0.40 m wide (a plate or post, not a column")
     assert not {"b0", "b1"} & {e.name for e in ground.built}  # the beams come after the columns
 
 
