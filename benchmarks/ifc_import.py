@@ -4,7 +4,8 @@
 
 Cold is the first ``load_ifc`` in the process after ``import ifcopenshell`` (timed separately);
 each further cold repeat clears the in-process cache first. Warm is ``load_ifc`` of another stage
-of the same file (the tessellation is cached). Issue 13's target: at most 5 s for a 3 MB file.
+of the same file (the tessellation is cached). Issue 13's target: at most 5 s for a 3 MB file on one
+core; the cold CPU time (``time.process_time``) is that figure when the machine is busy.
 A benchmark, not a test: numbers depend on the machine and on what else runs on it.
 """
 
@@ -27,12 +28,13 @@ def main(path: str | Path = DUPLEX, repeats: int = 3) -> dict[str, float]:
     from uav_struct_env.site import ifc_stages, load_ifc
 
     library = time.perf_counter() - t
-    cold = []
+    cold, cold_cpu = [], []
     for _ in range(repeats):
         ifc_module._parse_cached.cache_clear()
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), time.process_time()
         site = load_ifc(path)
         cold.append(time.perf_counter() - t)
+        cold_cpu.append(time.process_time() - cpu)
     stages = ifc_stages(path)
     warm = []
     for k in range(max(repeats, len(stages))):
@@ -41,11 +43,11 @@ def main(path: str | Path = DUPLEX, repeats: int = 3) -> dict[str, float]:
         warm.append(time.perf_counter() - t)
     size_mb = Path(path).stat().st_size / 1e6
     out = {"import_ifcopenshell_s": library, "cold_s": statistics.median(cold), "cold_first_s": cold[0],
-           "warm_s": statistics.median(warm)}
+           "cold_cpu_s": statistics.median(cold_cpu), "warm_s": statistics.median(warm)}
     print(f"{Path(path).name}: {size_mb:.1f} MB, {len(site.elements)} elements, stages {stages}")
     print(f"import ifcopenshell + uav_struct_env.site.ifc: {library:.2f} s")
     print(f"cold load_ifc (parse + tessellate + rules): first {cold[0]:.2f} s, median {out['cold_s']:.2f} s "
-          f"over {repeats}")
+          f"over {repeats}; CPU median {out['cold_cpu_s']:.2f} s (the one-core figure on a busy machine)")
     print(f"warm load_ifc (another stage, cached):      median {1000 * out['warm_s']:.1f} ms")
     return out
 

@@ -18,7 +18,13 @@ railings, doors, windows, coverings, furniture and every other non-structural pr
 IfcOpeningElements become slab openings. Real files are messy; the rules, in order (each is a
 function of the same name: :func:`_no_body_geometry`, ... :func:`_columns_beams_walls`):
 
-1. **No body geometry**: an element the iterator cannot tessellate is dropped.
+0. **A ``*`` where a value belongs**: ``*`` marks an attribute a subtype derives; Renga also
+   writes it for unset optional attributes (names, profile names), where ``$`` belongs, and the
+   geometry kernel then refuses the element. Such a ``*`` is read as unset
+   (:func:`_unset_star_arguments`; counted in the report's ``repaired``).
+1. **No body geometry**: an element the iterator cannot tessellate is dropped; an aggregate
+   whose parts carry the geometry (a Revit multi-layer floor exported as IfcSlab parts) is
+   reported as such, its parts imported in its place.
 2. **Coincident duplicates**: an element whose kind, 3D bounding box (within
    :data:`DUPLICATE_TOL`) and plan footprint match an earlier one is dropped.
 3. **Finish floors**: a slab thinner than :data:`MIN_SLAB_THICKNESS` is dropped (said to be a
@@ -43,7 +49,10 @@ function of the same name: :func:`_no_body_geometry`, ... :func:`_columns_beams_
    covered). A big or L-shaped re-entrant region stays part of the outline. An opening is
    ``Hole(source="void")`` named and identified after the IfcOpeningElement voiding the slab
    there, else ``source="outline"`` with guid ``"<slab guid>/opening <k>"``.
-8. **Columns**: axis = centroid of the top face, outline = plan footprint. **Beams, walls**:
+8. **Columns**: axis = centroid of the top face, outline = plan footprint. An IfcColumn shorter
+   than :data:`MIN_COLUMN_HEIGHT` or squatter than its plan is wide (a plate, a railing post:
+   Tekla exports them as IfcColumn) is rendered as a member and bears no landmark
+   (:func:`_not_a_column`). **Beams, walls**:
    outline = the union of the plan projections of their triangles (its largest part, or the
    convex hull when the union falls apart into comparable parts). All keep their triangles as
    ``mesh``.
@@ -62,8 +71,16 @@ where 8 do not tell them apart). The floor of a
 storey is its flat structural slabs. Stages, in build order, for each storey with a floor:
 ``"<storey>/slab"`` = every kept element of lower storeys plus the floors up to this one;
 ``"<storey>/columns"`` (only when the storey contains columns) = plus those columns. Imported
-stages have no short aliases. Landmark ids follow from the element order (columns, slabs, beams,
-walls; by storey, then file order), so they are stable across loads of the same file.
+stages have no short aliases.
+
+A building without a floor (a steel frame; slabs only at the terrain) gets **columns-only
+stages** instead (:func:`_column_stages`): ``"<storey>/columns"`` = every kept element of lower
+storeys plus the storey's columns, for each storey where at least four column tops stand exposed
+above the terrain; the default is the last, where the columns end. A file with neither is
+refused in one line that counts the slabs by the rule that kept them from being a floor
+(``sloped or stepped``, ``ground-bearing at the terrain``, ...). Landmark ids follow from the
+element order (columns, slabs, beams, walls; by storey, then file order), so they are stable
+across loads of the same file.
 
 The parse is cached in-process per (file, mtime, size, transform): loading another stage of the
 same file does not tessellate again. What was kept and dropped is an :class:`ImportReport` in
@@ -88,7 +105,8 @@ from numpy.typing import ArrayLike, NDArray
 from uav_struct_env.errors import ConfigError, IfcImportError, SiteGeometryError
 from uav_struct_env.site.elements import Beam, Column, Element, Hole, Slab, Stage, Storey, TriangleMesh, Wall
 from uav_struct_env.site.ifc_export import require_ifcopenshell, write_building
-from uav_struct_env.site.ifc_file import check_complete, check_coordinates, check_size
+from uav_struct_env.site.ifc_file import check_complete, check_coordinates, check_size, star_arguments
+from uav_struct_env.site.landmarks import exposed_landmarks
 from uav_struct_env.site.model import Site
 from uav_struct_env.site.polygons import canonical_outline
 
@@ -97,6 +115,7 @@ __all__ = [
     "FLAT_FRACTION",
     "GROUND_TOL",
     "IMPORTED_CLASSES",
+    "MIN_COLUMN_HEIGHT",
     "MIN_SLAB_THICKNESS",
     "NOTCH_FRACTION",
     "OUTLINE_TOL",
@@ -129,6 +148,8 @@ OUTLINE_TOL = 0.001
 NOTCH_FRACTION = 0.2
 #: A slab is flat-topped when its top face makes at least this fraction of its upward area.
 FLAT_FRACTION = 0.9
+#: An IfcColumn shorter than this (or squatter than its plan is wide) is a plate or post, m.
+MIN_COLUMN_HEIGHT = 1.5
 #: A slab whose top lies at most this high above the terrain (z = 0 of the project frame, where the
 #: env lays its ground) is ground-bearing: its corners are not seen as structure, m.
 GROUND_TOL = 0.3
@@ -146,6 +167,11 @@ _NOT_IMPORTED = (
     ("IfcAnnotation", "annotation"),
     ("IfcGrid", "grid"),
 )
+# The duplicate search's cells (m, wider than DUPLICATE_TOL) and the offsets of a cell's neighbours.
+_DUPLICATE_CELL = 1.0
+#: A stage needs at least this many landmarks of a set for a camera to get a pose from it.
+_MIN_LANDMARKS = 4
+_NEIGHBOURS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
 _KIND_ORDER = {"column": 0, "slab": 1, "beam": 2, "wall": 3}
 _ELEMENT_CLASS = {"column": Column, "slab": Slab, "beam": Beam, "wall": Wall}
 
@@ -167,12 +193,15 @@ class ImportReport:
         kept: ``(guid, ifc class, name, role)`` of every imported IFC element.
         dropped: ``(guid, ifc class, name, reason)`` of every imported-class element left out.
         skipped: ``(ifc class, count, reason)`` of the classes not imported at all.
+        repaired: ``(ifc class, count, what)`` of the instances read other than as written
+            (a ``*`` where the schema wants a value or ``$``: read as unset).
     """
 
     path: str
     kept: tuple[tuple[str, str, str, str], ...]
     dropped: tuple[tuple[str, str, str, str], ...]
     skipped: tuple[tuple[str, int, str], ...]
+    repaired: tuple[tuple[str, int, str], ...] = ()
 
     def __repr__(self) -> str:
         return (f"ImportReport({self.path!r}: kept {len(self.kept)}, dropped {len(self.dropped)}, "
@@ -185,6 +214,7 @@ class ImportReport:
         lines += [f"  kept    {c:<20} {g}  {n!r}: {r}" for g, c, n, r in self.kept]
         lines += [f"  dropped {c:<20} {g}  {n!r}: {r}" for g, c, n, r in self.dropped]
         lines += [f"  skipped {c:<20} x{n}: {r}" for c, n, r in self.skipped]
+        lines += [f"  read    {c:<20} x{n}: {r}" for c, n, r in self.repaired]
         return "\n".join(lines)
 
 
@@ -394,6 +424,27 @@ def _open(path: Path) -> tuple[Any, bytes]:
         raise IfcImportError(f"{str(path)!r} is not a readable IFC file: {exc}") from exc
 
 
+def _unset_star_arguments(f: Any, text: bytes) -> tuple[tuple[str, int, str], ...]:
+    """Read a ``*`` written where the schema wants a value or ``$`` as unset, in the parsed file ``f``.
+
+    Renga writes ``*`` (a derived attribute) for unset optional attributes; the geometry kernel
+    then refuses the element. Returns ``(ifc class, count, what)`` for the report.
+    """
+    import ifcopenshell.ifcopenshell_wrapper as wrapper
+
+    schema = wrapper.schema_by_name(f.schema)
+    counts: Counter[str] = Counter()
+    for entity_id, _, positions in star_arguments(text):
+        inst = f.by_id(entity_id)
+        derived = schema.declaration_by_name(inst.is_a()).as_entity().derived()
+        for k in positions:
+            if k < len(derived) and not derived[k]:
+                inst.unset_attribute_value(k)
+                counts[inst.is_a()] += 1
+    what = "'*' (derived) where the schema wants a value or '$': read as unset"
+    return tuple((c, n, what) for c, n in sorted(counts.items()))
+
+
 def _matrix_m(placement: Any, scale: float) -> NDArray[np.float64]:
     import ifcopenshell.util.placement
 
@@ -562,7 +613,7 @@ def _no_body_geometry(
     dropped: list[_Row] = []
     for order, e in enumerate(include):
         if e.id() not in shapes or len(shapes[e.id()][1]) == 0:
-            dropped.append((e.GlobalId, e.is_a(), e.Name or e.is_a(), "no body geometry"))
+            dropped.append((e.GlobalId, e.is_a(), e.Name or e.is_a(), _no_body_reason(e)))
         elif not np.all(np.isfinite(shapes[e.id()][0])):
             dropped.append((e.GlobalId, e.is_a(), e.Name or e.is_a(), "non-finite body geometry"))
         else:
@@ -570,11 +621,20 @@ def _no_body_geometry(
     return tessellated, dropped
 
 
-def _coincident(u: _Raw, r: _Raw, footprints: _Footprints) -> bool:
+def _no_body_reason(e: Any) -> str:
+    """Why ``e`` has no tessellation: an aggregate whose parts carry the geometry, or no body at all."""
+    parts = [p for rel in getattr(e, "IsDecomposedBy", ()) or () for p in rel.RelatedObjects]
+    if parts:
+        classes = ", ".join(f"{n} {c}" for c, n in sorted(Counter(p.is_a() for p in parts).items()))
+        return f"aggregate without a body of its own: its parts ({classes}) are imported in its place"
+    return "no body geometry"
+
+
+def _coincident(u: _Raw, r: _Raw, boxes: dict[str, NDArray[np.float64]], footprints: _Footprints) -> bool:
     """Whether ``r`` repeats ``u``: same kind, bounding box within DUPLICATE_TOL, same footprint."""
     import shapely
 
-    if u.kind != r.kind or np.max(np.abs(u.bbox() - r.bbox())) > DUPLICATE_TOL:
+    if u.kind != r.kind or np.max(np.abs(boxes[u.guid] - boxes[r.guid])) > DUPLICATE_TOL:
         return False
     fa, fb = footprints[u.guid], footprints[r.guid]
     if fa is None or fb is None:
@@ -586,15 +646,25 @@ def _coincident(u: _Raw, r: _Raw, footprints: _Footprints) -> bool:
 def _coincident_duplicates(
     raws: list[_Raw], footprints: _Footprints
 ) -> tuple[list[_Raw], list[_Row]]:
-    """Rule 2: the elements that repeat no earlier one; the coincident duplicates dropped."""
+    """Rule 2: the elements that repeat no earlier one; the coincident duplicates dropped.
+
+    The earlier elements are binned by their bounding box's lower corner in cells of
+    ``_DUPLICATE_CELL``: a twin's corner lies within DUPLICATE_TOL, so in the same or a
+    neighbouring cell, and only those are compared (the first twin in file order wins).
+    """
+    boxes = {r.guid: r.bbox() for r in raws}
+    cells: dict[tuple[int, ...], list[int]] = {}
     unique: list[_Raw] = []
     dropped: list[_Row] = []
     for r in raws:
-        twin = next((u for u in unique if _coincident(u, r, footprints)), None)
+        cell = np.floor(boxes[r.guid][:3] / _DUPLICATE_CELL).astype(np.int64)
+        near = sorted(k for d in _NEIGHBOURS for k in cells.get(tuple(cell + d), ()))
+        twin = next((unique[k] for k in near if _coincident(unique[k], r, boxes, footprints)), None)
         if twin is not None:
             why = f"coincident duplicate of {twin.guid} ({twin.name!r})"
             dropped.append((r.guid, r.ifc_class, r.name, why))
         else:
+            cells.setdefault(tuple(cell), []).append(len(unique))
             unique.append(r)
     return unique, dropped
 
@@ -823,22 +893,39 @@ def _columns_beams_walls(
         if fp is None or r.zmax - r.zmin <= 1e-6:
             dropped.append((r.guid, r.ifc_class, r.name, "no plan footprint or no height"))
             continue
+        squat = _not_a_column(r, fp) if r.kind == "column" else None
+        kind = "beam" if squat else r.kind
         extra: dict[str, Any] = {}
-        if r.kind == "column":
+        if kind == "column":
             top = _slab_top(r)
             c = (top.polygon if top.flat and not top.polygon.is_empty else shapely.Polygon(fp)).centroid
             extra = {"axis": (c.x, c.y), "index": columns}
         try:
-            element = _ELEMENT_CLASS[r.kind](guid=r.guid, name=r.name, storey=r.storey, outline=fp,
-                                             z_bottom=r.zmin, z_top=r.zmax, mesh=_mesh_of([r.tri]), **extra)
+            element = _ELEMENT_CLASS[kind](guid=r.guid, name=r.name, storey=r.storey, outline=fp,
+                                           z_bottom=r.zmin, z_top=r.zmax, mesh=_mesh_of([r.tri]), **extra)
         except ValueError as exc:  # SiteGeometryError included
             dropped.append(_degenerate(r.guid, r.ifc_class, r.name, exc))
             continue
-        if r.kind == "column":
-            columns += 1
-        elements.append(((_KIND_ORDER[r.kind], r.storey, r.order, 0), element))
-        kept.append((r.guid, r.ifc_class, r.name, f"{r.kind} of {storeys.name(r.storey)}"))
+        columns += kind == "column"
+        elements.append(((_KIND_ORDER[kind], r.storey, r.order, 0), element))
+        kept.append((r.guid, r.ifc_class, r.name, squat or f"{kind} of {storeys.name(r.storey)}"))
     return elements, kept, dropped
+
+
+def _not_a_column(r: _Raw, footprint: NDArray[np.float64]) -> str | None:
+    """Rule 8b: why an IfcColumn is no column (a plate, a railing post), or None if it is one.
+
+    Such an element (Tekla exports plates and railing posts as IfcColumn) is shorter than
+    :data:`MIN_COLUMN_HEIGHT` or squatter than its plan is wide; it is rendered as a member
+    (a beam) and bears no column-top landmark.
+    """
+    height = r.zmax - r.zmin
+    extent = float(np.max(footprint.max(axis=0) - footprint.min(axis=0)))
+    if height < MIN_COLUMN_HEIGHT or height < extent:
+        return (f"IfcColumn {height:.2f} m tall and {extent:.2f} m wide (a plate or post, not a column "
+                f"at least {MIN_COLUMN_HEIGHT} m tall and taller than wide): rendered as a member, "
+                "no column-top landmark")
+    return None
 
 
 # ----------------------------------------------------------------------------- the site
@@ -870,7 +957,10 @@ def _distinct_prefix(guids: list[str], shortest: int = 8) -> int:
 def _stages(
     elements: tuple[Element, ...], floors: dict[int, list[str]], storeys: _Storeys
 ) -> tuple[Stage, ...]:
-    """``"<storey>/slab"`` and ``"<storey>/columns"`` for each storey with a floor, in build order."""
+    """``"<storey>/slab"`` and ``"<storey>/columns"`` for each storey with a floor, in build order.
+
+    A building without a floor gets :func:`_column_stages` instead.
+    """
     stages: list[Stage] = []
     for s in sorted(floors):
         below = {e.guid for e in elements if e.storey < s}
@@ -880,17 +970,53 @@ def _stages(
         cols = {e.guid for e in elements if isinstance(e, Column) and e.storey == s}
         if cols:
             stages.append(Stage(f"{storeys.name(s)}/columns", built | cols, tuple(floors[s])))
+    return tuple(stages) if stages else _column_stages(elements, storeys)
+
+
+def _column_stages(elements: tuple[Element, ...], storeys: _Storeys) -> tuple[Stage, ...]:
+    """Columns-only stages of a building without a floor (a frame, or slabs only at the terrain).
+
+    ``"<storey>/columns"`` = every kept element of lower storeys plus the storey's columns (not its
+    beams: the column tops are the landmarks), for each storey where at least four column tops
+    stand exposed above the terrain (:data:`GROUND_TOL`): fewer cannot give a camera a pose.
+    """
+    stages: list[Stage] = []
+    for s in sorted({e.storey for e in elements if isinstance(e, Column)}):
+        built = frozenset(e.guid for e in elements
+                          if e.storey < s or (isinstance(e, Column) and e.storey == s))
+        standing = tuple(e for e in elements if e.guid in built)
+        tops = [p for p in exposed_landmarks("column_tops", standing, (), ()) if p[4][2] > GROUND_TOL]
+        if len(tops) >= _MIN_LANDMARKS:
+            stages.append(Stage(f"{storeys.name(s)}/columns", built, ()))
     return tuple(stages)
 
 
+# Short labels of the rules' reasons, for the one-line refusal (first match wins).
+_REASON_LABELS = (
+    ("ground-bearing", "ground-bearing at the terrain"), ("sloped", "sloped or stepped"),
+    ("finish floor", "finish floors"), ("thinner than", "thinner than a structural floor"),
+    ("aggregate", "aggregates of parts"), ("duplicate", "coincident duplicates"),
+    ("no body", "without body geometry"), ("degenerate", "degenerate"),
+)
+
+
+def _reason_label(why: str) -> str:
+    """A rule's reason as a short label (``"sloped or stepped"``) to count in the refusal."""
+    return next((label for key, label in _REASON_LABELS if key in why), why.split(":")[0])
+
+
 def _no_floor(path: Path, by_kind: dict[str, list[Any]], dropped: list[_Row],
-              rendered: list[tuple[_Raw, str]]) -> IfcImportError:
-    """The error for a file without a flat-topped structural floor, naming what was left out and why."""
+              rendered: list[tuple[_Raw, str]], elements: tuple[Element, ...]) -> IfcImportError:
+    """The error for a file without a stage a camera can use: one line, the reasons counted."""
+    reasons = Counter(_reason_label(why) for _, cls, _, why in dropped if cls.startswith("IfcSlab"))
+    reasons.update(_reason_label(why) for _, why in rendered)
+    slabs = "; ".join(f"{n} {why}" for why, n in reasons.most_common()) or "none imported"
+    columns = sum(isinstance(e, Column) for e in elements)
     return IfcImportError(
-        f"{str(path)!r} has no flat-topped structural floor to build stages on: "
-        f"{len(by_kind['slab'])} IfcSlab, {len(by_kind['column'])} IfcColumn; dropped or not "
-        "landmark-bearing: " + "; ".join(f"{g} {n!r}: {why}" for g, _, n, why in dropped[:8])
-        + "; " + "; ".join(f"{r.guid} {r.name!r}: {why}" for r, why in rendered[:8])
+        f"{str(path)!r} has no stage a camera can use: no flat-topped structural floor above the "
+        f"terrain, and no storey with {_MIN_LANDMARKS} column tops exposed above the terrain "
+        f"({len(by_kind['slab'])} IfcSlab: {slabs}; {len(by_kind['column'])} IfcColumn, {columns} kept); "
+        "ifc_report() is not available for it, set logging to DEBUG for every element"
     )
 
 
@@ -921,6 +1047,7 @@ def _parse(path: Path, transform: NDArray[np.float64]) -> _Parsed:
     f, text = _open(path)
     scale = float(ios.util.unit.calculate_unit_scale(f))
     check_coordinates(path, text, scale)
+    repaired = _unset_star_arguments(f, text)
     products = f.by_type("IfcProduct")
     by_kind = _imported_by_kind(f, products, path)
     storeys = _storeys(f, scale, transform)
@@ -941,10 +1068,11 @@ def _parse(path: Path, transform: NDArray[np.float64]) -> _Parsed:
     dropped = no_body + duplicates + finish + floors_dropped + no_footprint + others_dropped
     elements = _in_order(floor_slabs + shown + others)
     stages = _stages(elements, floors, storeys)
-    if not stages:
-        raise _no_floor(path, by_kind, dropped, rendered)
     report = ImportReport(str(path), tuple(floors_kept + shown_kept + others_kept), tuple(dropped),
-                          _not_imported(products, include))
+                          _not_imported(products, include), repaired)
+    if not stages:
+        log.debug("%s", report.summary())
+        raise _no_floor(path, by_kind, dropped, rendered, elements)
     source = {
         "format": "ifc", "path": str(path), "schema": f.schema,
         "units": {"length_unit_in_m": scale},
@@ -978,7 +1106,8 @@ def ifc_stages(path: str | os.PathLike, *, transform: ArrayLike | None = None) -
 
     Raises:
         FileNotFoundError: if the file does not exist.
-        IfcImportError: if it is not IFC, has no slab or column, or no flat structural floor.
+        IfcImportError: if it is not IFC, has no slab or column, or no stage a camera can use
+            (no flat structural floor above the terrain and no four exposed column tops).
         ImportError: if ifcopenshell is not installed (names the ``ifc`` extra).
     """
     return [st.name for st in _parsed(path, transform).stages]
@@ -1007,7 +1136,8 @@ def load_ifc(
 
     Raises:
         FileNotFoundError: if the file does not exist.
-        IfcImportError: if it is not IFC, has no slab or column, or no flat structural floor.
+        IfcImportError: if it is not IFC, has no slab or column, or no stage a camera can use
+            (no flat structural floor above the terrain and no four exposed column tops).
         ConfigError: for an unknown stage (the message lists the valid ones).
         ValueError: for a transform that is not 4x4 rigid keeping z up.
         ImportError: if ifcopenshell is not installed (names the ``ifc`` extra).

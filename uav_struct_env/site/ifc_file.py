@@ -27,6 +27,7 @@ __all__ = [
     "check_complete",
     "check_size",
     "max_file_bytes",
+    "star_arguments",
 ]
 
 #: Files larger than this are refused before parsing, MB (10^6 bytes); see MAX_FILE_MB_VARIABLE.
@@ -42,6 +43,9 @@ _POINTS = re.compile(rb"#(\d+)\s*=\s*(IFCCARTESIANPOINT(?:LIST[23]D)?|IFCDIRECTI
                      re.IGNORECASE)
 _NUMBER = re.compile(rb"[^\s(),$]+")
 _END = b"END-ISO-10303-21"
+# A ``*`` argument (the derived-value mark), and an entity instance's head.
+_STAR = re.compile(rb"[(,]\s*\*\s*[,)]")
+_INSTANCE = re.compile(rb"#(\d+)\s*=\s*(\w+)\s*\(")
 
 
 def max_file_bytes() -> int:
@@ -104,3 +108,49 @@ def check_coordinates(path: Path, text: bytes, length_unit_m: float) -> None:
                     f"{token.decode('latin-1')!r} (a finite number within {MAX_COORDINATE_M:.0e} m "
                     "was expected); the file would import as a different building"
                 )
+
+
+def _top_level_arguments(body: str) -> list[str]:
+    """The comma-separated arguments of an instance (its text between the outer parentheses)."""
+    args: list[str] = []
+    depth, start, quoted = 0, 0, False
+    for k, c in enumerate(body):
+        if quoted:
+            quoted = c != "'"  # an escaped quote ('') closes and reopens: same result
+        elif c == "'":
+            quoted = True
+        elif c == "(":
+            depth += 1
+        elif c == ")":
+            depth -= 1
+        elif c == "," and depth == 0:
+            args.append(body[start:k].strip())
+            start = k + 1
+    args.append(body[start:].strip())
+    return args
+
+
+def star_arguments(text: bytes) -> list[tuple[int, str, tuple[int, ...]]]:
+    """The instances with a ``*`` argument: ``(entity id, TYPE, positions of the ``*`` arguments)``.
+
+    ``*`` marks an attribute that a subtype derives; some exporters (Renga) also write it for
+    an optional attribute left unset, where ``$`` belongs, and the geometry kernel then fails
+    on the element ("Requested type <string> does not match actual type <derived>"). The
+    importer reads such a ``*`` as unset (:func:`uav_struct_env.site.ifc._unset_star_arguments`,
+    which knows from the schema which positions are derived). One instance per line, as the
+    exporters write them.
+    """
+    found: dict[int, tuple[int, str, tuple[int, ...]]] = {}
+    for m in _STAR.finditer(text):
+        start = text.rfind(b"\n", 0, m.start()) + 1
+        if start in found:
+            continue
+        end = text.find(b";", m.end())
+        head = _INSTANCE.match(text, start)
+        if head is None or end < 0:
+            continue
+        body = text[head.end():end].decode("latin-1").rstrip()
+        args = _top_level_arguments(body[:-1] if body.endswith(")") else body)
+        stars = tuple(k for k, a in enumerate(args) if a == "*")
+        found[start] = (int(head.group(1)), head.group(2).decode().upper(), stars)
+    return [v for v in found.values() if v[2]]
