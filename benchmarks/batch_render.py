@@ -144,10 +144,13 @@ def main(part: str = "all", views: int = 500, steps: int = 400, seed: int = 0) -
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--part", default="all", choices=("all", "agreement", "throughput"))
+    parser = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0], formatter_class=argparse.ArgumentDefaultsHelpFormatter
+    )
+    parser.add_argument("--part", default="all", choices=("all", "agreement", "throughput"),
+                        help="agreement with TinyRenderer, env throughput, or both")
     parser.add_argument("--views", type=int, default=500, help="random views per world")
     parser.add_argument("--steps", type=int, default=400, help="env steps per configuration and renderer")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="seed of the views and sites")
     args = parser.parse_args()
     main(args.part, args.views, args.steps, args.seed)

@@ -104,11 +104,13 @@ def _calibration(folder: Path, info: dict) -> Path:
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n")[0], formatter_class=argparse.ArgumentDefaultsHelpFormatter
+    )
     parser.add_argument("--episodes", type=int, default=10, help="env resets (4 photos each)")
     parser.add_argument("--quality", type=int, default=95, help="JPEG quality")
     parser.add_argument("--seed", type=int, default=0, help="first episode's seed")
-    parser.add_argument("--ifc", default=None, help="another building's IFC (default: the paper site)")
+    parser.add_argument("--ifc", default=None, help="another building's IFC (none: the paper site)")
     parser.add_argument("--stage", default=STAGE, help="the stage localized against")
     args = parser.parse_args()
     main(args.episodes, args.quality, args.seed, args.ifc, args.stage)

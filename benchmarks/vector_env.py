@@ -138,12 +138,15 @@ def _span(values: list[float]) -> str:
 
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--config", default="state")
+    p = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.ArgumentDefaultsHelpFormatter
+    )
+    p.add_argument("--config", default="state", help="training configuration (wrappers.configs)")
     p.add_argument("--steps", type=int, default=4000, help="agent-steps per measurement")
     p.add_argument("--ks", type=int, nargs="+", default=[1, 4, 16], help="vector env sizes K")
-    p.add_argument("--policy", default="hold", choices=("hold", "random"))
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--policy", default="hold", choices=("hold", "random"),
+                   help="actions: hold still or random")
+    p.add_argument("--seed", type=int, default=0, help="first copy's seed (copy k: seed + k)")
     p.add_argument("--site", default="paper", help="'paper', 'random' (one per copy) or a site file")
     p.add_argument("--repeats", type=int, default=2, help="alternating rounds")
     p.add_argument("--sb3", action="store_true",
