@@ -135,7 +135,7 @@ if __name__ == "__main__":
     parser.add_argument("--timeout", type=float, default=600.0, help="seconds allowed per file")
     parser.add_argument("--names", nargs="*", default=None, help="only these corpus names")
     parser.add_argument("--files", default=None,
-                        help="a folder holding <name>.ifc for each file (default: the manifest's local_path)")
+                        help="a folder holding <name>.ifc for each file (none: the manifest's local_path)")
     parser.add_argument("--one", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one:
