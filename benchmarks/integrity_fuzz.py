@@ -120,11 +120,11 @@ def record(studies: list[Path], out: Path = FALSE_DETECTIONS_PATH) -> dict:
             raise ValueError(f"{folder}: detector {config.get('detector')!r}, expected a learned detector")
         w, h = config["image_size"]
         site = Path(str(config["site"])).name
-        sources.append(f"{folder.name}: site {site}, activity {config['activity']}, camera {config['camera']}, "
-                       f"imaging {config['imaging']}, detector {config['detector']}")
+        conditions = ", ".join(f"{k} {config[k]}" for k in ("activity", "camera", "imaging", "detector"))
+        sources.append(f"{folder.name}: site {site}, {conditions}")
         by_view = defaultdict(list)
         with open(folder / "detections.csv") as f:
-            for r in csv.DictReader(f):
+            for r in csv.DictReader(line for line in f if not line.startswith("#")):
                 by_view[(r["method"], r["uav"], r["viewpoint"])].append(r)
         for (method, uav, vp), rows in sorted(by_view.items()):
             if method not in ("slab_corners", "opening_corners", "column_tops"):

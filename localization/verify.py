@@ -20,9 +20,13 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   edges of a slab's thickness, on a corner and its shadow) gives a second copy of the pattern a
   few to 80 px away. The search pairs one copy; the other, left unassigned, is as consistent a
   pose. The unassigned detections that sit at one common offset from the pairs (a vote over
-  the offsets up to :data:`TWIN_RADIUS_PX`) give the twin: the same landmarks paired with those
-  detections, refined from the winner's pose. A twin that passes the fit test, lies at a
-  distinct camera centre (outside the winner's 99.9 % position ellipsoid) and scores within
+  the offsets up to :data:`TWIN_RADIUS_PX`; a winner may hold some copies of each side) give
+  the twins: the same landmarks paired with those detections, refined from the winner's pose;
+  with a few pairs, where a mix of the copies still fits, every subset of the pairs moved to
+  its nearest unassigned detection is a twin too (:func:`twin_hypotheses`). A twin that passes
+  the fit test, lies at a distinct camera centre (outside the winner's 99.9 % position
+  ellipsoid, the ambiguity rule's test; a twin that is the winner's camera turned, at the same
+  centre, leaves the position right) and scores within
   the ambiguity margin of the winner -- or better -- fails as
   :attr:`~localization.failure.FailureCode.DUPLICATED_DETECTIONS`: which copy is the structure
   only the prior could say, and the prior is metres off. Both hypotheses are scored as the
@@ -42,13 +46,14 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import binom, chi2
 
-from localization.associate.ambiguity import AMBIGUITY_MARGIN, DISTINCT_POSITION_SQ
+from localization.associate.ambiguity import AMBIGUITY_MARGIN
 from localization.failure import FailureCode
-from localization.geometry.transforms import camera_center, project
+from localization.geometry.transforms import project
 from localization.pose.batch import refine_many, to_transforms
-from localization.pose.covariance import PriorSigmas, prior_mahalanobis_sq
+from localization.pose.covariance import PriorSigmas, pose_difference, prior_mahalanobis_sq
 
 __all__ = [
+    "DISTINCT_POSITION_SQ",
     "MAX_LOG10_NFA",
     "TWIN_RADIUS_PX",
     "Refusal",
@@ -73,6 +78,12 @@ TWIN_RADIUS_PX = 80.0
 #: twin: four to six pairs leave the fit test two to six degrees of freedom, and a mix of the two
 #: copies still fits a pose; more pairs than this, only a mix by one common offset is tried.
 _ENUMERATE_PAIRS = 6
+
+
+#: chi-square 99.9 % quantile, 3 dof: a twin whose camera centre is farther than this from the
+#: winner's (squared Mahalanobis distance under the winner's position covariance) is a different
+#: pose (:mod:`localization.associate.ambiguity`'s rule).
+DISTINCT_POSITION_SQ = 16.27
 
 
 #: Chi-square quantile of the twin's fit test (the association's own).
@@ -281,19 +292,20 @@ def _score(inputs: VerifyInputs, a: NDArray[np.int64], T: NDArray[np.float64]) -
 
 
 def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
-    """The refusal when a twin fits, lies at a distinct centre and scores about as well, else None."""
+    """The refusal when a twin fits, is a distinct pose and scores about as well, else None."""
     twins = twin_hypotheses(inputs)
     if not twins:
         return None
     n = int(np.count_nonzero(inputs.assignment >= 0))
     limit = chi2.ppf(_FIT_QUANTILE, max(2 * n - 6, 1))
-    centre = camera_center(inputs.cam_from_world)
-    cov = inputs.covariance[:3, :3]
+    cov = inputs.covariance
     finite = bool(np.all(np.isfinite(cov)))
     s_best = None
     for a_twin, T_twin, chi in twins:
-        d = camera_center(T_twin) - centre
-        if not chi <= limit or (finite and float(d @ np.linalg.solve(cov, d)) <= DISTINCT_POSITION_SQ):
+        d = pose_difference(T_twin, inputs.cam_from_world)
+        dc = d[:3]
+        same = finite and float(dc @ np.linalg.lstsq(cov[:3, :3], dc, rcond=None)[0]) <= DISTINCT_POSITION_SQ
+        if not chi <= limit or same:
             continue
         if s_best is None:
             s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
@@ -305,7 +317,8 @@ def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
                 f"duplicated detections: the same {n} landmarks with {moved} of their detections "
                 f"moved to unassigned ones within {TWIN_RADIUS_PX:g} px fit as well (scores "
                 f"{s_best:.1f} and {s_twin:.1f}, margin {AMBIGUITY_MARGIN:.1f}) with a camera "
-                f"centre {float(np.linalg.norm(d)):.2f} m away",
+                f"centre {float(np.linalg.norm(d[:3])):.2f} m and "
+                f"{float(np.degrees(np.linalg.norm(d[3:]))):.2f} deg away",
             )
     return None
 

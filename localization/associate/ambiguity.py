@@ -28,7 +28,7 @@ from localization.associate.hypothesis_kernels import rival_translations
 from localization.geometry.transforms import camera_center
 from localization.pose.covariance import pose_covariance
 
-__all__ = ["AMBIGUITY_MARGIN", "DISTINCT_POSITION_SQ", "ambiguity", "translation_hypotheses"]
+__all__ = ["AMBIGUITY_MARGIN", "ambiguity", "translation_hypotheses"]
 
 
 #: Score margin (negative log-likelihood, chi-square units) within which a conflicting rival
@@ -38,7 +38,7 @@ AMBIGUITY_MARGIN = 2.0 * float(np.log(100.0))
 
 #: chi-square 99.9 % quantile, 3 dof: a rival camera centre beyond this (squared Mahalanobis
 #: distance under the winner's covariance) is a different pose, not the same one re-weighted.
-DISTINCT_POSITION_SQ = 16.27
+_DISTINCT_POSITION_SQ = 16.27
 
 
 def translation_hypotheses(
@@ -135,7 +135,7 @@ def ambiguity(
             cov = pose_covariance(K, best_T, landmarks_xyz[best_a[pairs]], pixel_sigma)[:3, :3]
         d = camera_center(T) - centre
         if np.all(np.isfinite(cov)):
-            distinct = float(d @ np.linalg.solve(cov, d)) > DISTINCT_POSITION_SQ
+            distinct = float(d @ np.linalg.solve(cov, d)) > _DISTINCT_POSITION_SQ
         else:
             distinct = True
         if distinct:
