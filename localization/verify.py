@@ -16,7 +16,7 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   :attr:`~localization.failure.FailureCode.UNSUPPORTED`: dense clutter matches any pose's
   predictions, and only a match far above what the clutter's density gives is evidence. Clean
   detections (``D`` about the landmarks in view) make ``p`` tiny and the test silent.
-* *A twin hypothesis* (:func:`twin_hypothesis`). A detector that fires twice per corner (on both
+* *A twin hypothesis* (:func:`twin_hypotheses`). A detector that fires twice per corner (on both
   edges of a slab's thickness, on a corner and its shadow) gives a second copy of the pattern a
   few to 80 px away. The search pairs one copy; the other, left unassigned, is as consistent a
   pose. The unassigned detections that sit at one common offset from the pairs (a vote over
