@@ -43,8 +43,9 @@ class FailureCode(str, Enum):
     #: A failure without a code (e.g. from a third-party localizer).
     UNKNOWN = "unknown"
     # Added later, after UNKNOWN: a code's position is its number in the wrappers' observations.
-    #: The pose's support is what the detections' density gives by chance: it matches too few of
-    #: the landmarks it projects into the image (:mod:`localization.verify`, dense clutter).
+    #: The pose's support is what chance gives: it matches too few of the landmarks it projects
+    #: into the image for the detections' density (dense clutter), or it rests on the minimum
+    #: number of pairs and fits them more loosely than 95 % of true poses (:mod:`localization.verify`).
     UNSUPPORTED = "unsupported"
     #: Unassigned detections at one offset from the pairs fit the same landmarks about as well
     #: with a distinct camera centre: a detector's ghost copy that only the prior could tell from

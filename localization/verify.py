@@ -16,6 +16,12 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   :attr:`~localization.failure.FailureCode.UNSUPPORTED`: dense clutter matches any pose's
   predictions, and only a match far above what the clutter's density gives is evidence. Clean
   detections (``D`` about the landmarks in view) make ``p`` tiny and the test silent.
+* *A minimal fit that fits loosely* (:func:`minimal_fit_chi2_limit`). A pose on as many pairs
+  as the minimum (four) leaves its fit test two degrees of freedom, and any four detections
+  near the prior fit some pose to a few pixels: among the wrong detections of a detector that
+  finds few corners, the search finds such a four and its residuals pass the association's
+  one-in-a-million test. A minimal fit must fit as well as 95 % of true ones do (the
+  chi-square 95 % quantile at ``pixel_sigma``); else it fails as ``UNSUPPORTED``.
 * *A twin hypothesis* (:func:`twin_hypotheses`). A detector that fires twice per corner (on both
   edges of a slab's thickness, on a corner and its shadow) gives a second copy of the pattern a
   few to 80 px away. The search pairs one copy; the other, left unassigned, is as consistent a
@@ -55,10 +61,12 @@ from localization.pose.covariance import PriorSigmas, pose_difference, prior_mah
 __all__ = [
     "DISTINCT_POSITION_SQ",
     "MAX_LOG10_NFA",
+    "MINIMAL_FIT_QUANTILE",
     "TWIN_RADIUS_PX",
     "Refusal",
     "VerifyInputs",
     "chance_support",
+    "minimal_fit_chi2_limit",
     "predicted_in_image",
     "twin_hypotheses",
     "verify_pose",
@@ -84,6 +92,10 @@ _ENUMERATE_PAIRS = 6
 #: winner's (squared Mahalanobis distance under the winner's position covariance) is a different
 #: pose (:mod:`localization.associate.ambiguity`'s rule).
 DISTINCT_POSITION_SQ = 16.27
+
+
+#: Chi-square quantile a minimal fit's residuals must stay within.
+MINIMAL_FIT_QUANTILE = 0.95
 
 
 #: Chi-square quantile of the twin's fit test (the association's own).
@@ -164,6 +176,34 @@ def chance_support(
     if k <= 2:
         return tests
     return tests + float(binom.logsf(k - 3, n - 2, p)) / math.log(10.0)
+
+
+def minimal_fit_chi2_limit(n_pairs: int, need: int) -> float:
+    """The chi-square (residuals over ``pixel_sigma^2``) a pose on ``n_pairs`` may reach.
+
+    ``MINIMAL_FIT_QUANTILE`` of ``2 n - 6`` degrees of freedom for a minimal fit
+    (``n_pairs <= need``), inf for more pairs (the association's own test holds them).
+    """
+    if n_pairs > need:
+        return float("inf")
+    return float(chi2.ppf(MINIMAL_FIT_QUANTILE, max(2 * n_pairs - 6, 1)))
+
+
+def _minimal_fit_refusal(inputs: VerifyInputs, k: int) -> Refusal | None:
+    limit = minimal_fit_chi2_limit(k, inputs.need)
+    if not np.isfinite(limit):
+        return None
+    m = inputs.assignment >= 0
+    uv, _ = project(inputs.K, inputs.cam_from_world, inputs.landmarks_xyz[inputs.assignment[m]])
+    chi = float(np.sum((uv - inputs.detections_uv[m]) ** 2)) / inputs.pixel_sigma**2
+    if chi <= limit:
+        return None
+    return Refusal(
+        FailureCode.UNSUPPORTED,
+        f"unsupported pose: a minimal fit ({k} pairs) with residual chi-square {chi:.1f} above the "
+        f"{MINIMAL_FIT_QUANTILE:g} quantile {limit:.1f} (pixel_sigma={inputs.pixel_sigma:g} px): "
+        "some four wrong detections fit as loosely by chance",
+    )
 
 
 def _offset_votes(
@@ -338,4 +378,4 @@ def verify_pose(inputs: VerifyInputs) -> Refusal | None:
             f"which {n_det} detections over the image match by chance among the poses a search "
             f"tries (false alarms 10^{log10_nfa:.1f} > 10^{MAX_LOG10_NFA:g})",
         )
-    return _twin_refusal(inputs)
+    return _minimal_fit_refusal(inputs, k) or _twin_refusal(inputs)
