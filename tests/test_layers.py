@@ -21,6 +21,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("localization.geometry",),
     ("localization.detect", "localization.pose"),
     ("localization.associate",),
+    ("localization.verify",),
     ("localization.pipeline", "localization.metrics", "localization.temporal", "localization.testing"),
     ("localization.aruco",),
     ("localization",),
