@@ -21,7 +21,6 @@ LAYERS: list[tuple[str, ...]] = [
     ("localization.geometry",),
     ("localization.detect", "localization.pose"),
     ("localization.associate",),
-    ("localization.verify",),
     ("localization.pipeline", "localization.verify", "localization.metrics", "localization.temporal",
      "localization.testing"),
     ("localization.aruco",),
