@@ -42,3 +42,12 @@ class FailureCode(str, Enum):
     NO_MARKERS = "no_markers"
     #: A failure without a code (e.g. from a third-party localizer).
     UNKNOWN = "unknown"
+    # Added later, after UNKNOWN: a code's position is its number in the wrappers' observations.
+    #: The pose's support is what chance gives: it matches too few of the landmarks it projects
+    #: into the image for the detections' density (dense clutter), or it rests on the minimum
+    #: number of pairs and fits them more loosely than 95 % of true poses (:mod:`localization.verify`).
+    UNSUPPORTED = "unsupported"
+    #: Unassigned detections at one offset from the pairs fit the same landmarks about as well
+    #: with a distinct camera centre: a detector's ghost copy that only the prior could tell from
+    #: the structure (:mod:`localization.verify`).
+    DUPLICATED_DETECTIONS = "duplicated_detections"

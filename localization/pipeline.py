@@ -33,6 +33,7 @@ from localization.geometry.transforms import (
 from localization.pose.covariance import PriorSigmas, pose_covariance, prior_mahalanobis_sq
 from localization.pose.finish import FinishInputs, finish_pose
 from localization.pose.pnp import is_coplanar, solve_pnp
+from localization.verify import VerifyInputs, verify_pose
 
 __all__ = ["ASSOCIATION_METHODS", "Localizer", "PoseEstimate", "image_size_from_K"]
 
@@ -57,7 +58,7 @@ class PoseEstimate:
         failure_code: why it failed, for grouping: a :class:`~localization.failure.FailureCode`
             (``UNKNOWN`` when a failed estimate was built without one), None on success.
         timings: seconds per stage (``validate``, ``associate``, ``pnp``, ``covariance``,
-            ``total``). ``associate`` includes the PnP runs made inside robust association; in
+            ``verify``, ``total``). ``associate`` includes the PnP runs made inside robust association; in
             robust mode ``pnp`` includes the covariance (one compiled call) and ``covariance`` is 0.
         prior_mahalanobis_sq: squared Mahalanobis distance of the estimate from the prior.
         n_hypotheses: association hypotheses evaluated.
@@ -194,6 +195,11 @@ class Localizer:
             probability that each detection is a landmark (in [0, 1], as the learned detector's
             refiner gives them) and let their log-odds enter the hypotheses' scoring
             (:mod:`localization.associate`, step 3). False ignores them.
+        verify: robust mode: hold the finished pose to what it predicts
+            (:mod:`localization.verify`): a pose whose support the detections' density gives by
+            chance, or that a ghost copy of the detections fits as well, fails with its reason.
+            False reports it unverified (the ``paper`` association never verifies: it is the
+            paper's method).
 
     Raises:
         TypeError, ValueError: on bad arguments, naming the value and what was expected.
@@ -219,6 +225,7 @@ class Localizer:
         max_prior_mahalanobis_sq: float | None = 22.46,
         distortion: ArrayLike | None = None,
         use_scores: bool = True,
+        verify: bool = True,
     ) -> None:
         X = as_points("landmarks_xyz", landmarks_xyz, 3)
         if X.shape[0] == 0:
@@ -265,6 +272,9 @@ class Localizer:
         if not isinstance(use_scores, (bool, np.bool_)):
             raise TypeError(f"use_scores must be True or False, got {use_scores!r}")
         self.use_scores = bool(use_scores)
+        if not isinstance(verify, (bool, np.bool_)):
+            raise TypeError(f"verify must be True or False, got {verify!r}")
+        self.verify = bool(verify)
 
     @property
     def distortion(self) -> NDArray[np.float64]:
@@ -413,6 +423,8 @@ class Localizer:
         if isinstance(pose, _Failure):
             return self._failed(frame, pose, timings, t0)
         failure = self._check_pose(pose, assoc.n_hypotheses)
+        if failure is None:
+            failure = self._verify(frame, pose, assoc.n_hypotheses, timings)
         if failure is not None:
             return self._failed(frame, failure, timings, t0)
         timings["total"] = time.perf_counter() - t0
@@ -590,12 +602,44 @@ class Localizer:
                 )
         return None
 
+    def _verify(
+        self, frame: _Frame, pose: _Pose, n_hypotheses: int, timings: dict[str, float]
+    ) -> _Failure | None:
+        """Why the detections do not confirm this pose (:mod:`localization.verify`), else None.
+
+        Robust mode with ``verify`` only; records the ``verify`` timing.
+        """
+        timings["verify"] = 0.0
+        if self.association != "robust" or not self.verify:
+            return None
+        t = time.perf_counter()
+        refusal = verify_pose(
+            VerifyInputs(
+                detections_uv=frame.detections_uv,
+                landmarks_xyz=self.landmarks_xyz,
+                K=self.K,
+                image_size=self.image_size,
+                cam_from_world=pose.cam_from_world,
+                assignment=pose.assignment,
+                covariance=pose.covariance,
+                prior_cam_from_world=frame.prior,
+                prior_sigmas=frame.prior_sigmas,
+                pixel_sigma=self.pixel_sigma,
+                gate_px=self.gate_px if self.gate_px is not None else max(5.0 * self.pixel_sigma, 3.0),
+                need=max(self.min_correspondences, 3),
+            )
+        )
+        timings["verify"] = time.perf_counter() - t
+        if refusal is None:
+            return None
+        return _Failure(refusal.code, refusal.reason, pose.assignment, n_hypotheses)
+
     @staticmethod
     def _failed(
         frame: _Frame, failure: _Failure, timings: dict[str, float], t0: float
     ) -> PoseEstimate:
         """The failed estimate: the prior as the pose, the stages not reached timed at 0."""
-        for stage in ("associate", "pnp", "covariance"):
+        for stage in ("associate", "pnp", "covariance", "verify"):
             timings.setdefault(stage, 0.0)
         timings["total"] = time.perf_counter() - t0
         n = frame.detections_uv.shape[0]

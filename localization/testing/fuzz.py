@@ -16,11 +16,27 @@ the robust localizer is sensitive to:
 
 The truth comes with the case (``cam_from_world``, ``true_index``), so a test can judge any
 estimate; nothing here is needed to localize.
+
+:func:`corrupt_detections` then adds what a real detector adds to those detections
+(:data:`CORRUPTIONS`):
+
+* ``ghost_shift``: a ghost copy of every detection, all shifted by one offset of 5-80 px (a
+  detector that fires twice per corner, e.g. on both edges of a slab's thickness);
+* ``ghost_each``: a ghost copy of every detection, each shifted by its own 5-80 px;
+* ``clutter_500``, ``clutter_2000``: that many uniform points over the image;
+* ``detector``: the false detections of the learned detector on real renders, replayed
+  (:class:`FalseDetections`): those it made within 80 px of a landmark keep their offset from
+  it and are attached to a random detection of the case, the others keep their place in the
+  image (as a fraction of its width and height).
+
+Ghosts closer than 5 px lie inside the localizer's inlier gate at 1 px noise and act as noise.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,7 +44,16 @@ from numpy.typing import NDArray
 from localization.geometry.transforms import look_at, project
 from localization.testing.synthetic import perturb_attitude
 
-__all__ = ["FOCALS", "FuzzCase", "LAYOUTS", "draw_case"]
+__all__ = [
+    "CORRUPTIONS",
+    "FALSE_DETECTIONS_PATH",
+    "FOCALS",
+    "FalseDetections",
+    "FuzzCase",
+    "LAYOUTS",
+    "corrupt_detections",
+    "draw_case",
+]
 
 
 LAYOUTS = ("regular", "irregular", "scattered")
@@ -45,6 +70,18 @@ PRIOR_POSITION_M = 3.0
 
 
 PRIOR_ATTITUDE_DEG = (2.0, 2.0, 5.0)
+
+
+#: The detector's failure modes :func:`corrupt_detections` adds (module docstring).
+CORRUPTIONS = ("clean", "ghost_shift", "ghost_each", "clutter_500", "clutter_2000", "detector")
+
+
+#: Ghost offsets, px: a ghost is this far from its detection.
+GHOST_OFFSET_PX = (5.0, 80.0)
+
+
+#: The recorded false detections of the learned detector (:class:`FalseDetections`).
+FALSE_DETECTIONS_PATH = Path(__file__).with_name("false_detections.json")
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,3 +224,95 @@ def draw_case(
         prior, kind = _prior(rng, T)
         labels = {"layout": lay, "coplanar": cop, "focal": foc, "centred": cen, "prior": kind}
         return FuzzCase(X, K, size, T, prior, det, idx.astype(np.int64), pixel_sigma, labels)
+
+
+@dataclass(frozen=True, eq=False)
+class FalseDetections:
+    """False detections of a real detector, per view, as :func:`corrupt_detections` replays them.
+
+    Attributes:
+        views: one dict per recorded view: ``near`` (K, 2) offsets, px, of the false detections
+            within 80 px of a landmark from that landmark's projection (``[r, NaN]`` when only
+            the distance ``r`` is known: the replay draws the direction), ``far`` (F, 2) the
+            others' places as fractions of the image width and height, ``source`` where they
+            were recorded.
+        sources: the studies they were recorded from (site, conditions, detector).
+    """
+
+    views: tuple[dict, ...]
+    sources: tuple[str, ...]
+
+    @classmethod
+    def load(cls, path: str | Path = FALSE_DETECTIONS_PATH) -> FalseDetections:
+        """The library written by ``benchmarks/integrity_fuzz.py record``.
+
+        Raises:
+            ValueError: if the file holds no view.
+        """
+        data = json.loads(Path(path).read_text())
+        views = tuple(
+            {
+                "near": np.asarray(v["near"], dtype=float).reshape(-1, 2),
+                "far": np.asarray(v["far"], dtype=float).reshape(-1, 2),
+                "source": v["source"],
+            }
+            for v in data["views"]
+        )
+        if not views:
+            raise ValueError(f"{path} holds no recorded view, expected at least one")
+        return cls(views, tuple(data["sources"]))
+
+
+def _ghost_offsets(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
+    r = rng.uniform(*GHOST_OFFSET_PX, n)
+    a = rng.uniform(0.0, 2.0 * np.pi, n)
+    return np.column_stack([r * np.cos(a), r * np.sin(a)])
+
+
+def _replayed(
+    case: FuzzCase, view: dict, rng: np.random.Generator
+) -> NDArray[np.float64]:
+    """One recorded view's false detections placed in ``case``'s image (module docstring)."""
+    det = case.detections_uv
+    near = view["near"].copy()
+    unknown = np.isnan(near[:, 1])
+    a = rng.uniform(0.0, 2.0 * np.pi, int(unknown.sum()))
+    r = near[unknown, 0]
+    near[unknown] = np.column_stack([r * np.cos(a), r * np.sin(a)])
+    near = det[rng.integers(len(det), size=len(near))] + near
+    far = view["far"] * np.asarray(case.image_size, dtype=float) - 0.5
+    return np.vstack([near, far])
+
+
+def corrupt_detections(
+    case: FuzzCase,
+    mode: str,
+    rng: np.random.Generator,
+    false_detections: FalseDetections | None = None,
+) -> NDArray[np.float64]:
+    """The case's detections with ``mode``'s corruption added (module docstring), in random order.
+
+    Args:
+        case: the problem.
+        mode: one of :data:`CORRUPTIONS`.
+        rng: the corruption's randomness.
+        false_detections: the ``detector`` mode's library; default :meth:`FalseDetections.load`.
+
+    Raises:
+        ValueError: on an unknown ``mode``.
+    """
+    if mode not in CORRUPTIONS:
+        raise ValueError(f"mode must be one of {CORRUPTIONS}, got {mode!r}")
+    det = case.detections_uv
+    w, h = case.image_size
+    if mode == "ghost_shift":
+        det = np.vstack([det, det + _ghost_offsets(rng, 1)])
+    elif mode == "ghost_each":
+        det = np.vstack([det, det + _ghost_offsets(rng, len(det))])
+    elif mode.startswith("clutter_"):
+        n = int(mode.split("_")[1])
+        det = np.vstack([det, rng.uniform([-0.5, -0.5], [w - 0.5, h - 0.5], (n, 2))])
+    elif mode == "detector":
+        library = false_detections or FalseDetections.load()
+        det = np.vstack([det, _replayed(case, library.views[rng.integers(len(library.views))], rng)])
+    return det[rng.permutation(len(det))]

@@ -65,7 +65,7 @@ def test_every_outcome_times_every_stage(scene, mode):
     # those it did not reach at 0
     X, T, uv = scene
     loc = Localizer(X, PAPER_K, association=mode)
-    stages = ["validate", "associate", "pnp", "covariance", "total"]
+    stages = ["validate", "associate", "pnp", "covariance", "verify", "total"]
     away = look_at(camera_center(T), 2 * camera_center(T) - np.array([4, 5.5, 3.4]))
     for det, prior, success in [(uv, paper_prior(T, 3), True), (uv[:3], T, False), (uv, away, False)]:
         est = loc.localize(det, prior)

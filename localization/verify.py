@@ -1,0 +1,381 @@
+"""Stage 4, verification: a finished pose checked against what it predicts the image shows.
+
+A pose makes predictions: the landmarks it projects inside the image must be there, each within
+the inlier gate of a detection. :func:`verify_pose` holds a finished pose
+(:mod:`localization.pose.finish`) to them before :meth:`localization.Localizer.localize` reports
+it, and turns it into a failure with a reason when the detections cannot confirm it:
+
+* *Support beyond chance* (:func:`chance_support`). With ``D`` detections over an image of area
+  ``A``, a landmark's projection has a detection within the gate ``g`` by chance with
+  probability ``p = 1 - exp(-D pi g^2 / A)``. A pose that matches ``k`` of the ``n`` landmarks
+  it predicts is a coincidence when such a match is expected among the poses a search could
+  have tried: the two-point hypotheses (:mod:`localization.associate.upright`) number about
+  ``n (n - 1) D (D - 1)``, and each explains its two anchors by construction, so the number of
+  false alarms is ``NFA = n (n - 1) D (D - 1) P(Binomial(n - 2, p) >= k - 2)`` (an a-contrario
+  test, Desolneux, Moisan and Morel 2008). ``NFA > 1`` fails as
+  :attr:`~localization.failure.FailureCode.UNSUPPORTED`: dense clutter matches any pose's
+  predictions, and only a match far above what the clutter's density gives is evidence. Clean
+  detections (``D`` about the landmarks in view) make ``p`` tiny and the test silent.
+* *A minimal fit that fits loosely* (:func:`minimal_fit_chi2_limit`). A pose on as many pairs
+  as the minimum (four) leaves its fit test two degrees of freedom, and any four detections
+  near the prior fit some pose to a few pixels: among the wrong detections of a detector that
+  finds few corners, the search finds such a four and its residuals pass the association's
+  one-in-a-million test. A minimal fit must fit as well as 95 % of true ones do (the
+  chi-square 95 % quantile at ``pixel_sigma``); else it fails as ``UNSUPPORTED``.
+* *A twin hypothesis* (:func:`twin_hypotheses`). A detector that fires twice per corner (on both
+  edges of a slab's thickness, on a corner and its shadow) gives a second copy of the pattern a
+  few to 80 px away. The search pairs one copy; the other, left unassigned, is as consistent a
+  pose. The unassigned detections that sit at one common offset from the pairs (a vote over
+  the offsets up to :data:`TWIN_RADIUS_PX`; a winner may hold some copies of each side) give
+  the twins: the same landmarks paired with those detections, refined from the winner's pose;
+  with a few pairs, where a mix of the copies still fits, every subset of the pairs moved to
+  its nearest unassigned detection is a twin too (:func:`twin_hypotheses`). A twin that passes
+  the fit test, lies at a distinct camera centre (outside the winner's 99.9 % position
+  ellipsoid, the ambiguity rule's test; a twin that is the winner's camera turned, at the same
+  centre, leaves the position right) and scores within
+  the ambiguity margin of the winner -- or better -- fails as
+  :attr:`~localization.failure.FailureCode.DUPLICATED_DETECTIONS`: which copy is the structure
+  only the prior could say, and the prior is metres off. Both hypotheses are scored as the
+  association scores them: squared residuals, a clutter cost per unassigned detection, a miss
+  cost per predicted landmark left unmatched, the prior's Mahalanobis distance.
+
+:class:`VerifyInputs` carries the frame and the pose; :func:`verify_pose` returns None for a
+confirmed pose, else a :class:`Refusal`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import binom, chi2
+
+from localization.associate.ambiguity import AMBIGUITY_MARGIN
+from localization.failure import FailureCode
+from localization.geometry.transforms import project
+from localization.pose.batch import refine_many, to_transforms
+from localization.pose.covariance import PriorSigmas, pose_difference, prior_mahalanobis_sq
+
+__all__ = [
+    "DISTINCT_POSITION_SQ",
+    "MAX_LOG10_NFA",
+    "MINIMAL_FIT_QUANTILE",
+    "TWIN_RADIUS_PX",
+    "Refusal",
+    "VerifyInputs",
+    "chance_support",
+    "minimal_fit_chi2_limit",
+    "predicted_in_image",
+    "twin_hypotheses",
+    "verify_pose",
+]
+
+
+#: A pose whose support has more false alarms than this (log10 NFA) is refused: 0 means one
+#: coincidence expected among the poses a search could try.
+MAX_LOG10_NFA = 0.0
+
+
+#: The farthest a ghost copy of a detection lies from it, px.
+TWIN_RADIUS_PX = 80.0
+
+
+#: Up to this many pairs, every subset of them moved to their nearest unassigned detection is a
+#: twin: four to six pairs leave the fit test two to six degrees of freedom, and a mix of the two
+#: copies still fits a pose; more pairs than this, only a mix by one common offset is tried.
+_ENUMERATE_PAIRS = 6
+
+
+#: chi-square 99.9 % quantile, 3 dof: a twin whose camera centre is farther than this from the
+#: winner's (squared Mahalanobis distance under the winner's position covariance) is a different
+#: pose (:mod:`localization.associate.ambiguity`'s rule).
+DISTINCT_POSITION_SQ = 16.27
+
+
+#: Chi-square quantile a minimal fit's residuals must stay within.
+MINIMAL_FIT_QUANTILE = 0.95
+
+
+#: Chi-square quantile of the twin's fit test (the association's own).
+_FIT_QUANTILE = 1.0 - 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class VerifyInputs:
+    """A finished pose and the frame it was found in.
+
+    Attributes:
+        detections_uv: (N, 2) the detections, pinhole pixels (NaN rows ignored).
+        landmarks_xyz: (M, 3) the model landmarks, project frame, metres.
+        K: (3, 3) intrinsics.
+        image_size: (W, H) px.
+        cam_from_world: (4, 4) the pose to verify.
+        assignment: (N,) its landmark per detection, -1 for none.
+        covariance: (6, 6) its covariance in ``(C [m], dtheta [rad])``.
+        prior_cam_from_world: (4, 4) the frame's prior.
+        prior_sigmas: the prior's uncertainty.
+        pixel_sigma: detector noise, px.
+        gate_px: the inlier gate, px.
+        need: the fewest pairs a pose may rest on.
+        miss_cost: cost of a predicted landmark left unmatched (the association's).
+    """
+
+    detections_uv: NDArray[np.float64]
+    landmarks_xyz: NDArray[np.float64]
+    K: NDArray[np.float64]
+    image_size: tuple[int, int]
+    cam_from_world: NDArray[np.float64]
+    assignment: NDArray[np.int64]
+    covariance: NDArray[np.float64]
+    prior_cam_from_world: NDArray[np.float64]
+    prior_sigmas: PriorSigmas
+    pixel_sigma: float
+    gate_px: float
+    need: int
+    miss_cost: float = 4.0
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """Why a finished pose is not reported: the code for grouping, the reason for people."""
+
+    code: FailureCode
+    reason: str
+
+
+def predicted_in_image(
+    K: NDArray[np.float64], cam_from_world: NDArray[np.float64], landmarks_xyz: NDArray[np.float64],
+    image_size: tuple[int, int],
+) -> NDArray[np.bool_]:
+    """(M,) the landmarks in front of the camera whose projection falls inside the image."""
+    uv, depth = project(K, cam_from_world, landmarks_xyz)
+    w, h = image_size
+    with np.errstate(invalid="ignore"):
+        return (
+            (depth > 0)
+            & (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5)
+            & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5)
+        )
+
+
+def chance_support(
+    n_predicted: int, n_matched: int, n_detections: int, image_size: tuple[int, int], gate_px: float
+) -> float:
+    """log10 of the number of false alarms of a pose matching ``n_matched`` of ``n_predicted``.
+
+    The module docstring's ``NFA``; ``n_detections`` the finite detections spread over the
+    image, ``gate_px`` the distance within which a detection matches a projection.
+    """
+    w, h = image_size
+    density = n_detections / float(w * h)
+    p = -math.expm1(-density * math.pi * gate_px**2)
+    n, k = max(n_predicted, n_matched), n_matched
+    tests = math.log10(max(n * (n - 1), 1)) + math.log10(max(n_detections * (n_detections - 1), 1))
+    if k <= 2:
+        return tests
+    return tests + float(binom.logsf(k - 3, n - 2, p)) / math.log(10.0)
+
+
+def minimal_fit_chi2_limit(n_pairs: int, need: int) -> float:
+    """The chi-square (residuals over ``pixel_sigma^2``) a pose on ``n_pairs`` may reach.
+
+    ``MINIMAL_FIT_QUANTILE`` of ``2 n - 6`` degrees of freedom for a minimal fit
+    (``n_pairs <= need``), inf for more pairs (the association's own test holds them).
+    """
+    if n_pairs > need:
+        return float("inf")
+    return float(chi2.ppf(MINIMAL_FIT_QUANTILE, max(2 * n_pairs - 6, 1)))
+
+
+def _minimal_fit_refusal(inputs: VerifyInputs, k: int) -> Refusal | None:
+    limit = minimal_fit_chi2_limit(k, inputs.need)
+    if not np.isfinite(limit):
+        return None
+    m = inputs.assignment >= 0
+    uv, _ = project(inputs.K, inputs.cam_from_world, inputs.landmarks_xyz[inputs.assignment[m]])
+    chi = float(np.sum((uv - inputs.detections_uv[m]) ** 2)) / inputs.pixel_sigma**2
+    if chi <= limit:
+        return None
+    return Refusal(
+        FailureCode.UNSUPPORTED,
+        f"unsupported pose: a minimal fit ({k} pairs) with residual chi-square {chi:.1f} above the "
+        f"{MINIMAL_FIT_QUANTILE:g} quantile {limit:.1f} (pixel_sigma={inputs.pixel_sigma:g} px): "
+        "some four wrong detections fit as loosely by chance",
+    )
+
+
+def _offset_votes(
+    pair_uv: NDArray[np.float64], free_uv: NDArray[np.float64], tol: float, radius: float
+) -> NDArray[np.float64]:
+    """Candidate common offsets from the pairs to the free detections, most pairs agreeing first.
+
+    The offsets between ``tol`` and ``radius`` long are binned in ``tol`` cells; the three cells
+    whose 3 x 3 neighbourhoods hold the most distinct pairs each give a candidate: the mean of
+    the offsets within ``tol`` of the cell's first, with the number of distinct pairs that have
+    an offset within ``tol`` of it. Returns (C, 3): offset (2), agreeing pairs.
+    """
+    off = free_uv[None, :, :] - pair_uv[:, None, :]
+    d = np.hypot(off[..., 0], off[..., 1])
+    pi, fi = np.nonzero((d <= radius) & (d > tol))
+    if pi.size == 0:
+        return np.zeros((0, 3))
+    vec = off[pi, fi]
+    span = int(2 * radius / tol) + 4  # cells per axis, with room for the neighbourhood
+    cell = np.floor(vec / tol).astype(np.int64) + span // 2
+    key = cell[:, 0] * span + cell[:, 1]
+    cells, per_cell = np.unique(np.unique(key * len(pair_uv) + pi) // len(pair_uv), return_counts=True)
+    votes = np.zeros(cells.size, dtype=np.int64)
+    for shift in (di * span + dj for di in (-1, 0, 1) for dj in (-1, 0, 1)):
+        at = np.clip(np.searchsorted(cells, cells + shift), 0, cells.size - 1)
+        votes += np.where(cells[at] == cells + shift, per_cell[at], 0)
+    out = []
+    for c in cells[np.argsort(-votes, kind="stable")[:3]]:
+        first = vec[np.argmax(key == c)]
+        centre = vec[np.hypot(*(vec - first).T) <= tol].mean(axis=0)
+        agree = np.hypot(*(vec - centre).T) <= tol
+        out.append([*centre, np.unique(pi[agree]).size])
+    out.sort(key=lambda r: -r[2])
+    return np.array(out)
+
+
+def _swap_sets(
+    pair_uv: NDArray[np.float64], free_uv: NDArray[np.float64], tol: float
+) -> tuple[NDArray[np.int64], list[NDArray[np.bool_]]]:
+    """Each pair's partner among the free detections, and the sets of pairs to swap to it.
+
+    Returns ``(partner (P,), swaps)``: ``partner[p]`` the free detection (column of
+    ``free_uv``) pair ``p`` would move to, -1 for none; each swap a (P,) mask of pairs that
+    move together. A common offset ``o`` (:func:`_offset_votes`) gives the pairs with a free
+    detection at ``+o`` and those at ``-o`` (a winner may hold some copies of each), each set
+    alone and both. With at most :data:`_ENUMERATE_PAIRS` pairs (where a mix of copies still
+    fits a pose) every subset of the pairs whose nearest free detection is within
+    :data:`TWIN_RADIUS_PX` moves to it.
+    """
+    n = len(pair_uv)
+    d = np.hypot(*(free_uv[None, :, :] - pair_uv[:, None, :]).transpose(2, 0, 1))
+    partner = np.where(d.min(axis=1) <= TWIN_RADIUS_PX, d.argmin(axis=1), -1)
+    swaps: list[tuple[NDArray[np.bool_], NDArray[np.int64]]] = []
+    for ox, oy, _ in _offset_votes(pair_uv, free_uv, tol, TWIN_RADIUS_PX)[:2]:
+        sides = []
+        for sign in (1.0, -1.0):
+            ds = np.hypot(*(free_uv[None, :, :] - (pair_uv + sign * np.array([ox, oy]))[:, None, :])
+                          .transpose(2, 0, 1))
+            sides.append((ds.min(axis=1) <= tol, ds.argmin(axis=1)))
+        (pa, fa), (pb, fb) = sides
+        to = np.where(pa, fa, np.where(pb, fb, -1))
+        for move in (pa, pb & ~pa, pa | pb):
+            if move.any():
+                swaps.append((move, to))
+    has = np.flatnonzero(partner >= 0)
+    if n <= _ENUMERATE_PAIRS and has.size:
+        for bits in range(1, 2 ** has.size):
+            move = np.zeros(n, dtype=bool)
+            move[has[[(bits >> i) & 1 == 1 for i in range(has.size)]]] = True
+            swaps.append((move, partner))
+    return partner, swaps
+
+
+def twin_hypotheses(inputs: VerifyInputs) -> list[tuple[NDArray[np.int64], NDArray[np.float64], float]]:
+    """The winner's landmarks moved to other detections (module docstring), refined at once.
+
+    Returns ``[(assignment (N,), cam_from_world (4, 4), chi-square), ...]``: each a set of
+    pairs moved to their partners (:func:`_swap_sets`), one-to-one, refined from the winner's
+    pose (Levenberg-Marquardt, one compiled batch).
+    """
+    det, a = inputs.detections_uv, inputs.assignment
+    pairs = np.flatnonzero(a >= 0)
+    free = np.flatnonzero((a < 0) & np.isfinite(det).all(axis=1))
+    if free.size == 0 or pairs.size == 0:
+        return []
+    _, swaps = _swap_sets(det[pairs], det[free], 2.0 * inputs.gate_px)
+    alts = []
+    for move, to in swaps:
+        rows = pairs.copy()
+        rows[move] = free[to[move]]
+        if np.unique(rows).size == rows.size:  # one-to-one
+            alts.append(rows)
+    if not alts:
+        return []
+    rows = np.stack(alts)
+    h = rows.shape[0]
+    X = np.broadcast_to(inputs.landmarks_xyz[a[pairs]], (h, pairs.size, 3)).copy()
+    T0 = inputs.cam_from_world
+    R, t, cost = refine_many(
+        inputs.K, np.broadcast_to(T0[:3, :3], (h, 3, 3)).copy(), np.broadcast_to(T0[:3, 3], (h, 3)).copy(),
+        X, det[rows], np.ones((h, pairs.size), dtype=bool), iterations=100, tol=1e-8,
+    )
+    out = []
+    for k, T in enumerate(to_transforms(R, t)):
+        b = np.full(det.shape[0], -1, dtype=np.int64)
+        b[rows[k]] = a[pairs]
+        out.append((b, T, float(cost[k]) / inputs.pixel_sigma**2))
+    return out
+
+
+def _score(inputs: VerifyInputs, a: NDArray[np.int64], T: NDArray[np.float64]) -> float:
+    """The negative log-likelihood of a hypothesis as the association scores it."""
+    m = a >= 0
+    uv, _ = project(inputs.K, T, inputs.landmarks_xyz[a[m]])
+    chi = float(np.sum((uv - inputs.detections_uv[m]) ** 2)) / inputs.pixel_sigma**2
+    seen = predicted_in_image(inputs.K, T, inputs.landmarks_xyz, inputs.image_size)
+    seen[a[m]] = False
+    n_free = int(np.count_nonzero(~m & np.isfinite(inputs.detections_uv).all(axis=1)))
+    score = (
+        chi
+        + n_free * (inputs.gate_px / inputs.pixel_sigma) ** 2
+        + int(seen.sum()) * inputs.miss_cost
+        + prior_mahalanobis_sq(T, inputs.prior_cam_from_world, inputs.prior_sigmas)
+    )
+    return float(score)
+
+
+def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
+    """The refusal when a twin fits, is a distinct pose and scores about as well, else None."""
+    twins = twin_hypotheses(inputs)
+    if not twins:
+        return None
+    n = int(np.count_nonzero(inputs.assignment >= 0))
+    limit = chi2.ppf(_FIT_QUANTILE, max(2 * n - 6, 1))
+    cov = inputs.covariance
+    finite = bool(np.all(np.isfinite(cov)))
+    s_best = None
+    for a_twin, T_twin, chi in twins:
+        d = pose_difference(T_twin, inputs.cam_from_world)
+        dc = d[:3]
+        same = finite and float(dc @ np.linalg.lstsq(cov[:3, :3], dc, rcond=None)[0]) <= DISTINCT_POSITION_SQ
+        if not chi <= limit or same:
+            continue
+        if s_best is None:
+            s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
+        s_twin = _score(inputs, a_twin, T_twin)
+        if s_twin - s_best < AMBIGUITY_MARGIN:
+            moved = int(np.count_nonzero((a_twin >= 0) & (inputs.assignment < 0)))
+            return Refusal(
+                FailureCode.DUPLICATED_DETECTIONS,
+                f"duplicated detections: the same {n} landmarks with {moved} of their detections "
+                f"moved to unassigned ones within {TWIN_RADIUS_PX:g} px fit as well (scores "
+                f"{s_best:.1f} and {s_twin:.1f}, margin {AMBIGUITY_MARGIN:.1f}) with a camera "
+                f"centre {float(np.linalg.norm(d[:3])):.2f} m and "
+                f"{float(np.degrees(np.linalg.norm(d[3:]))):.2f} deg away",
+            )
+    return None
+
+
+def verify_pose(inputs: VerifyInputs) -> Refusal | None:
+    """None when the detections confirm the pose, else why not (module docstring)."""
+    a = inputs.assignment
+    k = int(np.count_nonzero(a >= 0))
+    predicted = predicted_in_image(inputs.K, inputs.cam_from_world, inputs.landmarks_xyz, inputs.image_size)
+    n = int(predicted.sum())
+    n_det = int(np.count_nonzero(np.isfinite(inputs.detections_uv).all(axis=1)))
+    log10_nfa = chance_support(n, k, n_det, inputs.image_size, inputs.gate_px)
+    if log10_nfa > MAX_LOG10_NFA:
+        return Refusal(
+            FailureCode.UNSUPPORTED,
+            f"unsupported pose: it matches {k} of the {n} landmarks it projects into the image, "
+            f"which {n_det} detections over the image match by chance among the poses a search "
+            f"tries (false alarms 10^{log10_nfa:.1f} > 10^{MAX_LOG10_NFA:g})",
+        )
+    return _minimal_fit_refusal(inputs, k) or _twin_refusal(inputs)
