@@ -1,4 +1,4 @@
-"""The ``uav-struct`` command: ``uav-struct study …``, ``uav-struct sweep …`` and ``uav-struct render …``."""
+"""The ``uav-struct`` command: ``uav-struct study …``, ``sweep …``, ``render …`` and ``adapt …``."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ commands:
   study    reproduce the paper's four-UAV study (Tables I and II, Fig. 2)
   sweep    the study over many sites and seeds (a process pool, or Ray), merged into one table
   render   render the four UAV views of a site to PNG files
+  adapt    fine-tune the learned detector on renders of one IFC building (needs torch)
 
 `uav-struct <command> --help` describes each command's options and their defaults;
 `uav-struct --version` prints the version."""
@@ -56,6 +57,10 @@ def _dispatch(argv: Sequence[str] | None) -> int:
         from uav_struct_env.demo import main as render_main
 
         return render_main(rest)
+    if command == "adapt":
+        from uav_struct_env.training.adapt import main as adapt_main
+
+        return adapt_main(rest)
     print(f"uav-struct: unknown command {command!r}\n\n{USAGE}", file=sys.stderr)
     return 2
 

@@ -108,6 +108,9 @@ def fit(model: nn.Module, loader: Iterable, step_loss: Callable, out_dir: Path, 
         validate: ``() -> metrics`` with an ``"f1"`` entry, or None for no validation.
         eval_every: validation period, steps.
         log: called with every logged record.
+
+    Raises:
+        ValueError: the loader yields no batch (fewer samples than one batch).
     """
     out_dir = Path(out_dir)
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
@@ -134,6 +137,7 @@ def fit(model: nn.Module, loader: Iterable, step_loss: Callable, out_dir: Path, 
 
     done = False
     while not done:
+        before = step
         for batch in loader:
             elapsed = time.perf_counter() - t0
             frac = elapsed / budget
@@ -159,6 +163,9 @@ def fit(model: nn.Module, loader: Iterable, step_loss: Callable, out_dir: Path, 
                 run_validation(final=False)
             if step % 200 == 0:
                 _save(model, out_dir / "last.pt")
+        if not done and step == before:
+            raise ValueError("the loader yielded no batch: fewer training samples than one batch "
+                             "(drop_last); give a smaller batch or more data")
     _save(model, out_dir / "last.pt")
     if validate is not None:
         run_validation(final=True)
