@@ -31,7 +31,8 @@ from uav_struct_env.training.train_loop import fit  # noqa: E402
 from uav_struct_env.training.train_refiner import PatchNet  # noqa: E402
 
 DUPLEX = Path(__file__).parents[1] / "data" / "ifc" / "duplex.ifc"
-TINY = AdaptConfig(layouts=1, refiner_layouts=1, views=1, keypoint_steps=2, refiner_steps=2, threads=1)
+TINY = AdaptConfig(layouts=1, refiner_layouts=1, views=1, keypoint_steps=2, refiner_steps=2, threads=1,
+                   render_workers=1)
 
 
 def test_committed_networks_load_from_their_onnx_files():

@@ -77,13 +77,13 @@ class AdaptConfig:
     layouts: int = 24
     refiner_layouts: int = 12
     views: int = 10
-    keypoint_steps: int = 1200
-    refiner_steps: int = 1200
+    keypoint_steps: int = 300
+    refiner_steps: int = 300
     keypoint_lr: float = 1e-3
     refiner_lr: float = 5e-4
     seed: int = 4400
     threads: int = 2
-    render_workers: int = 1
+    render_workers: int = 2
 
     def __post_init__(self) -> None:
         for f in fields(self):
