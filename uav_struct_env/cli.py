@@ -1,4 +1,4 @@
-"""The ``uav-struct`` command: ``uav-struct study …``, ``sweep …``, ``render …`` and ``localize …``."""
+"""The ``uav-struct`` command: ``study …``, ``sweep …``, ``render …``, ``localize …`` and ``adapt …``."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ commands:
   sweep    the study over many sites and seeds (a process pool, or Ray), merged into one table
   render   render the four UAV views of a site to PNG files
   localize localize drone photos (EXIF GPS + DJI XMP) against an IFC model
+  adapt    fine-tune the learned detector on renders of one IFC building (needs torch)
 
 `uav-struct <command> --help` describes each command's options and their defaults;
 `uav-struct --version` prints the version."""
@@ -61,6 +62,10 @@ def _dispatch(argv: Sequence[str] | None) -> int:
         from uav_struct_env.photos.command import main as localize_main
 
         return localize_main(rest)
+    if command == "adapt":
+        from uav_struct_env.training.adapt import main as adapt_main
+
+        return adapt_main(rest)
     print(f"uav-struct: unknown command {command!r}\n\n{USAGE}", file=sys.stderr)
     return 2
 

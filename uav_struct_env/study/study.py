@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from localization.detect.weights import WEIGHT_NAMES
+from localization.detect.weights import WEIGHT_NAMES, WeightSet, adapted_weights
 from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.outputs import OutputExistsError, StagedOutput
 from uav_struct_env.processes import WorkerDied
@@ -138,7 +138,8 @@ def _parser() -> CommandParser:
         "--detector",
         default="learned",
         help=f"landmark detector: {', '.join(DETECTORS)}, learned:NAME ({', '.join(WEIGHT_NAMES)}; "
-        "default learned: the method from the rendered pixels with the default weights; projection: "
+        "default learned: the method from the rendered pixels with the default weights, or with those "
+        "`uav-struct adapt` made for an IFC --site when they exist; projection: "
         "ground truth + noise, an ablation isolating association and pose)",
     )
     p.add_argument("--association", default="robust", choices=ASSOCIATIONS)
@@ -273,7 +274,24 @@ def study_config(args, **overrides) -> StudyConfig:
         upright_workers=args.upright_workers,
     )
     fields.update(overrides)
+    adapted = adapted_for(*(fields[k] for k in ("site", "detector", "detector_model", "refiner_model")))
+    if adapted is not None:
+        fields.update(detector_model=str(adapted.model), refiner_model=str(adapted.refiner))
     return StudyConfig(**fields)
+
+
+def adapted_for(site: str, detector: str, detector_model: str | None,
+                refiner_model: str | None) -> WeightSet | None:
+    """The weights ``uav-struct adapt`` made for ``site``, if the plain default learned detector runs there.
+
+    None unless ``detector`` is ``"learned"`` (not ``learned:NAME``) with no weight files given and
+    ``site`` is an IFC file with an adapted set (:func:`localization.detect.weights.adapted_weights`).
+    """
+    if detector != "learned" or detector_model is not None or refiner_model is not None:
+        return None
+    if not (isinstance(site, str) and site.lower().endswith(".ifc") and Path(site).is_file()):
+        return None
+    return adapted_weights(site)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -285,6 +303,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_output_dir(args.out, overwrite=args.overwrite)
     except INPUT_ERRORS as err:
         return refuse("uav-struct study", err)
+    adapted = adapted_for(args.site, args.detector, args.detector_model, args.refiner_model)
+    if adapted is not None:
+        print(f"uav-struct study: note: running the detector weights adapted to this building by uav-struct "
+              f"adapt ({adapted.model.parent}); --detector learned:landmarks_v1 runs the default ones",
+              file=sys.stderr)
     for key, why in config.skip_reasons.items():
         print(f"uav-struct study: note: {key} left out: {why}", file=sys.stderr)
     if not config.selected_methods:

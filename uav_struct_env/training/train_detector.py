@@ -38,6 +38,7 @@ from localization.detect.onnx_net import OnnxNet
 from uav_struct_env.datasets.landmarks import LANDMARK_TYPES, load_labels
 from uav_struct_env.errors import UsageError
 from uav_struct_env.outputs import atomic_path, atomic_write_json, prepare_output_dir
+from uav_struct_env.training.init_weights import load_onnx_weights
 from uav_struct_env.training.train_loop import (
     add_training_arguments,
     check_training_arguments,
@@ -294,14 +295,17 @@ def pool_labels(paths: list[str | Path]) -> dict:
 def train(data: str | list[str], out: str, val: str | None = None, minutes: float = 45.0,
           max_steps: int | None = None, batch: int = 16, crop: tuple[int, int] = (256, 192),
           lr: float = 3e-3, width: int = 16, seed: int = 0, threads: int = 2,
-          eval_every: int = 500, workers: int = 1, log=print) -> dict:
-    """Train from scratch; writes ``out/{last,best}.pt``, ``out/log.jsonl``, ``out/model.onnx``.
+          eval_every: int = 500, workers: int = 1, init: str | Path | None = None,
+          warmup_steps: int = 200, log=print) -> dict:
+    """Train from scratch (or from ``init``); writes ``out/{last,best}.pt``, ``log.jsonl``, ``model.onnx``.
 
     ``data`` is one dataset or several (their images pooled: for example random sites and an IFC
     building).
 
     Stops after ``minutes`` of wall time or ``max_steps`` steps (the cosine learning-rate
-    schedule runs over the time budget). Returns a summary dict.
+    schedule runs over the time budget). ``init``: an exported keypoint network (ONNX, same
+    ``width``) to fine-tune (:func:`~uav_struct_env.training.init_weights.load_onnx_weights`:
+    its batch norms stay frozen). Returns a summary dict.
     """
     torch.manual_seed(seed)
     torch.set_num_threads(threads)
@@ -313,7 +317,10 @@ def train(data: str | list[str], out: str, val: str | None = None, minutes: floa
     loader = make_loader(LandmarkCrops(labels, crop, seed, epoch_size=10**7), batch, workers, seed)
     # Channels-last (NHWC) convolutions: faster on a CPU (docs/benchmarks.md; the refiner trainer
     # does the same).
-    model = KeypointNet(width).to(memory_format=torch.channels_last)
+    model = KeypointNet(width)
+    if init is not None:
+        load_onnx_weights(model, init, torch.rand(1, 3, 64, 64) * 255)
+    model = model.to(memory_format=torch.channels_last)
 
     def step_loss(batch):
         x, heat, off, mask = batch
@@ -322,12 +329,13 @@ def train(data: str | list[str], out: str, val: str | None = None, minutes: floa
         return loss, {"heat": hm, "offset": l1}
 
     summary = fit(model, loader, step_loss, out_dir, minutes=minutes, max_steps=max_steps, lr=lr,
-                  warmup_steps=200, eval_every=eval_every, log=log,
+                  warmup_steps=warmup_steps, eval_every=eval_every, log=log,
                   validate=None if val_labels is None else lambda: _evaluate(model, val_labels))
     onnx_path = export_onnx(model, out_dir / "model.onnx")
     summary.update(params=sum(p.numel() for p in model.parameters()),
                    train_images=len(labels["images"]), onnx=str(onnx_path), seed=seed,
-                   batch=batch, crop=list(crop), width=width)
+                   batch=batch, crop=list(crop), width=width,
+                   init=None if init is None else str(Path(init).resolve()))
     atomic_write_json(out_dir / "summary.json", summary, indent=2)
     return summary
 
@@ -351,7 +359,7 @@ def main(argv: list[str] | None = None) -> dict:
         raise SystemExit(refuse(ap.prog, err)) from None
     prepare_output_dir(a.out, overwrite=a.overwrite)
     summary = train(a.data, a.out, a.val, a.minutes, a.max_steps, a.batch, tuple(a.crop), a.lr,
-                    a.width, a.seed, a.threads, a.eval_every, a.workers)
+                    a.width, a.seed, a.threads, a.eval_every, a.workers, a.init)
     print(json.dumps(summary, indent=2))
     return summary
 

@@ -22,7 +22,7 @@ from torch import nn
 
 from uav_struct_env.errors import UsageError
 from uav_struct_env.outputs import atomic_path, open_append
-from uav_struct_env.validate import check_option, check_output_dir
+from uav_struct_env.validate import check_input_file, check_option, check_output_dir
 
 __all__ = ["add_training_arguments", "check_training_arguments", "fit", "make_loader"]
 
@@ -31,7 +31,7 @@ def add_training_arguments(ap: argparse.ArgumentParser, *, minutes: float, batch
                            lr: float) -> None:
     """Add the command-line options both trainers share, with per-network defaults.
 
-    ``--minutes --max-steps --batch --lr --width --seed --threads --workers --eval-every``.
+    ``--minutes --max-steps --batch --lr --width --seed --threads --workers --eval-every --init``.
     """
     ap.add_argument("--minutes", type=float, default=minutes, help="wall-time budget")
     ap.add_argument("--max-steps", type=int, default=None, help="step budget (none: time only)")
@@ -42,6 +42,9 @@ def add_training_arguments(ap: argparse.ArgumentParser, *, minutes: float, batch
     ap.add_argument("--threads", type=int, default=2, help="torch threads")
     ap.add_argument("--workers", type=int, default=1, help="data-loading processes")
     ap.add_argument("--eval-every", type=int, default=500, help="validation period, steps")
+    ap.add_argument("--init", default=None, metavar="ONNX",
+                    help="fine-tune: start from these exported weights (same architecture and "
+                         "--width; batch norms frozen) instead of from scratch")
     ap.add_argument("--overwrite", action="store_true",
                     help="train into an --out folder that already holds files (else refused)")
 
@@ -67,6 +70,8 @@ def check_training_arguments(a: argparse.Namespace) -> None:
     check_option("--threads", a.threads, 1, integer=True)
     check_option("--workers", a.workers, 0, integer=True)
     check_option("--eval-every", a.eval_every, 1, integer=True)
+    if a.init is not None:
+        check_input_file(a.init, option="--init", what="ONNX file")
     check_output_dir(a.out, overwrite=a.overwrite)
     data = a.data if isinstance(a.data, list) else [a.data]
     for option, paths in (("--data", data), ("--val", [a.val] if a.val else [])):
@@ -103,6 +108,9 @@ def fit(model: nn.Module, loader: Iterable, step_loss: Callable, out_dir: Path, 
         validate: ``() -> metrics`` with an ``"f1"`` entry, or None for no validation.
         eval_every: validation period, steps.
         log: called with every logged record.
+
+    Raises:
+        ValueError: the loader yields no batch (fewer samples than one batch).
     """
     out_dir = Path(out_dir)
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
@@ -129,6 +137,7 @@ def fit(model: nn.Module, loader: Iterable, step_loss: Callable, out_dir: Path, 
 
     done = False
     while not done:
+        before = step
         for batch in loader:
             elapsed = time.perf_counter() - t0
             frac = elapsed / budget
@@ -154,6 +163,9 @@ def fit(model: nn.Module, loader: Iterable, step_loss: Callable, out_dir: Path, 
                 run_validation(final=False)
             if step % 200 == 0:
                 _save(model, out_dir / "last.pt")
+        if not done and step == before:
+            raise ValueError("the loader yielded no batch: fewer training samples than one batch "
+                             "(drop_last); give a smaller batch or more data")
     _save(model, out_dir / "last.pt")
     if validate is not None:
         run_validation(final=True)

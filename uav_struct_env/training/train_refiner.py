@@ -44,6 +44,7 @@ from localization.detect.learned import DEFAULT_MODEL, LANDMARK_TYPES, LearnedDe
 from localization.detect.refiner import HALF, PATCH, POSITIVE_RADIUS, extract_patches
 from uav_struct_env.datasets.landmarks import load_labels
 from uav_struct_env.outputs import atomic_path, atomic_write_json, prepare_output_dir
+from uav_struct_env.training.init_weights import load_onnx_weights
 from uav_struct_env.training.train_detector import LandmarkCrops, conv_bn_relu, export_checked
 from uav_struct_env.training.train_loop import (
     add_training_arguments,
@@ -254,12 +255,15 @@ def evaluate(refiner: str | Path, labels: dict, match_px: float = 3.0,
 def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
           max_steps: int | None = None, batch: int = 128, lr: float = 2e-3, width: int = 16,
           seed: int = 0, threads: int = 2, eval_every: int = 500, workers: int = 1,
-          detector_model: str | None = None, log=print) -> dict:
-    """Train from scratch on mined windows; returns the summary.
+          detector_model: str | None = None, init: str | Path | None = None,
+          warmup_steps: int = 100, log=print) -> dict:
+    """Train from scratch (or from ``init``) on mined windows; returns the summary.
 
     Writes ``out/{last,best}.pt``, ``out/log.jsonl``, ``out/refiner.onnx`` and
     ``out/summary.json``. Stops after ``minutes`` of wall time or ``max_steps`` steps.
     Validation runs the refiner behind ``detector_model`` (None: the committed keypoint network).
+    ``init``: an exported refiner (ONNX, same ``width``) to fine-tune
+    (:func:`~uav_struct_env.training.init_weights.load_onnx_weights`: its batch norms stay frozen).
     """
     torch.manual_seed(seed)
     torch.set_num_threads(threads)
@@ -270,7 +274,10 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
     val_labels = load_labels(val) if val else None
     # Channels-last (NHWC) convolutions: faster on a CPU, so a wall-time budget trains more steps
     # (docs/benchmarks.md).
-    model = PatchNet(width).to(memory_format=torch.channels_last)
+    model = PatchNet(width)
+    if init is not None:
+        load_onnx_weights(model, init, torch.rand(2, 3, PATCH, PATCH) * 255)
+    model = model.to(memory_format=torch.channels_last)
 
     def step_loss(batch):
         x, present, off = batch
@@ -283,14 +290,15 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
                         detector_model=detector_model)
 
     summary = fit(model, make_loader(ds, batch, workers, seed), step_loss, out_dir,
-                  minutes=minutes, max_steps=max_steps, lr=lr, warmup_steps=100,
+                  minutes=minutes, max_steps=max_steps, lr=lr, warmup_steps=warmup_steps,
                   validate=None if val_labels is None else validate, eval_every=eval_every,
                   log=log)
     onnx_path = export_refiner(model, out_dir / "refiner.onnx")
     (out_dir / "candidate.onnx").unlink(missing_ok=True)
     summary.update(params=sum(p.numel() for p in model.parameters()), train_windows=len(ds),
                    onnx=str(onnx_path), seed=seed, batch=batch, width=width,
-                   detector_model=str(Path(detector_model or DEFAULT_MODEL).resolve()))
+                   detector_model=str(Path(detector_model or DEFAULT_MODEL).resolve()),
+                   init=None if init is None else str(Path(init).resolve()))
     atomic_write_json(out_dir / "summary.json", summary, indent=2)
     return summary
 
@@ -322,7 +330,7 @@ def main(argv: list[str] | None = None) -> dict:
     if not windows.exists():
         mine(a.data, str(windows), model=a.detector_model, seed=a.seed)
     summary = train(str(windows), a.out, a.val, a.minutes, a.max_steps, a.batch, a.lr, a.width,
-                    a.seed, a.threads, a.eval_every, a.workers, a.detector_model)
+                    a.seed, a.threads, a.eval_every, a.workers, a.detector_model, a.init)
     print(json.dumps(summary, indent=2))
     return summary
 

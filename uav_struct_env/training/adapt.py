@@ -1,0 +1,275 @@
+"""``uav-struct adapt b.ifc``: fine-tune the learned detector on renders of one building.
+
+The building model is known before the flight, so the detector can be prepared for it. The
+command renders the building at its stages (:mod:`uav_struct_env.datasets.landmarks` with
+``site=b.ifc``: every layout one of its stages, activity, camera and imaging all ``mixed``), then
+fine-tunes the default weights (:data:`localization.detect.weights.DEFAULT_WEIGHTS`) on them:
+
+1. the keypoint network, from its committed ONNX file, on ``layouts x views`` half-resolution
+   renders (dataset seed ``seed``, :func:`uav_struct_env.training.train_detector.train`);
+2. the patch refiner, from its committed ONNX file, on windows mined by the *adapted* keypoint
+   network from ``refiner_layouts x views`` other full-resolution renders (dataset seed
+   ``seed + 1``, :func:`uav_struct_env.training.train_refiner.train`).
+
+The dataset's viewpoints are drawn at random around the building (any azimuth, 10-40 m out,
+8-30 m up) from their own seeds; the study's are its four UAVs' scheduled viewpoints, so none of
+the study's images is trained on. Both trainings run a fixed number of steps with one seed, so
+the weights do not depend on the machine's load (the wall time does). Checkpoints are not chosen
+on any validation set: the last weights are kept.
+
+The set is written to ``ROOT/<sha256 of b.ifc>/`` (ROOT: ``--out``, else
+:func:`localization.detect.weights.adapted_root`): the two ONNX files
+(:func:`localization.detect.weights.adapted_set` names them) and ``provenance.json`` (settings,
+software version and commit, the file's SHA-256, steps, minutes per phase), moved there together
+when all is done; Ctrl-C or SIGTERM leaves the folder as it was. ``uav-struct study --site b.ifc``
+with the default learned detector then runs the adapted set.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from localization.checks import check_number
+from localization.detect.weights import (
+    ADAPTED_DIR_ENV,
+    ADAPTED_PROVENANCE,
+    DEFAULT_WEIGHTS,
+    adapted_root,
+    adapted_set,
+    adapted_weights,
+    file_sha256,
+    weight_set,
+)
+from uav_struct_env.errors import ConfigError
+
+__all__ = ["AdaptConfig", "adapt", "main"]
+
+#: The refiner's batch (the trainer's default), or every mined window if there are fewer.
+REFINER_BATCH = 128
+
+
+@dataclass(frozen=True)
+class AdaptConfig:
+    """Settings of one adaptation (chosen on the corpus's training buildings; docs/adapt.md).
+
+    Attributes:
+        layouts: layouts of the keypoint network's dataset (each a stage drawn at random).
+        refiner_layouts: layouts of the refiner's dataset.
+        views: viewpoints per layout.
+        keypoint_steps: fine-tuning steps of the keypoint network (batch 16, 256 x 192 crops).
+        refiner_steps: fine-tuning steps of the refiner (batch :data:`REFINER_BATCH`).
+        keypoint_lr: peak learning rate of the keypoint network (warm-up, then cosine).
+        refiner_lr: peak learning rate of the refiner.
+        seed: dataset seed of the keypoint network's renders (the refiner's: ``seed + 1``) and
+            training seed of both networks.
+        threads: torch threads.
+        render_workers: rendering processes.
+    """
+
+    layouts: int = 24
+    refiner_layouts: int = 12
+    views: int = 10
+    keypoint_steps: int = 300
+    refiner_steps: int = 300
+    keypoint_lr: float = 1e-3
+    refiner_lr: float = 5e-4
+    seed: int = 4400
+    threads: int = 2
+    render_workers: int = 2
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.type == "int":
+                check_number(f"AdaptConfig.{f.name}", value, 0 if f.name == "seed" else 1, integer=True,
+                             error=ConfigError, type_error=ConfigError)
+            else:
+                check_number(f"AdaptConfig.{f.name}", value, 0, 1, lo_open=True, error=ConfigError,
+                             type_error=ConfigError)
+
+
+class _StepBar:
+    """A progress bar over a trainer's steps, fed by its log records (one every 50 steps)."""
+
+    def __init__(self, total: int, desc: str, progress: bool) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, desc=desc, unit="step", disable=not progress)
+
+    def __call__(self, record: dict) -> None:
+        if "step" in record:
+            self.bar.update(record["step"] - self.bar.n)
+            self.bar.set_postfix(loss=record["loss"])
+
+    def close(self) -> None:
+        self.bar.update(self.bar.total - self.bar.n)
+        self.bar.close()
+
+
+def _render(ifc: Path, out: Path, layouts: int, seed: int, scale: float, config: AdaptConfig,
+            progress: bool) -> Path:
+    """Render one labelled dataset of the building (activity, camera and imaging mixed)."""
+    from uav_struct_env.datasets.landmarks import DatasetConfig, generate
+
+    dataset = DatasetConfig(n_layouts=layouts, views_per_layout=config.views, seed=seed, scale=scale,
+                            site=str(ifc), activity="mixed", camera="mixed", imaging="mixed")
+    return generate(dataset, out, workers=config.render_workers, progress=progress)
+
+
+def _train_networks(ifc: Path, work: Path, final: dict, config: AdaptConfig, progress: bool) -> dict:
+    """Render both datasets and fine-tune both networks; returns the phases' costs and counts."""
+    from uav_struct_env.training import train_detector, train_refiner
+
+    base = weight_set(DEFAULT_WEIGHTS)
+    minutes: dict[str, float] = {}
+    t = time.perf_counter()
+
+    def lap(name: str) -> None:
+        nonlocal t
+        minutes[name] = round((time.perf_counter() - t) / 60.0, 2)
+        t = time.perf_counter()
+
+    keypoint_data = _render(ifc, work / "keypoint_data", config.layouts, config.seed, 0.5, config, progress)
+    refiner_data = _render(ifc, work / "refiner_data", config.refiner_layouts, config.seed + 1, 1.0, config,
+                           progress)
+    lap("render")
+    bar = _StepBar(config.keypoint_steps, "keypoint network", progress)
+    kp = train_detector.train(str(keypoint_data.parent), str(work / "keypoint"), minutes=1e9,
+                              max_steps=config.keypoint_steps, lr=config.keypoint_lr, seed=config.seed,
+                              threads=config.threads, workers=0, init=base.model, warmup_steps=100,
+                              log=bar)
+    bar.close()
+    shutil.move(kp["onnx"], final["model"])
+    lap("keypoint_network")
+    windows = train_refiner.mine(str(refiner_data.parent), str(work / "windows.npz"),
+                                 model=str(final["model"]), seed=config.seed, progress=progress)
+    lap("mine")
+    bar = _StepBar(config.refiner_steps, "patch refiner", progress)
+    with np.load(windows) as arrays:  # a building too small for one batch of windows trains on all it has
+        batch = min(REFINER_BATCH, len(arrays["kind"]))
+    ref = train_refiner.train(str(windows), str(work / "refiner"), minutes=1e9, batch=batch,
+                              max_steps=config.refiner_steps, lr=config.refiner_lr, seed=config.seed,
+                              threads=config.threads, workers=0, detector_model=str(final["model"]),
+                              init=base.refiner, warmup_steps=50, log=bar)
+    bar.close()
+    shutil.move(ref["onnx"], final["refiner"])
+    lap("refiner")
+    return {"minutes": {**minutes, "total": round(sum(minutes.values()), 2)},
+            "steps": {"keypoint_network": kp["steps"], "refiner": ref["steps"]},
+            "images": {"keypoint_network": kp["train_images"], "refiner": len(_labels(refiner_data))},
+            "refiner_windows": ref["train_windows"], "refiner_batch": batch}
+
+
+def _labels(path: Path) -> list:
+    from uav_struct_env.datasets.landmarks import load_labels
+
+    return load_labels(path)["images"]
+
+
+def adapt(ifc: str | Path, root: str | Path | None = None, config: AdaptConfig | None = None,
+          progress: bool = True, overwrite: bool = False) -> Path:
+    """Adapt the default weights to the building file ``ifc``; returns the set's folder.
+
+    Args:
+        ifc: the building's IFC file.
+        root: the folder of adapted sets (None: :func:`~localization.detect.weights.adapted_root`);
+            the set goes to ``root/<sha256 of ifc>/``.
+        config: the settings (None: :class:`AdaptConfig`'s defaults).
+        progress: show progress bars.
+        overwrite: replace a set adapted before (otherwise such a folder is refused).
+
+    Raises:
+        uav_struct_env.outputs.OutputExistsError: the building has an adapted set and not ``overwrite``.
+    """
+    import torch
+
+    from uav_struct_env.outputs import StagedOutput, atomic_write_json
+    from uav_struct_env.provenance import software
+
+    config = config or AdaptConfig()
+    ifc = Path(ifc).resolve()
+    sha = file_sha256(ifc)
+    target = adapted_set(sha, root)
+    t0 = time.perf_counter()
+    with StagedOutput(target.model.parent, overwrite=overwrite,
+                      owned=(ADAPTED_PROVENANCE, "adapted_*.onnx")) as staged, \
+            tempfile.TemporaryDirectory(prefix="uav-struct-adapt-") as work:
+        final = {"model": staged.stage / target.model.name, "refiner": staged.stage / target.refiner.name}
+        costs = _train_networks(ifc, Path(work), final, config, progress)
+        record = {
+            "building": {"file": str(ifc), "name": ifc.name, "sha256": sha},
+            "weights": {"name": target.name, "model": target.model.name, "refiner": target.refiner.name,
+                        "base": DEFAULT_WEIGHTS,
+                        "base_sha256": {k: file_sha256(getattr(weight_set(DEFAULT_WEIGHTS), k))
+                                        for k in ("model", "refiner")}},
+            "settings": asdict(config),
+            "software": {**software(), "torch": torch.__version__},
+            **costs,
+            "wall_minutes": round((time.perf_counter() - t0) / 60.0, 2),
+        }
+        atomic_write_json(staged.stage / ADAPTED_PROVENANCE, record, indent=2)
+    return target.model.parent
+
+
+def _parser() -> argparse.ArgumentParser:
+    from uav_struct_env.validate import CommandParser
+
+    d = AdaptConfig()
+    p = CommandParser(prog="uav-struct adapt",
+                      description="Fine-tune the learned detector on renders of one building (IFC), "
+                      "for `uav-struct study --site` on that file.")
+    p.add_argument("ifc", help="the building's IFC file")
+    p.add_argument("--out", default=None,
+                   help=f"folder of adapted sets (default {adapted_root()}, or $UAV_STRUCT_ADAPTED_DIR); "
+                   "the set goes to OUT/<sha256 of the file>/")
+    p.add_argument("--overwrite", action="store_true", help="replace the building's adapted set")
+    for f in fields(AdaptConfig):
+        p.add_argument("--" + f.name.replace("_", "-"), type=int if f.type == "int" else float,
+                       default=getattr(d, f.name), help=f"(default {getattr(d, f.name)})")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``uav-struct adapt``; returns the exit status."""
+    from uav_struct_env.outputs import OutputExistsError
+    from uav_struct_env.processes import WorkerDied, interrupted_status, stop_on_sigterm
+    from uav_struct_env.validate import INPUT_ERRORS, check_input_file, check_site, refuse
+
+    prog = "uav-struct adapt"
+    args = _parser().parse_args(argv)
+    stop_on_sigterm()
+    try:
+        check_input_file(args.ifc, option="ifc", what="IFC file")
+        check_site(args.ifc)
+        config = AdaptConfig(**{f.name: getattr(args, f.name) for f in fields(AdaptConfig)})
+        import torch  # noqa: F401  (the train extra)
+    except ImportError as err:
+        return refuse(prog, f"{err}; adapt trains with torch: pip install 'uav-struct-env[train]'")
+    except INPUT_ERRORS as err:
+        return refuse(prog, err)
+    try:
+        folder = adapt(args.ifc, args.out, config, progress=not args.no_progress, overwrite=args.overwrite)
+    except (OutputExistsError, NotADirectoryError) as err:
+        return refuse(prog, err)
+    except WorkerDied as err:
+        return refuse(prog, f"{err}; no adapted set written", status=1)
+    except OSError as err:
+        return refuse(prog, f"{err}; no adapted set written", status=1)
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted; no adapted set written", file=sys.stderr)
+        return interrupted_status()
+    found = adapted_weights(args.ifc)
+    here = found is not None and found.model.parent == folder
+    hint = (f"uav-struct study --site {args.ifc} now runs these weights" if here
+            else f"for uav-struct study to run them: export {ADAPTED_DIR_ENV}={Path(args.out).resolve()}")
+    print(f"wrote {folder} ({hint})")
+    return 0
