@@ -145,9 +145,10 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     sub = ap.add_subparsers(dest="command")
-    rec = sub.add_parser("record", help="write the false-detection library from study folders")
+    rec = sub.add_parser("record", help="write the false-detection library from study folders",
+                         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     rec.add_argument("studies", nargs="+", type=Path, help="study output folders (learned detector)")
-    rec.add_argument("--out", type=Path, default=FALSE_DETECTIONS_PATH)
+    rec.add_argument("--out", type=Path, default=FALSE_DETECTIONS_PATH, help="the library file written")
     ap.add_argument("--cases", type=int, default=300, help="fuzz cases per mode")
     ap.add_argument("--modes", nargs="+", default=list(CORRUPTIONS), choices=CORRUPTIONS,
                     help="corruptions to run")

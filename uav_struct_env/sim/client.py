@@ -32,12 +32,13 @@ number of EGL clients coexist and each renders exactly what a fresh process rend
 If libEGL cannot be reached through ctypes, at most one EGL client is allowed per process and a
 second raises :class:`RendererUnavailableError` (``"auto"`` then falls back to TinyRenderer).
 
-**The first EGL frame.** A client's first ``getCameraImage`` through the plugin differs from every
-later render of the same request (measured with pybullet 3.2.7 and Mesa llvmpipe at 1280 x 720: 200-1,000
-pixels of six random views of the paper site; the second and third renders agree exactly, and a
-throwaway frame of another size leaves a pixel different). Which frame of a world came first
-depends on how the work is split (the study's ``--workers``), so an EGL client renders its first
-request twice and returns the second (:meth:`RenderClient.render`; ``tests/sim/test_client.py``).
+**The first EGL frames.** A client's first two ``getCameraImage`` calls through the plugin differ
+from every later render of the same request (measured with pybullet 3.2.7 and Mesa llvmpipe: 200-1,000
+pixels of six random 1280 x 720 views of the paper site, one call per tile, so the first frame;
+about 20 pixels of a 320 x 180 view, the first two frames; later renders agree exactly). Which
+frame of a world came first depends on how the work is split (the study's ``--workers``), so an
+EGL client renders its first request :data:`EGL_WARMUP_RENDERS` times and discards them
+(:meth:`RenderClient.render`; ``tests/sim/test_client.py``).
 
 pybullet prints "pybullet build time: ..." on the C-level stderr when it is imported, and the EGL
 plugin its device choice (stderr), OpenGL banner and per-frame chatter (stdout). None of it may
@@ -65,6 +66,7 @@ from uav_struct_env.sim.camera import Camera, projection_matrix
 __all__ = [
     "BACKENDS",
     "EGL_MAX_TILE",
+    "EGL_WARMUP_RENDERS",
     "RENDERERS",
     "TINY_PIXEL_SHIFT",
     "RawImage",
@@ -85,6 +87,9 @@ EGL_MAX_TILE = (1024, 768)
 #: cost grows with the pixels, EGL's is mostly a fixed cost per frame, and on the 2-core machine
 #: they cross near 1e5 pixels (``benchmarks/render.py``; figures in docs/benchmarks.md).
 AUTO_EGL_MIN_PIXELS = 100_000
+
+#: Throwaway renders of an EGL client's first request (its first two plugin calls differ from later ones).
+EGL_WARMUP_RENDERS = 2
 
 #: Client ids of the EGL clients alive in this process.
 _LIVE_EGL: set[int] = set()
@@ -221,7 +226,7 @@ class RenderClient:
         self.client_id = -1
         self._closed = True
         self._egl_state: tuple[int, int, int, int] | None = None
-        #: False until the first EGL frame has been rendered (and discarded: module docstring).
+        #: False until the first EGL frames have been rendered (and discarded: module docstring).
         self._primed = backend != "egl"
         if backend == "egl" and _LIVE_EGL and _EglApi.get() is None:
             raise RendererUnavailableError(
@@ -307,7 +312,8 @@ class RenderClient:
         self.activate()
         if not self._primed:
             self._primed = True
-            self.render(view, camera, segmentation=segmentation, light=light)
+            for _ in range(EGL_WARMUP_RENDERS):
+                self.render(view, camera, segmentation=segmentation, light=light)
         if self.backend == "tiny":
             du, dv = TINY_PIXEL_SHIFT
             shifted = camera._replaced(cx=camera.cx - du, cy=camera.cy - dv)
