@@ -56,16 +56,18 @@ from localization.associate.ambiguity import AMBIGUITY_MARGIN
 from localization.failure import FailureCode
 from localization.geometry.transforms import project
 from localization.pose.batch import refine_many, to_transforms
-from localization.pose.covariance import PriorSigmas, pose_difference, prior_mahalanobis_sq
+from localization.pose.covariance import PriorSigmas, pose_difference, pose_jacobian, prior_mahalanobis_sq
 
 __all__ = [
     "DISTINCT_POSITION_SQ",
     "MAX_LOG10_NFA",
     "MINIMAL_FIT_QUANTILE",
+    "OUTLIER_QUANTILE",
     "TWIN_RADIUS_PX",
     "Refusal",
     "VerifyInputs",
     "chance_support",
+    "leave_one_out_chi2",
     "minimal_fit_chi2_limit",
     "predicted_in_image",
     "twin_hypotheses",
@@ -96,6 +98,11 @@ DISTINCT_POSITION_SQ = 16.27
 
 #: Chi-square quantile a minimal fit's residuals must stay within.
 MINIMAL_FIT_QUANTILE = 0.95
+
+
+#: Chi-square quantile (2 dof) a pair's leave-one-out residual must stay within
+#: (:func:`leave_one_out_chi2`); a pair beyond it is one the other pairs reject.
+OUTLIER_QUANTILE = 0.999
 
 
 #: Chi-square quantile of the twin's fit test (the association's own).
@@ -203,6 +210,86 @@ def _minimal_fit_refusal(inputs: VerifyInputs, k: int) -> Refusal | None:
         f"unsupported pose: a minimal fit ({k} pairs) with residual chi-square {chi:.1f} above the "
         f"{MINIMAL_FIT_QUANTILE:g} quantile {limit:.1f} (pixel_sigma={inputs.pixel_sigma:g} px): "
         "some four wrong detections fit as loosely by chance",
+    )
+
+
+def leave_one_out_chi2(
+    K: NDArray[np.float64], cam_from_world: NDArray[np.float64], landmarks_xyz: NDArray[np.float64],
+    detections_uv: NDArray[np.float64], pixel_sigma: float,
+) -> NDArray[np.float64]:
+    """(P,) each pair's residual against the pose the other pairs give, as a 2-dof chi-square.
+
+    Linearized at the pose (``J`` the (2P, 6) projection Jacobian, ``H = J (J^T J)^+ J^T``): the
+    leave-one-out residual of pair ``i`` is ``(I - H_ii)^-1 e_i`` with covariance
+    ``sigma^2 (I - H_ii)^-1``, so ``e_i^T (I - H_ii)^-1 e_i / sigma^2`` is chi-square with two
+    degrees of freedom for a right pair under Gaussian pixel noise (the externally studentized
+    residual of regression diagnostics, Cook and Weisberg 1982). A wrong pair among a few right
+    ones hides in the fit's RMS but not here. Inf for a pair the others cannot predict.
+    """
+    J, uv = pose_jacobian(K, cam_from_world, landmarks_xyz)
+    e = detections_uv - uv
+    H = J @ np.linalg.pinv(J.T @ J) @ J.T
+    out = np.empty(len(e))
+    for i in range(len(e)):
+        B = np.eye(2) - H[2 * i:2 * i + 2, 2 * i:2 * i + 2]
+        det = B[0, 0] * B[1, 1] - B[0, 1] * B[1, 0]
+        out[i] = float(e[i] @ np.linalg.solve(B, e[i])) / pixel_sigma**2 if det > 1e-12 else np.inf
+    return out
+
+
+def _refit(
+    inputs: VerifyInputs, rows: NDArray[np.int64], ids: NDArray[np.int64]
+) -> NDArray[np.float64]:
+    """The pose refined on the pairs (detection ``rows``, landmark ``ids``) from the winner's."""
+    T0 = inputs.cam_from_world
+    R, t, _ = refine_many(
+        inputs.K, T0[None, :3, :3].copy(), T0[None, :3, 3].copy(), inputs.landmarks_xyz[ids][None].copy(),
+        inputs.detections_uv[rows][None].copy(), np.ones((1, rows.size), dtype=bool), iterations=100,
+        tol=1e-8,
+    )
+    return to_transforms(R, t)[0]
+
+
+def _outlier_refusal(inputs: VerifyInputs) -> Refusal | None:
+    """The refusal when pairs the others reject (:func:`leave_one_out_chi2`) hold the pose up.
+
+    The worst rejected pair is dropped and the pose refitted on the rest, again while one is
+    rejected and more than ``need`` pairs remain; the pose fails as
+    :attr:`~localization.failure.FailureCode.UNSUPPORTED` when the rest's pose has its camera
+    centre outside the winner's 99.9 % position ellipsoid (:data:`DISTINCT_POSITION_SQ`): the
+    winner then rests on wrong pairs. A right pose with a stray pair among many keeps its centre
+    and passes, unchanged.
+    """
+    rows = np.flatnonzero(inputs.assignment >= 0)
+    ids = inputs.assignment[rows]
+    limit = float(chi2.ppf(OUTLIER_QUANTILE, 2))
+    T, dropped = inputs.cam_from_world, 0
+    while True:
+        t = leave_one_out_chi2(inputs.K, T, inputs.landmarks_xyz[ids], inputs.detections_uv[rows],
+                               inputs.pixel_sigma)
+        worst = int(np.argmax(t))
+        if not t[worst] > limit:
+            break
+        if rows.size <= inputs.need:  # a minimal fit: its own test (minimal_fit_chi2_limit) holds it
+            break
+        keep = np.arange(rows.size) != worst
+        rows, ids, dropped = rows[keep], ids[keep], dropped + 1
+        T = _refit(inputs, rows, ids)
+    if dropped == 0:
+        return None
+    dc = pose_difference(T, inputs.cam_from_world)[:3]
+    cov = inputs.covariance[:3, :3]
+    if not np.all(np.isfinite(cov)):
+        return None
+    q = float(dc @ np.linalg.lstsq(cov, dc, rcond=None)[0])
+    if q <= DISTINCT_POSITION_SQ:
+        return None
+    return Refusal(
+        FailureCode.UNSUPPORTED,
+        f"unsupported pose: {dropped} of its pairs lie beyond the others' leave-one-out "
+        f"{OUTLIER_QUANTILE:g} quantile (pixel_sigma={inputs.pixel_sigma:g} px), and without them the "
+        f"camera centre moves {float(np.linalg.norm(dc)):.2f} m (squared Mahalanobis {q:.1f} > "
+        f"{DISTINCT_POSITION_SQ:g}): the pose rests on wrong pairs",
     )
 
 
@@ -378,4 +465,4 @@ def verify_pose(inputs: VerifyInputs) -> Refusal | None:
             f"which {n_det} detections over the image match by chance among the poses a search "
             f"tries (false alarms 10^{log10_nfa:.1f} > 10^{MAX_LOG10_NFA:g})",
         )
-    return _minimal_fit_refusal(inputs, k) or _twin_refusal(inputs)
+    return _minimal_fit_refusal(inputs, k) or _outlier_refusal(inputs) or _twin_refusal(inputs)
