@@ -123,10 +123,13 @@ class VerifyInputs:
         covariance: (6, 6) its covariance in ``(C [m], dtheta [rad])``.
         prior_cam_from_world: (4, 4) the frame's prior.
         prior_sigmas: the prior's uncertainty.
-        pixel_sigma: detector noise, px.
+        pixel_sigma: detector noise, px (the association's model: its gates and fit test).
         gate_px: the inlier gate, px.
         need: the fewest pairs a pose may rest on.
         miss_cost: cost of a predicted landmark left unmatched (the association's).
+        fit_sigma: the detector's own calibrated noise, px, that the minimal-fit and
+            leave-one-out tests hold the pairs to (a detector that declares one, e.g.
+            :data:`localization.detect.learned.FIT_PIXEL_SIGMA_PX`); None: ``pixel_sigma``.
     """
 
     detections_uv: NDArray[np.float64]
@@ -142,6 +145,12 @@ class VerifyInputs:
     gate_px: float
     need: int
     miss_cost: float = 4.0
+    fit_sigma: float | None = None
+
+    @property
+    def fit_sigma_px(self) -> float:
+        """The noise the fit tests assume, px: ``fit_sigma``, else ``pixel_sigma``."""
+        return self.pixel_sigma if self.fit_sigma is None else self.fit_sigma
 
 
 @dataclass(frozen=True)
@@ -202,13 +211,14 @@ def _minimal_fit_refusal(inputs: VerifyInputs, k: int) -> Refusal | None:
         return None
     m = inputs.assignment >= 0
     uv, _ = project(inputs.K, inputs.cam_from_world, inputs.landmarks_xyz[inputs.assignment[m]])
-    chi = float(np.sum((uv - inputs.detections_uv[m]) ** 2)) / inputs.pixel_sigma**2
+    sigma = inputs.fit_sigma_px
+    chi = float(np.sum((uv - inputs.detections_uv[m]) ** 2)) / sigma**2
     if chi <= limit:
         return None
     return Refusal(
         FailureCode.UNSUPPORTED,
         f"unsupported pose: a minimal fit ({k} pairs) with residual chi-square {chi:.1f} above the "
-        f"{MINIMAL_FIT_QUANTILE:g} quantile {limit:.1f} (pixel_sigma={inputs.pixel_sigma:g} px): "
+        f"{MINIMAL_FIT_QUANTILE:g} quantile {limit:.1f} (pixel sigma {sigma:g} px): "
         "some four wrong detections fit as loosely by chance",
     )
 
@@ -266,7 +276,7 @@ def _outlier_refusal(inputs: VerifyInputs) -> Refusal | None:
     T, dropped = inputs.cam_from_world, 0
     while True:
         t = leave_one_out_chi2(inputs.K, T, inputs.landmarks_xyz[ids], inputs.detections_uv[rows],
-                               inputs.pixel_sigma)
+                               inputs.fit_sigma_px)
         worst = int(np.argmax(t))
         if not t[worst] > limit:
             break
@@ -287,7 +297,7 @@ def _outlier_refusal(inputs: VerifyInputs) -> Refusal | None:
     return Refusal(
         FailureCode.UNSUPPORTED,
         f"unsupported pose: {dropped} of its pairs lie beyond the others' leave-one-out "
-        f"{OUTLIER_QUANTILE:g} quantile (pixel_sigma={inputs.pixel_sigma:g} px), and without them the "
+        f"{OUTLIER_QUANTILE:g} quantile (pixel sigma {inputs.fit_sigma_px:g} px), and without them the "
         f"camera centre moves {float(np.linalg.norm(dc)):.2f} m (squared Mahalanobis {q:.1f} > "
         f"{DISTINCT_POSITION_SQ:g}): the pose rests on wrong pairs",
     )
