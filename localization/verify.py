@@ -266,7 +266,8 @@ def _outlier_refusal(inputs: VerifyInputs) -> Refusal | None:
     The worst rejected pair is dropped and the pose refitted on the rest, again while one is
     rejected and more than ``need`` pairs remain; the pose fails as
     :attr:`~localization.failure.FailureCode.UNSUPPORTED` when the rest's pose has its camera
-    centre outside the winner's 99.9 % position ellipsoid (:data:`DISTINCT_POSITION_SQ`): the
+    centre outside the winner's 99.9 % position ellipsoid (:data:`DISTINCT_POSITION_SQ`; the
+    winner's covariance rescaled from ``pixel_sigma`` to the detector's ``fit_sigma``): the
     winner then rests on wrong pairs. A right pose with a stray pair among many keeps its centre
     and passes, unchanged.
     """
@@ -291,7 +292,7 @@ def _outlier_refusal(inputs: VerifyInputs) -> Refusal | None:
     cov = inputs.covariance[:3, :3]
     if not np.all(np.isfinite(cov)):
         return None
-    q = float(dc @ np.linalg.lstsq(cov, dc, rcond=None)[0])
+    q = float(dc @ np.linalg.lstsq(cov, dc, rcond=None)[0]) * (inputs.pixel_sigma / inputs.fit_sigma_px) ** 2
     if q <= DISTINCT_POSITION_SQ:
         return None
     return Refusal(
