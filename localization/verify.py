@@ -39,6 +39,22 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   association scores them: squared residuals, a clutter cost per unassigned detection, a miss
   cost per predicted landmark left unmatched, the prior's Mahalanobis distance.
 
+* *Pairs the others reject* (:func:`leave_one_out_chi2`). A detector that fires a few px off a
+  corner (on the far edge of a slab, on a hidden corner's neighbour) gives a fit of five to
+  seven pairs with one to three wrong, loose (1-2.5 px RMS) but within the association's fit
+  test at ``pixel_sigma``. Each pair's residual against the pose the other pairs give is a
+  2-dof chi-square for a right pair; the worst beyond :data:`OUTLIER_QUANTILE` is dropped and
+  the pose refitted, while more than ``need`` pairs remain, and the pose fails as
+  ``UNSUPPORTED`` when the refitted camera centre leaves the winner's position ellipsoid. The
+  residuals are scaled by the detector's own calibrated noise when it declares one
+  (``fit_sigma``, :data:`localization.detect.learned.FIT_PIXEL_SIGMA_PX`), which the
+  minimal-fit test uses too.
+* *A period of the layout* (:func:`lattice_rivals`). On a regular grid the same detections
+  pair as well with the landmarks one period over, seen from a camera moved by the period: the
+  residuals are identical and only the prior (and the landmarks each predicts) tell them
+  apart. A rival within the ambiguity margin fails as
+  :attr:`~localization.failure.FailureCode.AMBIGUOUS`.
+
 :class:`VerifyInputs` carries the frame and the pose; :func:`verify_pose` returns None for a
 confirmed pose, else a :class:`Refusal`.
 """
@@ -50,6 +66,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 from scipy.stats import binom, chi2
 
 from localization.associate.ambiguity import AMBIGUITY_MARGIN
@@ -60,6 +77,7 @@ from localization.pose.covariance import PriorSigmas, pose_difference, pose_jaco
 
 __all__ = [
     "DISTINCT_POSITION_SQ",
+    "LATTICE_TOL_M",
     "MAX_LOG10_NFA",
     "MINIMAL_FIT_QUANTILE",
     "OUTLIER_QUANTILE",
@@ -67,6 +85,7 @@ __all__ = [
     "Refusal",
     "VerifyInputs",
     "chance_support",
+    "lattice_rivals",
     "leave_one_out_chi2",
     "minimal_fit_chi2_limit",
     "predicted_in_image",
@@ -103,6 +122,10 @@ MINIMAL_FIT_QUANTILE = 0.95
 #: Chi-square quantile (2 dof) a pair's leave-one-out residual must stay within
 #: (:func:`leave_one_out_chi2`); a pair beyond it is one the other pairs reject.
 OUTLIER_QUANTILE = 0.999
+
+
+#: A translation of the layout maps a landmark onto another when they lie this close, m.
+LATTICE_TOL_M = 0.02
 
 
 #: Chi-square quantile of the twin's fit test (the association's own).
@@ -461,6 +484,60 @@ def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
     return None
 
 
+def lattice_rivals(
+    inputs: VerifyInputs,
+) -> list[tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]]:
+    """The winner's pairs moved by a period of the layout: ``[(assignment, cam_from_world, d), ...]``.
+
+    A translation ``d`` (m, project frame) that carries every paired landmark onto another one
+    (within :data:`LATTICE_TOL_M`; the candidates are the first pair's landmark onto every
+    other) gives a rival that pairs the same detections with the shifted landmarks, seen by the
+    camera moved by ``d`` with the same rotation: its residuals are the winner's exactly.
+    """
+    a = inputs.assignment
+    rows = np.flatnonzero(a >= 0)
+    if rows.size == 0:
+        return []
+    X = inputs.landmarks_xyz
+    P = X[a[rows]]
+    tree = cKDTree(X)
+    R, t = inputs.cam_from_world[:3, :3], inputs.cam_from_world[:3, 3]
+    out, seen = [], set()
+    for d in X - P[0]:
+        if np.linalg.norm(d) <= LATTICE_TOL_M:
+            continue
+        dist, j = tree.query(P + d)
+        key = tuple(np.round(d / LATTICE_TOL_M).astype(int))
+        if key in seen or not np.all(dist <= LATTICE_TOL_M) or np.unique(j).size != j.size:
+            continue
+        seen.add(key)
+        T = inputs.cam_from_world.copy()
+        T[:3, 3] = t - R @ d  # camera centre C + d
+        b = np.full_like(a, -1)
+        b[rows] = j
+        out.append((b, T, d))
+    return out
+
+
+def _lattice_refusal(inputs: VerifyInputs) -> Refusal | None:
+    """The refusal when a shift by a period of the layout scores within the ambiguity margin."""
+    rivals = lattice_rivals(inputs)
+    if not rivals:
+        return None
+    s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
+    scored = [(_score(inputs, b, T), d) for b, T, d in rivals]
+    s_rival, d = min(scored, key=lambda r: r[0])
+    if s_rival - s_best >= AMBIGUITY_MARGIN:
+        return None
+    return Refusal(
+        FailureCode.AMBIGUOUS,
+        f"ambiguous pose: the layout repeats with period ({d[0]:.2f}, {d[1]:.2f}, {d[2]:.2f}) m, and "
+        f"the same detections paired with the landmarks one period over (camera moved "
+        f"{float(np.linalg.norm(d)):.2f} m) score {s_rival:.1f} against {s_best:.1f} (margin "
+        f"{AMBIGUITY_MARGIN:.1f}): only the prior tells them apart",
+    )
+
+
 def verify_pose(inputs: VerifyInputs) -> Refusal | None:
     """None when the detections confirm the pose, else why not (module docstring)."""
     a = inputs.assignment
@@ -476,4 +553,9 @@ def verify_pose(inputs: VerifyInputs) -> Refusal | None:
             f"which {n_det} detections over the image match by chance among the poses a search "
             f"tries (false alarms 10^{log10_nfa:.1f} > 10^{MAX_LOG10_NFA:g})",
         )
-    return _minimal_fit_refusal(inputs, k) or _outlier_refusal(inputs) or _twin_refusal(inputs)
+    return (
+        _minimal_fit_refusal(inputs, k)
+        or _outlier_refusal(inputs)
+        or _twin_refusal(inputs)
+        or _lattice_refusal(inputs)
+    )

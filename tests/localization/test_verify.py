@@ -8,6 +8,8 @@ modes held to zero confident wrong poses.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -15,9 +17,17 @@ from localization import FailureCode, Localizer
 from localization.detect.learned import FIT_PIXEL_SIGMA_PX, fit_pixel_sigma
 from localization.geometry.camera import PAPER_IMAGE_SIZE, PAPER_K
 from localization.geometry.transforms import camera_center, look_at, project
+from localization.pose.covariance import PriorSigmas
 from localization.testing.fuzz import CORRUPTIONS, FalseDetections, corrupt_detections, draw_case
 from localization.testing.synthetic import paper_prior
-from localization.verify import OUTLIER_QUANTILE, chance_support, leave_one_out_chi2, minimal_fit_chi2_limit
+from localization.verify import (
+    OUTLIER_QUANTILE,
+    VerifyInputs,
+    chance_support,
+    lattice_rivals,
+    leave_one_out_chi2,
+    minimal_fit_chi2_limit,
+)
 
 SLICE = 1_000
 FULL = 10_000
@@ -42,7 +52,8 @@ def _error(est, case) -> float:
     ("mode", "k", "code"),
     [("ghost_shift", 144, FailureCode.DUPLICATED_DETECTIONS),
      ("ghost_each", 154, FailureCode.UNSUPPORTED),  # four pairs, 2 px RMS: a loose minimal fit
-     ("clutter_500", 64, FailureCode.UNSUPPORTED)],
+     ("clutter_500", 64, FailureCode.UNSUPPORTED),
+     ("detector", 137, FailureCode.AMBIGUOUS)],  # a two-level grid through a 9,900 px lens
 )
 def test_a_formerly_confident_wrong_pose_is_refused_with_its_reason(mode, k, code):
     case, det = _case(mode, k)
@@ -238,3 +249,27 @@ def test_a_pose_resting_on_displaced_pairs_fails_and_among_many_it_stands():
     plain = Localizer(X, PAPER_K, image_size=PAPER_IMAGE_SIZE, verify=False).localize(det, paper_prior(T, 3))
     assert est.success and np.linalg.norm(est.position - camera_center(T)) < 0.3
     np.testing.assert_array_equal(est.cam_from_world, plain.cam_from_world)
+
+
+def test_a_period_of_the_layout_gives_rivals_with_the_same_residuals():
+    # a 6 x 6 grid of corners 4 m apart; the pose pairs its central 2 x 2 block: every shift of
+    # the block onto the grid (5 x 5 places, less its own) is a rival with the same pixels
+    X = np.array([[4.0 * i, 4.0 * j, 3.5] for i in range(6) for j in range(6)])
+    T = look_at([10.0, -6.0, 30.0], [10.0, 10.0, 3.5])
+    block = [14, 15, 20, 21]  # (2, 2), (2, 3), (3, 2), (3, 3)
+    uv, _ = project(PAPER_K, T, X[block])
+    inputs = VerifyInputs(
+        detections_uv=uv, landmarks_xyz=X, K=PAPER_K, image_size=PAPER_IMAGE_SIZE, cam_from_world=T,
+        assignment=np.array(block), covariance=np.eye(6), prior_cam_from_world=T,
+        prior_sigmas=PriorSigmas(), pixel_sigma=1.0, gate_px=5.0, need=4,
+    )
+    rivals = lattice_rivals(inputs)
+    assert len(rivals) == 24
+    for b, T_rival, d in rivals:
+        np.testing.assert_allclose(camera_center(T_rival), camera_center(T) + d, atol=1e-9)
+        np.testing.assert_allclose(project(PAPER_K, T_rival, X[b])[0], uv, atol=1e-6)
+        assert set(np.round(d[:2] / 4.0).astype(int)) <= set(range(-2, 4)) and d[2] == 0.0
+    # a layout without a period has no rival
+    Y = X + np.random.default_rng(0).normal(0.0, 0.5, X.shape)
+    uv, _ = project(PAPER_K, T, Y[block])
+    assert lattice_rivals(replace(inputs, landmarks_xyz=Y, detections_uv=uv)) == []
