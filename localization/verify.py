@@ -262,12 +262,15 @@ def leave_one_out_chi2(
     J, uv = pose_jacobian(K, cam_from_world, landmarks_xyz)
     e = detections_uv - uv
     H = J @ np.linalg.pinv(J.T @ J) @ J.T
-    out = np.empty(len(e))
-    for i in range(len(e)):
-        B = np.eye(2) - H[2 * i:2 * i + 2, 2 * i:2 * i + 2]
-        det = B[0, 0] * B[1, 1] - B[0, 1] * B[1, 0]
-        out[i] = float(e[i] @ np.linalg.solve(B, e[i])) / pixel_sigma**2 if det > 1e-12 else np.inf
-    return out
+    n = len(e)
+    idx = np.arange(n)
+    b00, b01 = 1.0 - H[2 * idx, 2 * idx], -H[2 * idx, 2 * idx + 1]
+    b10, b11 = -H[2 * idx + 1, 2 * idx], 1.0 - H[2 * idx + 1, 2 * idx + 1]
+    det = b00 * b11 - b01 * b10  # each 2 x 2 block I - H_ii, inverted in closed form
+    u, v = e[:, 0], e[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = (u * (b11 * u - b01 * v) + v * (b00 * v - b10 * u)) / det / pixel_sigma**2
+    return np.where(det > 1e-12, q, np.inf)
 
 
 def _refit(
@@ -500,21 +503,21 @@ def lattice_rivals(
         return []
     X = inputs.landmarks_xyz
     P = X[a[rows]]
-    tree = cKDTree(X)
+    shifts = X - P[0]
+    dist, j = cKDTree(X).query((P[None, :, :] + shifts[:, None, :]).reshape(-1, 3))
+    dist, j = dist.reshape(len(X), rows.size), j.reshape(len(X), rows.size)
     R, t = inputs.cam_from_world[:3, :3], inputs.cam_from_world[:3, 3]
     out, seen = [], set()
-    for d in X - P[0]:
-        if np.linalg.norm(d) <= LATTICE_TOL_M:
-            continue
-        dist, j = tree.query(P + d)
+    for i in np.flatnonzero(np.all(dist <= LATTICE_TOL_M, axis=1)):
+        d = shifts[i]
         key = tuple(np.round(d / LATTICE_TOL_M).astype(int))
-        if key in seen or not np.all(dist <= LATTICE_TOL_M) or np.unique(j).size != j.size:
+        if np.linalg.norm(d) <= LATTICE_TOL_M or key in seen or np.unique(j[i]).size != rows.size:
             continue
         seen.add(key)
         T = inputs.cam_from_world.copy()
         T[:3, 3] = t - R @ d  # camera centre C + d
         b = np.full_like(a, -1)
-        b[rows] = j
+        b[rows] = j[i]
         out.append((b, T, d))
     return out
 
