@@ -197,7 +197,8 @@ class Localizer:
             (:mod:`localization.associate`, step 3). False ignores them.
         verify: robust mode: hold the finished pose to what it predicts
             (:mod:`localization.verify`): a pose whose support the detections' density gives by
-            chance, or that a ghost copy of the detections fits as well, fails with its reason.
+            chance, that rests on pairs the others reject, or that a ghost copy of the detections
+            or a period of the layout fits as well, fails with its reason.
             False reports it unverified (the ``paper`` association never verifies: it is the
             paper's method).
         fit_sigma_px: the detector's own calibrated pixel noise, which the verification's fit
