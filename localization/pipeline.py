@@ -197,9 +197,14 @@ class Localizer:
             (:mod:`localization.associate`, step 3). False ignores them.
         verify: robust mode: hold the finished pose to what it predicts
             (:mod:`localization.verify`): a pose whose support the detections' density gives by
-            chance, or that a ghost copy of the detections fits as well, fails with its reason.
+            chance, that rests on pairs the others reject, or that a ghost copy of the detections
+            or a period of the layout fits as well, fails with its reason.
             False reports it unverified (the ``paper`` association never verifies: it is the
             paper's method).
+        fit_sigma_px: the detector's own calibrated pixel noise, which the verification's fit
+            tests (a minimal fit's residuals, each pair's leave-one-out residual) hold the pairs
+            to; None: ``pixel_sigma``. The learned detector declares one
+            (:data:`localization.detect.learned.FIT_PIXEL_SIGMA_PX`).
 
     Raises:
         TypeError, ValueError: on bad arguments, naming the value and what was expected.
@@ -226,6 +231,7 @@ class Localizer:
         distortion: ArrayLike | None = None,
         use_scores: bool = True,
         verify: bool = True,
+        fit_sigma_px: float | None = None,
     ) -> None:
         X = as_points("landmarks_xyz", landmarks_xyz, 3)
         if X.shape[0] == 0:
@@ -275,6 +281,9 @@ class Localizer:
         if not isinstance(verify, (bool, np.bool_)):
             raise TypeError(f"verify must be True or False, got {verify!r}")
         self.verify = bool(verify)
+        self.fit_sigma_px = (
+            None if fit_sigma_px is None else check_number("fit_sigma_px", fit_sigma_px, 0, lo_open=True)
+        )
 
     @property
     def distortion(self) -> NDArray[np.float64]:
@@ -627,6 +636,7 @@ class Localizer:
                 pixel_sigma=self.pixel_sigma,
                 gate_px=self.gate_px if self.gate_px is not None else max(5.0 * self.pixel_sigma, 3.0),
                 need=max(self.min_correspondences, 3),
+                fit_sigma=self.fit_sigma_px,
             )
         )
         timings["verify"] = time.perf_counter() - t

@@ -39,6 +39,22 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   association scores them: squared residuals, a clutter cost per unassigned detection, a miss
   cost per predicted landmark left unmatched, the prior's Mahalanobis distance.
 
+* *Pairs the others reject* (:func:`leave_one_out_chi2`). A detector that fires a few px off a
+  corner (on the far edge of a slab, on a hidden corner's neighbour) gives a fit of five to
+  seven pairs with one to three wrong, loose (1-2.5 px RMS) but within the association's fit
+  test at ``pixel_sigma``. Each pair's residual against the pose the other pairs give is a
+  2-dof chi-square for a right pair; the worst beyond :data:`OUTLIER_QUANTILE` is dropped and
+  the pose refitted, while more than ``need`` pairs remain, and the pose fails as
+  ``UNSUPPORTED`` when the refitted camera centre leaves the winner's position ellipsoid. The
+  residuals are scaled by the detector's own calibrated noise when it declares one
+  (``fit_sigma``, :data:`localization.detect.learned.FIT_PIXEL_SIGMA_PX`), which the
+  minimal-fit test uses too.
+* *A period of the layout* (:func:`lattice_rivals`). On a regular grid the same detections
+  pair as well with the landmarks one period over, seen from a camera moved by the period: the
+  residuals are identical and only the prior (and the landmarks each predicts) tell them
+  apart. A rival within the ambiguity margin fails as
+  :attr:`~localization.failure.FailureCode.AMBIGUOUS`.
+
 :class:`VerifyInputs` carries the frame and the pose; :func:`verify_pose` returns None for a
 confirmed pose, else a :class:`Refusal`.
 """
@@ -50,22 +66,27 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 from scipy.stats import binom, chi2
 
 from localization.associate.ambiguity import AMBIGUITY_MARGIN
 from localization.failure import FailureCode
 from localization.geometry.transforms import project
 from localization.pose.batch import refine_many, to_transforms
-from localization.pose.covariance import PriorSigmas, pose_difference, prior_mahalanobis_sq
+from localization.pose.covariance import PriorSigmas, pose_difference, pose_jacobian, prior_mahalanobis_sq
 
 __all__ = [
     "DISTINCT_POSITION_SQ",
+    "LATTICE_TOL_M",
     "MAX_LOG10_NFA",
     "MINIMAL_FIT_QUANTILE",
+    "OUTLIER_QUANTILE",
     "TWIN_RADIUS_PX",
     "Refusal",
     "VerifyInputs",
     "chance_support",
+    "lattice_rivals",
+    "leave_one_out_chi2",
     "minimal_fit_chi2_limit",
     "predicted_in_image",
     "twin_hypotheses",
@@ -98,6 +119,15 @@ DISTINCT_POSITION_SQ = 16.27
 MINIMAL_FIT_QUANTILE = 0.95
 
 
+#: Chi-square quantile (2 dof) a pair's leave-one-out residual must stay within
+#: (:func:`leave_one_out_chi2`); a pair beyond it is one the other pairs reject.
+OUTLIER_QUANTILE = 0.999
+
+
+#: A translation of the layout maps a landmark onto another when they lie this close, m.
+LATTICE_TOL_M = 0.02
+
+
 #: Chi-square quantile of the twin's fit test (the association's own).
 _FIT_QUANTILE = 1.0 - 1e-6
 
@@ -116,10 +146,13 @@ class VerifyInputs:
         covariance: (6, 6) its covariance in ``(C [m], dtheta [rad])``.
         prior_cam_from_world: (4, 4) the frame's prior.
         prior_sigmas: the prior's uncertainty.
-        pixel_sigma: detector noise, px.
+        pixel_sigma: detector noise, px (the association's model: its gates and fit test).
         gate_px: the inlier gate, px.
         need: the fewest pairs a pose may rest on.
         miss_cost: cost of a predicted landmark left unmatched (the association's).
+        fit_sigma: the detector's own calibrated noise, px, that the minimal-fit and
+            leave-one-out tests hold the pairs to (a detector that declares one, e.g.
+            :data:`localization.detect.learned.FIT_PIXEL_SIGMA_PX`); None: ``pixel_sigma``.
     """
 
     detections_uv: NDArray[np.float64]
@@ -135,6 +168,12 @@ class VerifyInputs:
     gate_px: float
     need: int
     miss_cost: float = 4.0
+    fit_sigma: float | None = None
+
+    @property
+    def fit_sigma_px(self) -> float:
+        """The noise the fit tests assume, px: ``fit_sigma``, else ``pixel_sigma``."""
+        return self.pixel_sigma if self.fit_sigma is None else self.fit_sigma
 
 
 @dataclass(frozen=True)
@@ -195,14 +234,99 @@ def _minimal_fit_refusal(inputs: VerifyInputs, k: int) -> Refusal | None:
         return None
     m = inputs.assignment >= 0
     uv, _ = project(inputs.K, inputs.cam_from_world, inputs.landmarks_xyz[inputs.assignment[m]])
-    chi = float(np.sum((uv - inputs.detections_uv[m]) ** 2)) / inputs.pixel_sigma**2
+    sigma = inputs.fit_sigma_px
+    chi = float(np.sum((uv - inputs.detections_uv[m]) ** 2)) / sigma**2
     if chi <= limit:
         return None
     return Refusal(
         FailureCode.UNSUPPORTED,
         f"unsupported pose: a minimal fit ({k} pairs) with residual chi-square {chi:.1f} above the "
-        f"{MINIMAL_FIT_QUANTILE:g} quantile {limit:.1f} (pixel_sigma={inputs.pixel_sigma:g} px): "
+        f"{MINIMAL_FIT_QUANTILE:g} quantile {limit:.1f} (pixel sigma {sigma:g} px): "
         "some four wrong detections fit as loosely by chance",
+    )
+
+
+def leave_one_out_chi2(
+    K: NDArray[np.float64], cam_from_world: NDArray[np.float64], landmarks_xyz: NDArray[np.float64],
+    detections_uv: NDArray[np.float64], pixel_sigma: float,
+) -> NDArray[np.float64]:
+    """(P,) each pair's residual against the pose the other pairs give, as a 2-dof chi-square.
+
+    Linearized at the pose (``J`` the (2P, 6) projection Jacobian, ``H = J (J^T J)^+ J^T``): the
+    leave-one-out residual of pair ``i`` is ``(I - H_ii)^-1 e_i`` with covariance
+    ``sigma^2 (I - H_ii)^-1``, so ``e_i^T (I - H_ii)^-1 e_i / sigma^2`` is chi-square with two
+    degrees of freedom for a right pair under Gaussian pixel noise (the externally studentized
+    residual of regression diagnostics, Cook and Weisberg 1982). A wrong pair among a few right
+    ones hides in the fit's RMS but not here. Inf for a pair the others cannot predict.
+    """
+    J, uv = pose_jacobian(K, cam_from_world, landmarks_xyz)
+    e = detections_uv - uv
+    H = J @ np.linalg.pinv(J.T @ J) @ J.T
+    n = len(e)
+    idx = np.arange(n)
+    b00, b01 = 1.0 - H[2 * idx, 2 * idx], -H[2 * idx, 2 * idx + 1]
+    b10, b11 = -H[2 * idx + 1, 2 * idx], 1.0 - H[2 * idx + 1, 2 * idx + 1]
+    det = b00 * b11 - b01 * b10  # each 2 x 2 block I - H_ii, inverted in closed form
+    u, v = e[:, 0], e[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = (u * (b11 * u - b01 * v) + v * (b00 * v - b10 * u)) / det / pixel_sigma**2
+    return np.where(det > 1e-12, q, np.inf)
+
+
+def _refit(
+    inputs: VerifyInputs, rows: NDArray[np.int64], ids: NDArray[np.int64]
+) -> NDArray[np.float64]:
+    """The pose refined on the pairs (detection ``rows``, landmark ``ids``) from the winner's."""
+    T0 = inputs.cam_from_world
+    R, t, _ = refine_many(
+        inputs.K, T0[None, :3, :3].copy(), T0[None, :3, 3].copy(), inputs.landmarks_xyz[ids][None].copy(),
+        inputs.detections_uv[rows][None].copy(), np.ones((1, rows.size), dtype=bool), iterations=100,
+        tol=1e-8,
+    )
+    return to_transforms(R, t)[0]
+
+
+def _outlier_refusal(inputs: VerifyInputs) -> Refusal | None:
+    """The refusal when pairs the others reject (:func:`leave_one_out_chi2`) hold the pose up.
+
+    The worst rejected pair is dropped and the pose refitted on the rest, again while one is
+    rejected and more than ``need`` pairs remain; the pose fails as
+    :attr:`~localization.failure.FailureCode.UNSUPPORTED` when the rest's pose has its camera
+    centre outside the winner's 99.9 % position ellipsoid (:data:`DISTINCT_POSITION_SQ`; the
+    winner's covariance rescaled from ``pixel_sigma`` to the detector's ``fit_sigma``): the
+    winner then rests on wrong pairs. A right pose with a stray pair among many keeps its centre
+    and passes, unchanged.
+    """
+    rows = np.flatnonzero(inputs.assignment >= 0)
+    ids = inputs.assignment[rows]
+    limit = float(chi2.ppf(OUTLIER_QUANTILE, 2))
+    T, dropped = inputs.cam_from_world, 0
+    while True:
+        t = leave_one_out_chi2(inputs.K, T, inputs.landmarks_xyz[ids], inputs.detections_uv[rows],
+                               inputs.fit_sigma_px)
+        worst = int(np.argmax(t))
+        if not t[worst] > limit:
+            break
+        if rows.size <= inputs.need:  # a minimal fit: its own test (minimal_fit_chi2_limit) holds it
+            break
+        keep = np.arange(rows.size) != worst
+        rows, ids, dropped = rows[keep], ids[keep], dropped + 1
+        T = _refit(inputs, rows, ids)
+    if dropped == 0:
+        return None
+    dc = pose_difference(T, inputs.cam_from_world)[:3]
+    cov = inputs.covariance[:3, :3]
+    if not np.all(np.isfinite(cov)):
+        return None
+    q = float(dc @ np.linalg.lstsq(cov, dc, rcond=None)[0]) * (inputs.pixel_sigma / inputs.fit_sigma_px) ** 2
+    if q <= DISTINCT_POSITION_SQ:
+        return None
+    return Refusal(
+        FailureCode.UNSUPPORTED,
+        f"unsupported pose: {dropped} of its pairs lie beyond the others' leave-one-out "
+        f"{OUTLIER_QUANTILE:g} quantile (pixel sigma {inputs.fit_sigma_px:g} px), and without them the "
+        f"camera centre moves {float(np.linalg.norm(dc)):.2f} m (squared Mahalanobis {q:.1f} > "
+        f"{DISTINCT_POSITION_SQ:g}): the pose rests on wrong pairs",
     )
 
 
@@ -363,6 +487,60 @@ def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
     return None
 
 
+def lattice_rivals(
+    inputs: VerifyInputs,
+) -> list[tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]]:
+    """The winner's pairs moved by a period of the layout: ``[(assignment, cam_from_world, d), ...]``.
+
+    A translation ``d`` (m, project frame) that carries every paired landmark onto another one
+    (within :data:`LATTICE_TOL_M`; the candidates are the first pair's landmark onto every
+    other) gives a rival that pairs the same detections with the shifted landmarks, seen by the
+    camera moved by ``d`` with the same rotation: its residuals are the winner's exactly.
+    """
+    a = inputs.assignment
+    rows = np.flatnonzero(a >= 0)
+    if rows.size == 0:
+        return []
+    X = inputs.landmarks_xyz
+    P = X[a[rows]]
+    shifts = X - P[0]
+    dist, j = cKDTree(X).query((P[None, :, :] + shifts[:, None, :]).reshape(-1, 3))
+    dist, j = dist.reshape(len(X), rows.size), j.reshape(len(X), rows.size)
+    R, t = inputs.cam_from_world[:3, :3], inputs.cam_from_world[:3, 3]
+    out, seen = [], set()
+    for i in np.flatnonzero(np.all(dist <= LATTICE_TOL_M, axis=1)):
+        d = shifts[i]
+        key = tuple(np.round(d / LATTICE_TOL_M).astype(int))
+        if np.linalg.norm(d) <= LATTICE_TOL_M or key in seen or np.unique(j[i]).size != rows.size:
+            continue
+        seen.add(key)
+        T = inputs.cam_from_world.copy()
+        T[:3, 3] = t - R @ d  # camera centre C + d
+        b = np.full_like(a, -1)
+        b[rows] = j[i]
+        out.append((b, T, d))
+    return out
+
+
+def _lattice_refusal(inputs: VerifyInputs) -> Refusal | None:
+    """The refusal when a shift by a period of the layout scores within the ambiguity margin."""
+    rivals = lattice_rivals(inputs)
+    if not rivals:
+        return None
+    s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
+    scored = [(_score(inputs, b, T), d) for b, T, d in rivals]
+    s_rival, d = min(scored, key=lambda r: r[0])
+    if s_rival - s_best >= AMBIGUITY_MARGIN:
+        return None
+    return Refusal(
+        FailureCode.AMBIGUOUS,
+        f"ambiguous pose: the layout repeats with period ({d[0]:.2f}, {d[1]:.2f}, {d[2]:.2f}) m, and "
+        f"the same detections paired with the landmarks one period over (camera moved "
+        f"{float(np.linalg.norm(d)):.2f} m) score {s_rival:.1f} against {s_best:.1f} (margin "
+        f"{AMBIGUITY_MARGIN:.1f}): only the prior tells them apart",
+    )
+
+
 def verify_pose(inputs: VerifyInputs) -> Refusal | None:
     """None when the detections confirm the pose, else why not (module docstring)."""
     a = inputs.assignment
@@ -378,4 +556,9 @@ def verify_pose(inputs: VerifyInputs) -> Refusal | None:
             f"which {n_det} detections over the image match by chance among the poses a search "
             f"tries (false alarms 10^{log10_nfa:.1f} > 10^{MAX_LOG10_NFA:g})",
         )
-    return _minimal_fit_refusal(inputs, k) or _twin_refusal(inputs)
+    return (
+        _minimal_fit_refusal(inputs, k)
+        or _outlier_refusal(inputs)
+        or _twin_refusal(inputs)
+        or _lattice_refusal(inputs)
+    )

@@ -145,8 +145,15 @@ def stack_spec(config: StudyConfig, method: Method) -> StackSpec:
     """The localization stack the study runs ``method`` with.
 
     The study's own policies: the localizer's noise model is floored at 0.5 px (a noise-free
-    projection detector must not collapse the gates) and the gates stay in px of the image.
+    projection detector must not collapse the gates) and the gates stay in px of the image; with
+    the learned detector the verification's fit tests assume its declared noise
+    (:func:`localization.detect.learned.fit_pixel_sigma`).
     """
+    kwargs = {}
+    if method.structural and config.detector == "learned":
+        from localization.detect.learned import fit_pixel_sigma  # onnxruntime only when it is used
+
+        kwargs["fit_sigma_px"] = fit_pixel_sigma(config.image_size[0])
     return StackSpec(
         landmarks=method.landmarks,
         detector=config.detector if method.structural else "aruco",
@@ -161,6 +168,7 @@ def stack_spec(config: StudyConfig, method: Method) -> StackSpec:
         aruco_mode=method.aruco_mode or "joint",
         aruco_prior=method.aruco_prior,
         aruco_pixel_sigma=config.pixel_sigma,
+        localizer_kwargs=kwargs,
     )
 
 
