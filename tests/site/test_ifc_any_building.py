@@ -125,3 +125,17 @@ def test_the_duplicate_search_finds_a_twin_across_a_cell_boundary():
     unique, dropped = ifc_module._coincident_duplicates(raws, footprints)
     assert [r.guid for r in unique] == ["a", "far"]
     assert dropped[0][0] == "twin" and "coincident duplicate of a" in dropped[0][3]
+
+
+def test_a_columns_only_stage_is_its_own_columns_role_and_the_study_evaluates_it(tmp_path):
+    from uav_struct_env.study.protocol import StudyConfig
+
+    path = write_ifc(_frame(), tmp_path / "frame.ifc")
+    site = load_ifc(path)
+    assert site.floor_stage("columns") == "L1/columns"
+    assert site.floor_stage("slab") is None
+    config = StudyConfig(site=str(path))
+    keys = [m.key for m in config.selected_methods]
+    assert "column_tops" in keys
+    assert config.skip_reasons["slab_corners"] == ("stage 'L1/columns' has no floor (a frame of "
+                                                   "columns only)")

@@ -169,10 +169,14 @@ class Site:
 
         ``role`` ``"slab"``: the floor just built (the floor's first stage); ``"columns"``: with
         the columns standing on it (its last stage, if that adds columns). The paper's two
-        stages are the first floor's roles; the study evaluates each method in its role.
+        stages are the first floor's roles; the study evaluates each method in its role. A
+        columns-only stage (a frame without a floor, :mod:`uav_struct_env.site.ifc`) is its own
+        ``"columns"`` role and has no ``"slab"`` one.
         """
         if role not in ("slab", "columns"):
             raise ValueError(f"role must be 'slab' or 'columns', got {role!r}")
+        if not self.current_stage.floor:
+            return self.current_stage.name if role == "columns" else None
         same = [st for st in self.stages if st.floor == self.current_stage.floor]
         first, last = same[0], same[-1]
         if role == "slab":

@@ -319,7 +319,9 @@ class StudyConfig:
         skips: dict[str, str] = {}
         for m in METHODS:
             stage = stages[m.scene.stage]
-            if stage is None:
+            if stage is None and stages["slab"] is None:
+                skips[m.key] = f"stage {stages['columns']!r} has no floor (a frame of columns only)"
+            elif stage is None:
                 skips[m.key] = f"the floor of stage {stages['slab']!r} has no columns stage"
             elif m.structural:
                 n = len(site.with_stage(stage).landmarks(m.landmarks))
