@@ -30,7 +30,7 @@ from uav_struct_env.photos.localize import (
     rtk_accuracy,
     run_plan,
 )
-from uav_struct_env.provenance import software
+from uav_struct_env.provenance import software, version_text
 from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_input_file, check_output_dir, refuse
 
 __all__ = ["LOCALIZE_FILES", "PoseRow", "expand_photos", "main", "parse_prior_sigmas", "settings_line",
@@ -93,12 +93,8 @@ def pose_row(p: PhotoPose) -> PoseRow:
 def settings_line(plan: PhotoPlan, detector: str, camera: str | None, prior: str | None,
                   sigmas: PriorSigmas | None) -> str:
     """One line saying how the outputs were made: software, IFC and stage, stack, georeferencing, prior."""
-    sw = software()
-    version = f"{sw['package']} {sw['version']}"
-    if sw.get("git_commit"):
-        version += f" (git {sw['git_commit'][:10]}{', modified' if sw.get('git_modified') else ''})"
     parts = [
-        version, f"ifc {plan.ifc.name}, stage {plan.site.stage}", f"landmarks {plan.landmarks}",
+        version_text(), f"ifc {plan.ifc.name}, stage {plan.site.stage}", f"landmarks {plan.landmarks}",
         f"{detector} detector, robust association",
         f"georeference {plan.georef.describe()}" if plan.georef else "no georeference (user prior)",
         f"camera {camera or 'from EXIF (uncalibrated)'}",
