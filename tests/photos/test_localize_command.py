@@ -19,6 +19,7 @@ from uav_struct_env.cli import main as cli_main
 from uav_struct_env.photos import PhotoError, read_ifc_georeference
 from uav_struct_env.photos.command import expand_photos
 from uav_struct_env.photos.dji_jpeg import dji_fields_from_pose, write_dji_jpeg
+from uav_struct_env.provenance import png_settings
 from uav_struct_env.site import load_ifc
 
 STAGE = "Level 1/slab"
@@ -60,6 +61,8 @@ def test_rendered_photos_localize_back_to_the_truth(flight, tmp_path):
     rows = list(csv.DictReader(lines[1:]))
     doc = json.loads((out / "poses.json").read_text())
     assert doc["settings"] == lines[0][len("# Settings: "):] and doc["stage"] == STAGE
+    for figure in (out / "flight_summary.png", *sorted((out / "overlays").glob("*.png"))):
+        assert png_settings(figure) == doc["settings"], figure.name
     assert [r["photo"] for r in rows] == [p["photo"] for p in doc["photos"]] == [
         f"DJI_uav_{k}.JPG" for k in range(4)]
     localized = 0

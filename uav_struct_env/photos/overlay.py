@@ -108,7 +108,7 @@ def plot_overlay(pose: PhotoPose, rgb: NDArray[np.uint8], site: Any, landmarks_x
     ax.set_title(_title(pose), fontsize=8)
     if settings:
         fig.text(0.01, 0.005, settings, fontsize=5, va="bottom")
-    out = save_figure(fig, path, dpi=100)
+    out = save_figure(fig, path, dpi=100, settings=settings or None)
     plt.close(fig)
     return out
 
@@ -158,6 +158,6 @@ def plot_flight_summary(poses: Sequence[PhotoPose], site: Any, path: str | Path,
     ax.set_title(f"{len(ok)} of {len(poses)} photos localized", fontsize=10)
     if settings:
         fig.text(0.01, 0.005, settings, fontsize=5, va="bottom", wrap=True)
-    out = save_figure(fig, path, dpi=120)
+    out = save_figure(fig, path, dpi=120, settings=settings or None)
     plt.close(fig)
     return out
