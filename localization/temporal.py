@@ -45,12 +45,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2
 
 from localization.checks import check_number
 from localization.geometry.attitude import attitude_from_world_from_cam, world_from_cam_from_attitude
 from localization.geometry.transforms import check_transform, invert, so3_exp
 from localization.pose.covariance import PriorSigmas, pose_difference
+from localization.stats import chi2_quantile
 
 __all__ = ["FilterNoise", "PoseFilter", "Update", "attitude_of"]
 
@@ -150,7 +150,7 @@ class FilterNoise:
 
     def gate(self, dof: int) -> float:
         """The chi-square gate of an update with ``dof`` degrees of freedom."""
-        return float(chi2.ppf(self.gate_probability, dof))
+        return chi2_quantile(self.gate_probability, dof)
 
 
 @dataclass(frozen=True)

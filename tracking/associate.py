@@ -24,8 +24,8 @@ from itertools import combinations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2 as chi2_dist
 
+from localization.stats import chi2_quantile
 from tracking.triangulate import dlt, max_ray_angle_deg, pixel_covariances, refine
 from tracking.views import CameraView
 
@@ -34,7 +34,7 @@ __all__ = ["Candidate", "associate", "candidates", "gate"]
 
 def gate(probability: float, dof: int) -> float:
     """The chi-square value below which a fit with ``dof`` degrees of freedom is consistent."""
-    return float(chi2_dist.ppf(probability, dof))
+    return chi2_quantile(probability, dof)
 
 
 @dataclass(frozen=True)

@@ -68,15 +68,20 @@ def test_sigterm_saves_the_run_and_resume_reaches_the_uninterrupted_weights(tmp_
 
 
 def test_a_second_trainer_into_the_same_out_is_refused(tmp_path):
+    # The holder takes --out as the trainer's train() does before any work (prepare_output_dir)
+    # and keeps it, as a first trainer would for its whole run.
     out = tmp_path / "run"
-    first = _train("--out", str(out), *TINY, "--total-timesteps", "1024")  # as long as it was
-    deadline = time.monotonic() + 120
-    while not (tmp_path / ".run.lock").exists() or not (tmp_path / ".run.lock").read_text():
-        assert first.poll() is None and time.monotonic() < deadline
-        time.sleep(0.05)
-    second = _train("--out", str(out), "--overwrite", *TINY)
-    _, err = second.communicate(timeout=120)
-    first.send_signal(signal.SIGINT)
-    first.communicate(timeout=60)
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time\n"
+                               "from uav_struct_env.outputs import prepare_output_dir\n"
+                               "prepare_output_dir(sys.argv[1]); print('locked', flush=True); time.sleep(60)",
+                               str(out)], cwd=ROOT, stdout=subprocess.PIPE, text=True,
+                              env={**os.environ, "PYTHONPATH": str(ROOT)})
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        second = _train("--out", str(out), "--overwrite", *TINY)
+        _, err = second.communicate(timeout=120)
+    finally:
+        holder.kill()
+        holder.wait()
     assert second.returncode == 2, err
-    assert err.count("\n") == 1 and f"pid {first.pid}" in err and str(out) in err
+    assert err.count("\n") == 1 and f"pid {holder.pid}" in err and str(out) in err
