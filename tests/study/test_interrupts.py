@@ -6,6 +6,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -43,9 +44,10 @@ def _running(pid: int) -> bool:
         return False
 
 
-def _study(out: Path, workers: int, *extra: str) -> subprocess.Popen:
+def _study(out: Path, workers: int, *extra: str, progress: bool = False) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "uav_struct_env.cli", "study", "--out", str(out), "--workers",
-           str(workers), "--no-progress", "--no-figures", "--detector", "projection", *extra]
+           str(workers), *([] if progress else ["--no-progress"]), "--no-figures", "--detector",
+           "projection", *extra]
     # A session of its own, so that a signal to the group is what a terminal's Ctrl-C sends.
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True, env=os.environ.copy(), preexec_fn=_sigint_default)
@@ -64,6 +66,25 @@ def _wait_for_workers(proc: subprocess.Popen, n: int, timeout: float = 120) -> l
     raise AssertionError("the study's workers did not start")
 
 
+def _wait_for_viewpoints(proc: subprocess.Popen, done: int,
+                         timeout: float = 180) -> tuple[list, threading.Thread]:
+    """Read the study's progress bar (stderr) until it counts ``done`` viewpoints.
+
+    Returns what was read (the list keeps growing) and the reading thread (joined at EOF).
+
+    A fixed sleep was not enough where the kernels had still to be compiled (a fresh clone): the
+    signal then came before the first viewpoint. A thread keeps reading, so the pipe never fills.
+    """
+    read: list[str] = []
+    reader = threading.Thread(target=lambda: read.extend(iter(lambda: proc.stderr.read(1), "")), daemon=True)
+    reader.start()
+    deadline = time.monotonic() + timeout
+    while f" {done}/" not in "".join(read):
+        assert proc.poll() is None and time.monotonic() < deadline, "".join(read)[-2000:]
+        time.sleep(0.1)
+    return read, reader
+
+
 def _previous_run(out: Path) -> dict[str, bytes]:
     out.mkdir()
     files = {"results.json": b'{"earlier": "run"}\n', "table2.md": b"| earlier |\n",
@@ -77,16 +98,21 @@ def _previous_run(out: Path) -> dict[str, bytes]:
 def test_ctrl_c_stops_the_study_quickly_with_one_line_and_status_130(workers, tmp_path):
     out = tmp_path / "out"
     before = _previous_run(out)
-    proc = _study(out, workers, "--overwrite")
+    proc = _study(out, workers, "--overwrite", progress=workers == 1)
     if workers > 1:
         pids = _wait_for_workers(proc, workers)
     else:
-        time.sleep(6.0)  # past start-up: rendering the first scene
+        read, reader = _wait_for_viewpoints(proc, 1)  # past start-up: a viewpoint done, the next rendering
         pids = []
     pids += _children(proc.pid)
     t0 = time.monotonic()
     os.killpg(proc.pid, signal.SIGINT)
-    _, err = proc.communicate(timeout=30)
+    if workers > 1:
+        _, err = proc.communicate(timeout=30)
+    else:
+        proc.wait(timeout=30)
+        reader.join(timeout=10)  # to the end of stderr
+        err = "".join(read)
     stopped_s = time.monotonic() - t0
     assert proc.returncode == 130, err[-2000:]
     assert stopped_s < 5.0
