@@ -9,9 +9,11 @@ import pytest
 from uav_struct_env.site import ArucoMarker
 from uav_struct_env.site.textures import (
     aruco_texture,
+    clear_texture_memo,
     concrete_texture,
     fractal_noise,
     ground_texture,
+    texture_memo,
     value_noise,
 )
 
@@ -82,3 +84,17 @@ def test_aruco_texture_detects_with_quiet_zone_and_corner_order(marker_id):
 def test_bad_arguments_raise(call, error, match):
     with pytest.raises(error, match=match):
         call()
+
+
+@pytest.mark.parametrize("draw", [lambda r: concrete_texture(r, 128, 2.0),
+                                  lambda r: ground_texture(r, 256, 30.0)])
+def test_a_repeated_draw_is_the_same_texture_and_leaves_the_generator_where_drawing_would(draw):
+    clear_texture_memo()
+    first_rng, again_rng = np.random.default_rng(11), np.random.default_rng(11)
+    first = draw(first_rng)  # drawn, and memoized
+    again = draw(again_rng)  # replayed
+    assert texture_memo() == (1, first.nbytes) and np.array_equal(first, again)
+    assert first_rng.uniform() == again_rng.uniform()  # the generators go on alike
+    again[:] = 0  # a caller's copy: the memo keeps its own
+    assert np.array_equal(draw(np.random.default_rng(11)), first)
+    assert not np.array_equal(draw(np.random.default_rng(12)), first)  # another state, another texture

@@ -6,9 +6,19 @@ metres, not texels: a texture covering ``extent`` metres looks the same at any r
 neighbouring surfaces of one element (whose faces share an atlas) get consistent grain.
 
 Only numpy, OpenCV (for the ArUco bit pattern) and nothing else: no pybullet here.
+
+Drawing a texture costs 10-250 ms (a 1024 x 1024 ground most), and the same site is often built
+again in one process (each ``reset`` of a fixed site, env copies, a test suite): the concrete and
+ground textures are memoized on the generator's state and the arguments (:func:`_replayable`);
+a repeated draw returns a copy of the texture and leaves the generator where drawing it would
+have, so every seed gives the same texture and the same later draws as without the memo.
 """
 
 from __future__ import annotations
+
+import functools
+from collections import OrderedDict
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -17,11 +27,14 @@ from localization.checks import check_number
 from uav_struct_env.site.markers import ArucoMarker
 
 __all__ = [
+    "REPLAY_BYTES",
     "aruco_texture",
+    "clear_texture_memo",
     "concrete_texture",
     "fractal_noise",
     "ground_palette",
     "ground_texture",
+    "texture_memo",
     "value_noise",
 ]
 
@@ -30,6 +43,43 @@ def _check_rng(rng: object) -> np.random.Generator:
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
     return rng
+
+
+#: Most bytes of textures :func:`_replayable` keeps (least recently used dropped first).
+REPLAY_BYTES = 64 * 2**20
+_REPLAY: OrderedDict[str, tuple[NDArray[np.uint8], dict]] = OrderedDict()
+
+
+def _replayable(draw: Callable[..., NDArray[np.uint8]]) -> Callable[..., NDArray[np.uint8]]:
+    """``draw(rng, ...)`` memoized on ``rng``'s state and the arguments (see the module docstring)."""
+
+    @functools.wraps(draw)
+    def replay(rng: np.random.Generator, *args, **kwargs) -> NDArray[np.uint8]:
+        rng = _check_rng(rng)
+        key = repr((draw.__name__, rng.bit_generator.state, args, sorted(kwargs.items())))
+        if key in _REPLAY:
+            _REPLAY.move_to_end(key)
+            texture, after = _REPLAY[key]
+            rng.bit_generator.state = after
+            return texture.copy()
+        texture = draw(rng, *args, **kwargs)
+        if texture.nbytes <= REPLAY_BYTES:
+            _REPLAY[key] = (texture.copy(), rng.bit_generator.state)
+            while texture_memo()[1] > REPLAY_BYTES:
+                _REPLAY.popitem(last=False)
+        return texture
+
+    return replay
+
+
+def texture_memo() -> tuple[int, int]:
+    """(textures, bytes) the memo of :func:`_replayable` holds in this process."""
+    return len(_REPLAY), sum(t.nbytes for t, _ in _REPLAY.values())
+
+
+def clear_texture_memo() -> None:
+    """Forget every memoized texture (the next draws compute them again)."""
+    _REPLAY.clear()
 
 
 def _check_size(size: int) -> int:
@@ -111,6 +161,7 @@ def _to_uint8(rgb: NDArray[np.floating]) -> NDArray[np.uint8]:
     return np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
 
 
+@_replayable
 def concrete_texture(
     rng: np.random.Generator, size: int = 512, extent: float = 4.0
 ) -> NDArray[np.uint8]:
@@ -158,6 +209,7 @@ def ground_palette(rng: np.random.Generator) -> tuple[NDArray[np.float64], NDArr
     return soil, gravel
 
 
+@_replayable
 def ground_texture(
     rng: np.random.Generator,
     size: int = 1024,
