@@ -102,7 +102,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from localization.detect.weights import file_sha256
 from uav_struct_env.errors import ConfigError, IfcImportError, SiteGeometryError
+from uav_struct_env.site import ifc_cache
 from uav_struct_env.site.elements import Beam, Column, Element, Hole, Slab, Stage, Storey, TriangleMesh, Wall
 from uav_struct_env.site.ifc_export import require_ifcopenshell, write_building
 from uav_struct_env.site.ifc_file import check_complete, check_coordinates, check_size, star_arguments
@@ -1083,7 +1085,21 @@ def _parse(path: Path, transform: NDArray[np.float64]) -> _Parsed:
 
 @functools.lru_cache(maxsize=8)
 def _parse_cached(path: str, mtime_ns: int, size: int, transform: bytes) -> _Parsed:
+    """The parse of ``path``: from the disk cache (:mod:`.ifc_cache`), else parsed and stored there.
+
+    The size guard comes first (a stat; the key hashes the whole file).
+    """
+    check_size(Path(path))
+    entry = ifc_cache.cache_path(file_sha256(path), transform)
+    parsed = ifc_cache.read_entry(entry)
+    if isinstance(parsed, _Parsed):
+        report = dataclasses.replace(parsed.report, path=path)  # the same content, maybe another path
+        parsed = dataclasses.replace(parsed, report=report, source={**parsed.source, "path": path,
+                                                                    "report": report})
+        log.info("%s (from the parse cache %s)", report.summary(), entry)
+        return parsed
     parsed = _parse(Path(path), np.frombuffer(transform, dtype=np.float64).reshape(4, 4).copy())
+    ifc_cache.write_entry(entry, parsed)
     log.info("%s", parsed.report.summary())
     return parsed
 

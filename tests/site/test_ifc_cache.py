@@ -1,0 +1,129 @@
+"""The IFC parse cache on disk (uav_struct_env.site.ifc_cache): a second process reads the parse back."""
+
+from __future__ import annotations
+
+import logging
+import shutil
+
+import numpy as np
+import pytest
+
+ifcopenshell = pytest.importorskip("ifcopenshell")
+
+from ifc_sites import DUPLEX  # noqa: E402
+
+from uav_struct_env.site import ifc as ifc_module  # noqa: E402
+from uav_struct_env.site import ifc_cache, ifc_report, ifc_stages, load_ifc  # noqa: E402
+
+
+def _fresh_process():
+    """What a new process has: no in-process parse."""
+    ifc_module._parse_cached.cache_clear()
+
+
+def _no_parse(*args, **kwargs):
+    raise AssertionError("the file was parsed, not read from the cache")
+
+
+def _same_site(a, b):
+    assert [e.guid for e in a.elements] == [e.guid for e in b.elements]
+    assert [e.name for e in a.elements] == [e.name for e in b.elements]
+    for ea, eb in zip(a.elements, b.elements, strict=True):
+        np.testing.assert_array_equal(ea.outline, eb.outline)
+        np.testing.assert_array_equal(ea.mesh.vertices, eb.mesh.vertices)
+        np.testing.assert_array_equal(ea.mesh.faces, eb.mesh.faces)
+    for name in ("slab_corners", "opening_corners", "column_tops"):
+        np.testing.assert_array_equal(a.landmarks(name).ids, b.landmarks(name).ids)
+        np.testing.assert_array_equal(a.landmarks(name).xyz, b.landmarks(name).xyz)
+        assert a.landmarks(name).labels == b.landmarks(name).labels
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    root = tmp_path / "cache"
+    monkeypatch.setenv(ifc_cache.IFC_CACHE_ENV, str(root))
+    _fresh_process()
+    yield root
+    _fresh_process()
+
+
+def test_the_second_process_reads_the_parse_back_unchanged(cache, monkeypatch):
+    first = load_ifc(DUPLEX, stage="Level 2/slab")
+    stages = ifc_stages(DUPLEX)
+    entries = list(cache.glob("*.pickle"))
+    assert len(entries) == 1 and entries[0].name.startswith(ifc_module.file_sha256(DUPLEX))
+    assert ifc_cache.importer_version() in entries[0].name
+    _fresh_process()
+    monkeypatch.setattr(ifc_module, "_parse", _no_parse)
+    again = load_ifc(DUPLEX, stage="Level 2/slab")
+    _same_site(first, again)
+    assert ifc_stages(DUPLEX) == stages
+    assert again.source["report"].kept == first.source["report"].kept
+
+
+def test_the_key_is_the_content_so_a_copy_elsewhere_is_served_under_its_own_path(cache, tmp_path,
+                                                                              monkeypatch):
+    load_ifc(DUPLEX)
+    copy = tmp_path / "elsewhere" / "copy.ifc"
+    copy.parent.mkdir()
+    shutil.copyfile(DUPLEX, copy)
+    monkeypatch.setattr(ifc_module, "_parse", _no_parse)
+    site = load_ifc(copy)
+    assert site.source["path"] == str(copy.resolve()) == site.source["report"].path
+    assert ifc_report(copy).path == str(copy.resolve())
+
+
+def test_another_transform_or_another_file_is_another_entry(cache):
+    load_ifc(DUPLEX)
+    shifted = np.eye(4)
+    shifted[:3, 3] = (10.0, -5.0, 0.0)
+    moved = load_ifc(DUPLEX, transform=shifted)
+    assert len(list(cache.glob("*.pickle"))) == 2
+    _fresh_process()
+    again = load_ifc(DUPLEX, transform=shifted)
+    np.testing.assert_array_equal(moved.landmarks("slab_corners").xyz, again.landmarks("slab_corners").xyz)
+    offset = again.landmarks("slab_corners").xyz - load_ifc(DUPLEX).landmarks("slab_corners").xyz
+    np.testing.assert_allclose(offset, np.tile([10.0, -5.0, 0.0], (len(offset), 1)), atol=1e-9)
+
+
+def test_off_disables_it(tmp_path, monkeypatch):
+    monkeypatch.setenv(ifc_cache.IFC_CACHE_ENV, "off")
+    assert ifc_cache.cache_root() is None and ifc_cache.cache_path("0" * 64, b"") is None
+    _fresh_process()
+    calls = []
+    parse = ifc_module._parse
+    monkeypatch.setattr(ifc_module, "_parse", lambda *a: calls.append(1) or parse(*a))
+    load_ifc(DUPLEX)
+    _fresh_process()
+    load_ifc(DUPLEX)
+    assert len(calls) == 2
+    _fresh_process()
+
+
+def test_the_default_folder_is_beside_the_adapted_weights(monkeypatch, tmp_path):
+    monkeypatch.delenv(ifc_cache.IFC_CACHE_ENV, raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert ifc_cache.cache_root() == tmp_path / "uav-struct" / "ifc"
+
+
+def test_a_damaged_entry_is_parsed_again_and_overwritten(cache, caplog):
+    first = load_ifc(DUPLEX)
+    (entry,) = cache.glob("*.pickle")
+    entry.write_bytes(b"not a pickle")
+    _fresh_process()
+    with caplog.at_level(logging.WARNING, logger="uav_struct_env.site.ifc_cache"):
+        again = load_ifc(DUPLEX)
+    assert "cannot be read" in caplog.text and "parsing the file again" in caplog.text
+    _same_site(first, again)
+    assert entry.stat().st_size > 1000  # rewritten
+
+
+def test_a_folder_that_cannot_be_written_is_warned_of_and_the_import_goes_on(tmp_path, monkeypatch, caplog):
+    blocker = tmp_path / "a file, not a folder"
+    blocker.write_text("x")
+    monkeypatch.setenv(ifc_cache.IFC_CACHE_ENV, str(blocker / "ifc"))
+    _fresh_process()
+    with caplog.at_level(logging.WARNING, logger="uav_struct_env.site.ifc_cache"):
+        site = load_ifc(DUPLEX)
+    assert "cannot write" in caplog.text and len(site.landmarks("slab_corners")) > 0
+    _fresh_process()
