@@ -4,16 +4,17 @@ from __future__ import annotations
 
 import logging
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 ifcopenshell = pytest.importorskip("ifcopenshell")
 
-from ifc_sites import DUPLEX  # noqa: E402
+from ifc_sites import DUPLEX, messy_site  # noqa: E402
 
 from uav_struct_env.site import ifc as ifc_module  # noqa: E402
-from uav_struct_env.site import ifc_cache, ifc_report, ifc_stages, load_ifc  # noqa: E402
+from uav_struct_env.site import ifc_cache, ifc_report, ifc_stages, load_ifc, write_ifc  # noqa: E402
 
 
 def _fresh_process():
@@ -38,32 +39,54 @@ def _same_site(a, b):
         assert a.landmarks(name).labels == b.landmarks(name).labels
 
 
+@pytest.fixture(scope="module")
+def seeded(tmp_path_factory):
+    """The duplex parsed once into a cache folder of this module: (its entry, the site, its stages)."""
+    root = tmp_path_factory.mktemp("seeded_ifc_cache")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(ifc_cache.IFC_CACHE_ENV, str(root))
+        _fresh_process()
+        site, stages = load_ifc(DUPLEX, stage="Level 2/slab"), ifc_stages(DUPLEX)
+        _fresh_process()
+    (entry,) = root.glob("*.pickle")
+    return entry, site, stages
+
+
 @pytest.fixture
-def cache(tmp_path, monkeypatch):
+def cache(tmp_path, monkeypatch, seeded):
+    """A cache folder holding the duplex's entry, as the first process left it; no in-process parse."""
     root = tmp_path / "cache"
+    root.mkdir()
+    shutil.copyfile(seeded[0], root / seeded[0].name)
     monkeypatch.setenv(ifc_cache.IFC_CACHE_ENV, str(root))
     _fresh_process()
     yield root
     _fresh_process()
 
 
-def test_the_second_process_reads_the_parse_back_unchanged(cache, monkeypatch):
-    first = load_ifc(DUPLEX, stage="Level 2/slab")
-    stages = ifc_stages(DUPLEX)
-    entries = list(cache.glob("*.pickle"))
-    assert len(entries) == 1 and entries[0].name.startswith(ifc_module.file_sha256(DUPLEX))
-    assert ifc_cache.importer_version() in entries[0].name
-    _fresh_process()
+@pytest.fixture(scope="module")
+def small(tmp_path_factory) -> Path:
+    """A small synthetic IFC file (fast to parse)."""
+    return write_ifc(messy_site(), tmp_path_factory.mktemp("small") / "small.ifc")
+
+
+def test_the_entry_is_keyed_by_the_content_and_the_importer_version(seeded):
+    entry = seeded[0]
+    assert entry.name.startswith(f"{ifc_module.file_sha256(DUPLEX)}-{ifc_cache.importer_version()}-")
+    assert ifc_cache.cache_path(ifc_module.file_sha256(DUPLEX), np.eye(4).tobytes(), entry.parent) == entry
+
+
+def test_the_next_process_reads_the_parse_back_unchanged(cache, seeded, monkeypatch):
+    _, first, stages = seeded
     monkeypatch.setattr(ifc_module, "_parse", _no_parse)
     again = load_ifc(DUPLEX, stage="Level 2/slab")
     _same_site(first, again)
     assert ifc_stages(DUPLEX) == stages
     assert again.source["report"].kept == first.source["report"].kept
+    assert again.source["report"].dropped == first.source["report"].dropped
 
 
-def test_the_key_is_the_content_so_a_copy_elsewhere_is_served_under_its_own_path(cache, tmp_path,
-                                                                              monkeypatch):
-    load_ifc(DUPLEX)
+def test_a_copy_elsewhere_is_served_under_its_own_path(cache, tmp_path, monkeypatch):
     copy = tmp_path / "elsewhere" / "copy.ifc"
     copy.parent.mkdir()
     shutil.copyfile(DUPLEX, copy)
@@ -73,30 +96,31 @@ def test_the_key_is_the_content_so_a_copy_elsewhere_is_served_under_its_own_path
     assert ifc_report(copy).path == str(copy.resolve())
 
 
-def test_another_transform_or_another_file_is_another_entry(cache):
-    load_ifc(DUPLEX)
+def test_another_transform_is_another_entry(tmp_path, monkeypatch, small):
+    monkeypatch.setenv(ifc_cache.IFC_CACHE_ENV, str(tmp_path))
+    _fresh_process()
     shifted = np.eye(4)
     shifted[:3, 3] = (10.0, -5.0, 0.0)
-    moved = load_ifc(DUPLEX, transform=shifted)
-    assert len(list(cache.glob("*.pickle"))) == 2
-    _fresh_process()
-    again = load_ifc(DUPLEX, transform=shifted)
-    np.testing.assert_array_equal(moved.landmarks("slab_corners").xyz, again.landmarks("slab_corners").xyz)
-    offset = again.landmarks("slab_corners").xyz - load_ifc(DUPLEX).landmarks("slab_corners").xyz
+    base, moved = load_ifc(small), load_ifc(small, transform=shifted)
+    assert len(list(tmp_path.glob("*.pickle"))) == 2
+    offset = moved.landmarks("slab_corners").xyz - base.landmarks("slab_corners").xyz
     np.testing.assert_allclose(offset, np.tile([10.0, -5.0, 0.0], (len(offset), 1)), atol=1e-9)
+    _fresh_process()
 
 
-def test_off_disables_it(tmp_path, monkeypatch):
+def test_off_disables_it(tmp_path, monkeypatch, small):
+    monkeypatch.setenv(ifc_cache.IFC_CACHE_ENV, str(tmp_path))
+    _fresh_process()
+    load_ifc(small)
+    assert len(list(tmp_path.glob("*.pickle"))) == 1
     monkeypatch.setenv(ifc_cache.IFC_CACHE_ENV, "off")
     assert ifc_cache.cache_root() is None and ifc_cache.cache_path("0" * 64, b"") is None
     _fresh_process()
     calls = []
     parse = ifc_module._parse
     monkeypatch.setattr(ifc_module, "_parse", lambda *a: calls.append(1) or parse(*a))
-    load_ifc(DUPLEX)
-    _fresh_process()
-    load_ifc(DUPLEX)
-    assert len(calls) == 2
+    load_ifc(small)  # the entry in the folder is not read
+    assert calls == [1]
     _fresh_process()
 
 
@@ -106,24 +130,28 @@ def test_the_default_folder_is_beside_the_adapted_weights(monkeypatch, tmp_path)
     assert ifc_cache.cache_root() == tmp_path / "uav-struct" / "ifc"
 
 
-def test_a_damaged_entry_is_parsed_again_and_overwritten(cache, caplog):
-    first = load_ifc(DUPLEX)
-    (entry,) = cache.glob("*.pickle")
+def test_a_damaged_entry_is_parsed_again_and_overwritten(tmp_path, monkeypatch, small, caplog):
+    monkeypatch.setenv(ifc_cache.IFC_CACHE_ENV, str(tmp_path))
+    _fresh_process()
+    first = load_ifc(small)
+    (entry,) = tmp_path.glob("*.pickle")
     entry.write_bytes(b"not a pickle")
     _fresh_process()
     with caplog.at_level(logging.WARNING, logger="uav_struct_env.site.ifc_cache"):
-        again = load_ifc(DUPLEX)
+        again = load_ifc(small)
     assert "cannot be read" in caplog.text and "parsing the file again" in caplog.text
     _same_site(first, again)
     assert entry.stat().st_size > 1000  # rewritten
+    _fresh_process()
 
 
-def test_a_folder_that_cannot_be_written_is_warned_of_and_the_import_goes_on(tmp_path, monkeypatch, caplog):
+def test_a_folder_that_cannot_be_written_is_warned_of_and_the_import_goes_on(tmp_path, monkeypatch, small,
+                                                                              caplog):
     blocker = tmp_path / "a file, not a folder"
     blocker.write_text("x")
     monkeypatch.setenv(ifc_cache.IFC_CACHE_ENV, str(blocker / "ifc"))
     _fresh_process()
     with caplog.at_level(logging.WARNING, logger="uav_struct_env.site.ifc_cache"):
-        site = load_ifc(DUPLEX)
+        site = load_ifc(small)
     assert "cannot write" in caplog.text and len(site.landmarks("slab_corners")) > 0
     _fresh_process()
