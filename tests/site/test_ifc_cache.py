@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import shutil
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -154,4 +155,33 @@ def test_a_folder_that_cannot_be_written_is_warned_of_and_the_import_goes_on(tmp
     with caplog.at_level(logging.WARNING, logger="uav_struct_env.site.ifc_cache"):
         site = load_ifc(small)
     assert "cannot write" in caplog.text and len(site.landmarks("slab_corners")) > 0
+    _fresh_process()
+
+
+def test_a_process_that_finds_the_entry_being_parsed_waits_for_it(tmp_path, monkeypatch, small):
+    monkeypatch.setenv(ifc_cache.IFC_CACHE_ENV, str(tmp_path / "made"))
+    _fresh_process()
+    first = load_ifc(small)
+    (made,) = (tmp_path / "made").glob("*.pickle")
+    monkeypatch.setenv(ifc_cache.IFC_CACHE_ENV, str(tmp_path / "empty"))
+    _fresh_process()
+    entry = tmp_path / "empty" / made.name
+    monkeypatch.setattr(ifc_module, "_parse", _no_parse)
+    out: dict = {}
+
+    def load():
+        try:
+            out["site"] = load_ifc(small)
+        except Exception as exc:  # reported below
+            out["error"] = exc
+
+    with ifc_cache.entry_lock(entry):  # another process is parsing the file
+        waiter = threading.Thread(target=load)
+        waiter.start()
+        waiter.join(0.5)
+        assert waiter.is_alive() and not entry.exists()
+        shutil.copyfile(made, entry)  # ... and writes its entry
+    waiter.join(60)
+    assert "error" not in out, out.get("error")
+    _same_site(first, out["site"])
     _fresh_process()

@@ -1105,15 +1105,16 @@ def _parse_cached(path: str, mtime_ns: int, size: int, transform: bytes) -> _Par
     """
     check_size(Path(path))
     entry = ifc_cache.cache_path(file_sha256(path), transform)
-    parsed = ifc_cache.read_entry(entry)
-    if isinstance(parsed, _Parsed):
-        report = dataclasses.replace(parsed.report, path=path)  # the same content, maybe another path
-        parsed = dataclasses.replace(parsed, report=report, source={**parsed.source, "path": path,
-                                                                    "report": report})
-        log.info("%s (from the parse cache %s)", report.summary(), entry)
-        return parsed
-    parsed = _parse(Path(path), np.frombuffer(transform, dtype=np.float64).reshape(4, 4).copy())
-    ifc_cache.write_entry(entry, parsed)
+    with ifc_cache.entry_lock(entry):  # another process parsing the same file: wait for its entry
+        parsed = ifc_cache.read_entry(entry)
+        if isinstance(parsed, _Parsed):
+            report = dataclasses.replace(parsed.report, path=path)  # the same content, maybe elsewhere
+            parsed = dataclasses.replace(parsed, report=report, source={**parsed.source, "path": path,
+                                                                        "report": report})
+            log.info("%s (from the parse cache %s)", report.summary(), entry)
+            return parsed
+        parsed = _parse(Path(path), np.frombuffer(transform, dtype=np.float64).reshape(4, 4).copy())
+        ifc_cache.write_entry(entry, parsed)
     log.info("%s", parsed.report.summary())
     return parsed
 

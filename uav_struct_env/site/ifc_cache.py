@@ -13,23 +13,30 @@ the import rules is a new version) and the ``transform``. It lives in :func:`cac
 adapt``'s adapted weights). An entry is a pickle written to a temporary file and moved into
 place, so a reader never sees half of one; an entry that cannot be read (another version of
 Python, a damaged file) is parsed again and overwritten, and a cache that cannot be written
-(a read-only folder, a full disk) is logged at WARNING and the import goes on without it. The
+(a read-only folder, a full disk) is logged at WARNING and the import goes on without it.
+Processes that load the same building at once (env copies started together) parse it once: the
+first holds a lock on the entry (:func:`entry_lock`) while it parses, the others wait for it and
+read its entry. The
 folder holds the user's own parses: like any pickle, an entry is code to Python, so point the
 variable only at a folder you alone write.
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import functools
 import hashlib
 import logging
 import os
 import pickle
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-__all__ = ["IFC_CACHE_ENV", "cache_path", "cache_root", "importer_version", "read_entry", "write_entry"]
+__all__ = ["IFC_CACHE_ENV", "cache_path", "cache_root", "entry_lock", "importer_version", "read_entry",
+           "write_entry"]
 
 log = logging.getLogger(__name__)
 
@@ -114,3 +121,27 @@ def write_entry(path: Path | None, obj: Any) -> bool:
         if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)
         return False
+
+
+@contextlib.contextmanager
+def entry_lock(path: Path | None) -> Iterator[None]:
+    """Hold an exclusive lock on the entry ``path`` (a ``.lock`` file beside it) while parsing it.
+
+    Another process that asks for the same entry waits until the holder has written it. Without
+    a cache, or where the lock file cannot be made, nothing is locked.
+    """
+    if path is None:
+        yield
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fh = open(path.with_name(path.name + ".lock"), "a+b")
+    except OSError:
+        yield
+        return
+    with fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
