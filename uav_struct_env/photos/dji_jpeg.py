@@ -92,7 +92,8 @@ def _dms(value: float) -> tuple[Fraction, Fraction, Fraction]:
 
 def write_dji_jpeg(path: str | Path, rgb: ArrayLike, fields: Mapping[str, float], *, make: str = "DJI",
                    model: str = "L1D-20c", focal_length_mm: float | None = None,
-                   focal_length_35mm: float | None = None, quality: int = 95) -> Path:
+                   focal_length_35mm: float | None = None, quality: int = 95,
+                   orientation: int = 1) -> Path:
     """Write an (H, W, 3) uint8 RGB image as a JPEG with DJI's EXIF and XMP (module docstring).
 
     Args:
@@ -105,6 +106,8 @@ def write_dji_jpeg(path: str | Path, rgb: ArrayLike, fields: Mapping[str, float]
         focal_length_mm: EXIF FocalLength, or None to leave it out.
         focal_length_35mm: EXIF FocalLengthIn35mmFilm, or None to leave it out.
         quality: JPEG quality.
+        orientation: EXIF Orientation (274) to state, written when not 1 (DJI writes 1): the
+            pixels are stored as given, the tag tells a viewer how to turn them.
 
     Raises:
         ValueError: an image that is not (H, W, 3) uint8, or an unknown field name.
@@ -117,6 +120,8 @@ def write_dji_jpeg(path: str | Path, rgb: ArrayLike, fields: Mapping[str, float]
     xmp = _xmp(fields, make, model)
     exif = Image.Exif()
     exif[ExifTags.Base.Make], exif[ExifTags.Base.Model] = make, model
+    if orientation != 1:
+        exif[ExifTags.Base.Orientation] = int(orientation)
     sub = exif.get_ifd(ExifTags.IFD.Exif)
     if focal_length_mm:
         focal = Fraction(focal_length_mm).limit_denominator(1000)
