@@ -17,7 +17,7 @@ errors over the ground-truth landmarks found within 3 px in both the lossless im
 encoding (paired), so the columns compare the same corners.
 
     python benchmarks/photo_jpeg_gap.py --layouts 4 --views 10
-    python benchmarks/photo_jpeg_gap.py --data /tmp/val --weights landmarks_v1_jpeg
+    python benchmarks/photo_jpeg_gap.py --data /tmp/val --weights active --encodings q95 q95_422
 """
 
 from __future__ import annotations
@@ -89,7 +89,8 @@ def _dataset(args: argparse.Namespace, folder: Path) -> Path:
 def main(args: argparse.Namespace) -> dict:
     from uav_struct_env.datasets.landmarks import load_labels
 
-    det = LearnedDetector.for_localizer("all", 1280, "robust", weights=args.weights)
+    det = LearnedDetector.for_localizer("all", 1280, "robust", weights=args.weights,
+                                        refiner=args.refiner or True)
     stages = ("cand", "final", "ref@jpg", "cand@jpg")
     errs: dict = {(e, s): [] for e in args.encodings for s in (*stages, "png")}
     types: list = []
@@ -138,6 +139,9 @@ if __name__ == "__main__":
     parser.add_argument("--views", type=int, default=10, help="views per layout")
     parser.add_argument("--seed", type=int, default=0, help="the rendered dataset's seed")
     parser.add_argument("--data", default=None, help="a labelled full-resolution dataset instead")
-    parser.add_argument("--weights", default=None, help="the detector's weight set (None: the default)")
-    parser.add_argument("--encodings", nargs="+", default=["q95", "q95_444", "q100", "q100_444", "gray"])
+    parser.add_argument("--weights", default=None, help="the detector's weight set (none: the default)")
+    parser.add_argument("--refiner", default=None, help="another refiner ONNX file (none: the set's)")
+    parser.add_argument("--encodings", nargs="+",
+                        default=["q95", "q95_422", "q95_444", "q100", "q100_444", "gray"],
+                        help="png, gray or q<QUALITY>[_<CHROMA>] with CHROMA 444, 422 or 420")
     main(parser.parse_args())

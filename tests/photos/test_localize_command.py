@@ -109,6 +109,9 @@ def test_refusals_are_one_line_before_any_work(flight, plain_ifc, tmp_path, caps
     bad.write_text("camera_matrix: [1, 2")
     cal = [flight["photos"][0], "--ifc", flight["ifc"], "--stage", STAGE, "--camera", str(bad)]
     assert "does not parse" in _refused(capsys, cal, tmp_path / "e")
+    det = [flight["photos"][0], *base, "--detector", "learned:v9"]
+    assert "--detector must be one of ('learned', 'learned:landmarks_v1'" in _refused(capsys, det,
+                                                                                      tmp_path / "f")
 
 
 def test_a_user_georeference_or_prior_replaces_a_missing_one(flight, plain_ifc, tmp_path):
