@@ -18,6 +18,9 @@ Two steps, both seeded:
    and applies photometric augmentation; loss = binary cross-entropy of the three scores + L1 of
    the offset of every type present within the positive radius. Checkpoints are chosen by the F1
    at 3 px of the whole detector (keypoint network + this refiner) on a validation dataset.
+   ``--jpeg P,QLO,QHI`` (off by default) also JPEG-compresses that fraction of the windows
+   (:mod:`uav_struct_env.training.jpeg_augment`), for photos: the refiner is the stage a camera's
+   JPEG costs accuracy (``benchmarks/photo_jpeg_gap.py``, docs/photos.md).
 
 Example (the committed refiner, see ``localization/detect/models/MODEL_CARD.md``)::
 
