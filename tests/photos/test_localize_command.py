@@ -109,6 +109,9 @@ def test_refusals_are_one_line_before_any_work(flight, plain_ifc, tmp_path, caps
     bad.write_text("camera_matrix: [1, 2")
     cal = [flight["photos"][0], "--ifc", flight["ifc"], "--stage", STAGE, "--camera", str(bad)]
     assert "does not parse" in _refused(capsys, cal, tmp_path / "e")
+    det = [flight["photos"][0], *base, "--detector", "learned:v9"]
+    assert "--detector must be one of ('learned', 'learned:landmarks_v1'" in _refused(capsys, det,
+                                                                                      tmp_path / "f")
 
 
 def test_a_user_georeference_or_prior_replaces_a_missing_one(flight, plain_ifc, tmp_path):
@@ -162,3 +165,44 @@ def test_a_folder_stands_for_its_jpegs(flight, tmp_path):
     with pytest.raises(PhotoError, match="holds no JPEG photo"):
         expand_photos([str(tmp_path / "none")])
     assert expand_photos([str(Path(flight["photos"][0]).parent)]) == sorted(flight["photos"])
+
+
+@pytest.mark.parametrize("tag", [6, 3, 8])
+def test_a_photo_stored_turned_localizes_its_sensor_camera(flight, tmp_path, tag):
+    # the same view stored as a sensor turned on its optical axis would store it, with the EXIF tag
+    # that turns it upright; the gimbal angles are the sensor's. For the quarter turns the calibration
+    # is the upright images' (640 x 360 for a 360 x 640 photo), for the half turn the stored pixels'.
+    from PIL import Image
+
+    from localization.geometry.transforms import rotation_angle_deg
+    from uav_struct_env.photos import localize_photos
+    from uav_struct_env.photos.calibration import load_calibration
+    from uav_struct_env.photos.orientation import turn_camera, turn_image, turn_pose, upright_turns
+
+    turns = upright_turns(tag)
+    g = read_ifc_georeference(flight["ifc"])
+    sensor_prior = np.linalg.inv(turn_pose(np.linalg.inv(flight["priors"][0]), -turns))
+    upright = np.asarray(Image.open(flight["photos"][0]))
+    photo = write_dji_jpeg(tmp_path / f"DJI_{tag}.JPG", turn_image(upright, -turns),
+                           dji_fields_from_pose(sensor_prior, g), orientation=tag)
+    up = load_calibration(flight["camera"], (640, 360))
+    K, dist, size = turn_camera(up.K, up.distortion, up.image_size, 2) if turns == 2 else (
+        up.K, up.distortion, up.image_size)
+    camera = tmp_path / "camera.yaml"  # with its image size: the layout it was made in
+    fs = cv2.FileStorage(str(camera), cv2.FILE_STORAGE_WRITE)
+    for key, value in (("camera_matrix", K), ("distortion_coefficients", dist.reshape(1, -1)),
+                       ("image_width", size[0]), ("image_height", size[1])):
+        fs.write(key, value)
+    fs.release()
+    pose = localize_photos([photo], flight["ifc"], stage=STAGE, camera=camera)[0]
+    assert pose.success and pose.orientation == tag, pose.failure_reason
+    truth = flight["truth"][0]
+    error = np.linalg.norm(pose.position - truth[:3, 3])
+    assert error < 5 * np.linalg.norm(pose.std[:3]) + 0.02
+    assert error < np.linalg.norm(flight["priors"][0][:3, 3] - truth[:3, 3])
+    sensor_truth = np.linalg.inv(turn_pose(np.linalg.inv(truth), -turns))
+    assert rotation_angle_deg(pose.world_from_cam[:3, :3], sensor_truth[:3, :3]) < 1.0
+    w, h = pose.camera.image_size
+    assert (w, h) == ((640, 360) if turns == 2 else (360, 640))
+    uv = pose.detections_uv
+    assert len(uv) >= 4 and np.all((uv > -0.5) & (uv < np.array([w, h]) - 0.5))

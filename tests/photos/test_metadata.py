@@ -86,3 +86,15 @@ def test_not_an_image_is_refused(tmp_path):
         read_metadata(path)
     with pytest.raises(FileNotFoundError, match="does not exist"):
         read_metadata(tmp_path / "missing.jpg")
+
+
+@pytest.mark.parametrize("chroma, sampling", [("4:2:0", 2), ("4:2:2", 1), ("4:4:4", 0)])
+def test_the_chroma_subsampling_written_is_the_one_asked_for(tmp_path, chroma, sampling):
+    from PIL import Image, JpegImagePlugin
+
+    rgb = np.random.default_rng(0).integers(0, 256, (32, 48, 3), dtype=np.uint8)
+    path = write_dji_jpeg(tmp_path / "p.jpg", rgb, {"GpsLatitude": 1.0, "GpsLongitude": 2.0}, chroma=chroma)
+    with Image.open(path) as im:
+        assert JpegImagePlugin.get_sampling(im) == sampling
+    with pytest.raises(ValueError, match="chroma must be one of"):
+        write_dji_jpeg(tmp_path / "q.jpg", rgb, {}, chroma="4:1:1")

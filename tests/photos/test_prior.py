@@ -5,7 +5,14 @@ import pytest
 
 from uav_struct_env.photos import Georeference, PhotoError, prior_from_metadata
 from uav_struct_env.photos.metadata import PhotoMetadata
-from uav_struct_env.photos.prior import CONSUMER_M, RTK_FIXED_M, RTK_FLOOR_M, prior_from_string, prior_sigmas
+from uav_struct_env.photos.prior import (
+    CONSUMER_M,
+    RTK_FIXED_M,
+    RTK_FLOAT_M,
+    RTK_FLOOR_M,
+    prior_from_string,
+    prior_sigmas,
+)
 
 G = Georeference((691000.0, 5334000.0, 500.0), 0.3, crs="EPSG:32632")
 GIMBAL = {"GimbalYawDegree": 10.0, "GimbalPitchDegree": -30.0, "GimbalRollDegree": 0.0}
@@ -40,6 +47,15 @@ def test_rtk_fixed_takes_the_stds_or_the_defaults(tmp_path):
     sigmas, case = prior_sigmas(_meta(tmp_path, dji={"RtkFlag": 50}))
     assert sigmas.position_m == (RTK_FIXED_M[0], RTK_FIXED_M[0], RTK_FIXED_M[1])
     assert sigmas.rotation_rad[2] == pytest.approx(math.radians(5.0))
+
+
+@pytest.mark.parametrize("flag, case", [(34, "RTK float"), (32, "RTK float"), (49, "RTK float"),
+                                        (16, "consumer GNSS"), (0, "consumer GNSS")])
+def test_rtk_flags_below_fixed_as_dji_documents_them(tmp_path, flag, case):
+    # DJI: 0 no position, 16 single point, 32-49 float, 50 fixed
+    sigmas, got = prior_sigmas(_meta(tmp_path, dji={"RtkFlag": flag}))
+    assert got == case
+    assert sigmas.position_m[0] == (RTK_FLOAT_M[0] if case == "RTK float" else CONSUMER_M[0])
 
 
 def test_a_photo_without_a_prior_is_refused_naming_what_is_missing(tmp_path):

@@ -1,7 +1,7 @@
 """Real drone photos localized against an IFC model (``uav-struct localize``), pure of pybullet.
 
-inputs (:mod:`.metadata`, :mod:`.calibration`, :mod:`.georef`) -> prior (:mod:`.attitude`,
-:mod:`.prior`) -> :mod:`.localize` -> outputs (:mod:`.overlay`, :mod:`.command`);
+inputs (:mod:`.metadata`, :mod:`.calibration`, :mod:`.georef`, :mod:`.orientation`) -> prior
+(:mod:`.attitude`, :mod:`.prior`) -> :mod:`.localize` -> outputs (:mod:`.overlay`, :mod:`.command`);
 :mod:`.dji_jpeg` writes DJI-style JPEGs for validation. pyproj is the ``photo`` extra.
 
 from uav_struct_env.photos import localize_photos

@@ -40,6 +40,7 @@ from localization.geometry.distortion import check_distortion
 from localization.geometry.transforms import check_intrinsics
 from uav_struct_env.photos.errors import PhotoError
 from uav_struct_env.photos.metadata import PhotoMetadata
+from uav_struct_env.photos.orientation import turn_camera, upright_turns
 
 __all__ = ["SENSOR_WIDTH_MM", "CameraModel", "camera_from_exif", "load_calibration", "resolve_camera"]
 
@@ -175,8 +176,14 @@ def _read_file(path: Path) -> Any:
     return yaml.safe_load(text)
 
 
-def load_calibration(path: str | Path, photo_size: tuple[int, int]) -> CameraModel:
+def load_calibration(path: str | Path, photo_size: tuple[int, int], turns: int = 0) -> CameraModel:
     """The camera of a calibration file (module docstring), scaled to photos of ``photo_size``.
+
+    ``turns``: the quarter turns the photo's EXIF orientation tag asks for
+    (:func:`uav_struct_env.photos.orientation.upright_turns`). With an odd number, a calibration
+    whose size has the upright image's aspect ratio (width and height swapped: made on images
+    turned upright by their tag, as OpenCV's ``imread`` turns them) is turned back to the stored
+    pixels' layout; a half turn keeps the size, so such a calibration is taken as stored.
 
     Raises:
         FileNotFoundError: if ``path`` does not exist.
@@ -198,7 +205,20 @@ def load_calibration(path: str | Path, photo_size: tuple[int, int]) -> CameraMod
         K, dist, size = _odm(name, data, photo_size)
     else:
         K, dist, size = _from_mapping(name, data)
+    upright_size = (photo_size[1], photo_size[0])
+    turned = size is not None and not _same_aspect(size, photo_size) and _same_aspect(size, upright_size)
+    if turns % 2 and turned:
+        upright = _scaled(name, K, dist, size, upright_size, str(path))
+        K, dist, _ = turn_camera(upright.K, upright.distortion, upright.image_size, -turns)
+        return CameraModel(K, dist, tuple(photo_size), f"{upright.source} (upright layout, turned back by "
+                           "the photo's EXIF orientation)")
     return _scaled(name, K, dist, size, photo_size, str(path))
+
+
+def _same_aspect(size: tuple[int, int], other: tuple[int, int]) -> bool:
+    """Whether images of ``size`` scale to ``other`` by one factor (to 1e-3)."""
+    sx, sy = other[0] / size[0], other[1] / size[1]
+    return abs(sx - sy) <= 1e-3 * max(sx, sy)
 
 
 def _scaled(name: str, K: NDArray, dist: NDArray, size: tuple[int, int] | None,
@@ -207,7 +227,7 @@ def _scaled(name: str, K: NDArray, dist: NDArray, size: tuple[int, int] | None,
     if size is None or tuple(size) == tuple(photo_size):
         return CameraModel(K, dist, tuple(photo_size), source)
     sx, sy = photo_size[0] / size[0], photo_size[1] / size[1]
-    if abs(sx - sy) > 1e-3 * max(sx, sy):
+    if not _same_aspect(size, photo_size):
         raise PhotoError(f"{name} is for {size[0]} x {size[1]} images, the photo is {photo_size[0]} x "
                          f"{photo_size[1]}: another aspect ratio (crop or rotation); calibrate at the "
                          "photo's size")
@@ -256,4 +276,4 @@ def resolve_camera(calibration: str | Path | CameraModel | None, meta: PhotoMeta
         return calibration
     if calibration is None:
         return camera_from_exif(meta)
-    return load_calibration(calibration, meta.image_size)
+    return load_calibration(calibration, meta.image_size, upright_turns(meta.orientation, str(meta.path)))

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from localization import PriorSigmas
+from localization.detect.weights import WEIGHT_NAMES
 from localization.geometry.attitude import attitude_from_world_from_cam
 from uav_struct_env.outputs import StagedOutput, atomic_write_json
 from uav_struct_env.photos.errors import PhotoError
@@ -103,6 +104,18 @@ def settings_line(plan: PhotoPlan, detector: str, camera: str | None, prior: str
             f"{tuple(round(math.degrees(v), 3) for v in sigmas.rotation_rad)} deg" if sigmas else ""),
     ]
     return " · ".join(parts)
+
+
+def check_detector(name: str) -> str:
+    """``--detector``: ``learned`` or ``learned:NAME`` with NAME a weight set; returned unchanged.
+
+    Raises:
+        PhotoError: naming the value and the names accepted.
+    """
+    names = ("learned", *(f"learned:{n}" for n in WEIGHT_NAMES))
+    if name not in names:
+        raise PhotoError(f"--detector must be one of {names}, got {name!r}")
+    return name
 
 
 def parse_prior_sigmas(text: str | None) -> PriorSigmas | None:
@@ -193,6 +206,9 @@ def _parser() -> CommandParser:
                    "consumer GNSS 3 m, 5 m, 2 deg, 5 deg)")
     p.add_argument("--max-distance", type=float, default=MAX_DISTANCE_M,
                    help="refuse a photo whose prior lies farther than this from the building's plan, m")
+    p.add_argument("--detector", default="learned",
+                   help="learned (the default weights) or learned:NAME, a weight set of "
+                   f"localization.detect.weights ({', '.join(WEIGHT_NAMES)})")
     p.add_argument("--out", default="localized", help="output folder")
     p.add_argument("--no-figures", action="store_true", help="write poses.csv and poses.json only")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier run in --out")
@@ -211,6 +227,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_input_file(args.ifc, option="--ifc", what="IFC file")
         if args.camera is not None:
             check_input_file(args.camera, option="--camera", what="calibration file")
+        check_detector(args.detector)
         sigmas = parse_prior_sigmas(args.prior_sigmas)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -225,11 +242,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         staged = StagedOutput(args.out, overwrite=args.overwrite, owned=LOCALIZE_FILES)
     except (*INPUT_ERRORS, PhotoError) as err:
         return refuse(p.prog, err)
-    settings = settings_line(plan, "learned", args.camera, args.prior, sigmas)
+    settings = settings_line(plan, args.detector, args.camera, args.prior, sigmas)
     with staged:
         bar = tqdm(total=len(plan.jobs), desc="localize", unit="photo", file=sys.stderr)
         try:
-            poses = run_plan(plan, progress=bar.update)
+            poses = run_plan(plan, args.detector, progress=bar.update)
         finally:
             bar.close()
         write_outputs(staged.stage, plan, poses, settings, figures=not args.no_figures)

@@ -23,6 +23,7 @@ from localization.geometry.transforms import check_transform
 from uav_struct_env.photos.attitude import dji_angles_from_enu_from_cam
 from uav_struct_env.photos.georef import Georeference
 from uav_struct_env.photos.metadata import DJI_FIELDS
+from uav_struct_env.training.jpeg_augment import CHROMA_SUBSAMPLING
 
 __all__ = ["dji_fields_from_pose", "write_dji_jpeg"]
 
@@ -92,7 +93,8 @@ def _dms(value: float) -> tuple[Fraction, Fraction, Fraction]:
 
 def write_dji_jpeg(path: str | Path, rgb: ArrayLike, fields: Mapping[str, float], *, make: str = "DJI",
                    model: str = "L1D-20c", focal_length_mm: float | None = None,
-                   focal_length_35mm: float | None = None, quality: int = 95) -> Path:
+                   focal_length_35mm: float | None = None, quality: int = 95,
+                   orientation: int = 1, chroma: str = "4:2:0") -> Path:
     """Write an (H, W, 3) uint8 RGB image as a JPEG with DJI's EXIF and XMP (module docstring).
 
     Args:
@@ -105,9 +107,13 @@ def write_dji_jpeg(path: str | Path, rgb: ArrayLike, fields: Mapping[str, float]
         focal_length_mm: EXIF FocalLength, or None to leave it out.
         focal_length_35mm: EXIF FocalLengthIn35mmFilm, or None to leave it out.
         quality: JPEG quality.
+        orientation: EXIF Orientation (274) to state, written when not 1 (DJI writes 1): the
+            pixels are stored as given, the tag tells a viewer how to turn them.
+        chroma: chroma subsampling, ``"4:2:0"`` (libjpeg's default), ``"4:2:2"`` (what DJI's
+            Phantom 4 camera writes, ``tests/data/photos/README.md``) or ``"4:4:4"``.
 
     Raises:
-        ValueError: an image that is not (H, W, 3) uint8, or an unknown field name.
+        ValueError: an image that is not (H, W, 3) uint8, an unknown field name or chroma layout.
     """
     from PIL import ExifTags, Image, TiffImagePlugin
 
@@ -117,6 +123,8 @@ def write_dji_jpeg(path: str | Path, rgb: ArrayLike, fields: Mapping[str, float]
     xmp = _xmp(fields, make, model)
     exif = Image.Exif()
     exif[ExifTags.Base.Make], exif[ExifTags.Base.Model] = make, model
+    if orientation != 1:
+        exif[ExifTags.Base.Orientation] = int(orientation)
     sub = exif.get_ifd(ExifTags.IFD.Exif)
     if focal_length_mm:
         focal = Fraction(focal_length_mm).limit_denominator(1000)
@@ -137,5 +145,8 @@ def write_dji_jpeg(path: str | Path, rgb: ArrayLike, fields: Mapping[str, float]
             millimetres = Fraction(round(abs(alt) * 1000), 1000)
             gps[ExifTags.GPS.GPSAltitude] = TiffImagePlugin.IFDRational(millimetres)
     out = Path(path)
-    Image.fromarray(img).save(out, "JPEG", quality=int(quality), exif=exif.tobytes(), xmp=xmp)
+    if chroma not in CHROMA_SUBSAMPLING:
+        raise ValueError(f"chroma must be one of {tuple(CHROMA_SUBSAMPLING)}, got {chroma!r}")
+    extra = {} if chroma == "4:2:0" else {"subsampling": CHROMA_SUBSAMPLING[chroma]}
+    Image.fromarray(img).save(out, "JPEG", quality=int(quality), exif=exif.tobytes(), xmp=xmp, **extra)
     return out

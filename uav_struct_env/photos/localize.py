@@ -13,8 +13,10 @@ not an image, no prior and none given, no georeferencing and none given, a prior
 does not localize is a :class:`PhotoPose` with ``success=False`` and its reason, at its prior,
 never a pose presented as found.
 
-Pixels are used as stored (the sensor's layout, which calibrations and the gimbal attitude refer
-to); the EXIF orientation tag is reported, and only display would rotate by it.
+The EXIF orientation tag is honoured (:mod:`~uav_struct_env.photos.orientation`): the detector
+runs on the image turned upright, the localizer with the camera and prior turned with it, and
+the pose, detections and camera reported are the sensor's and the stored pixels' (the layout the
+gimbal attitude and calibrations refer to). Mirrored tags are refused.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from uav_struct_env.photos.calibration import CameraModel, resolve_camera
 from uav_struct_env.photos.errors import PhotoError
 from uav_struct_env.photos.georef import Georeference, read_control_points, read_ifc_georeference
 from uav_struct_env.photos.metadata import PhotoMetadata, read_metadata
+from uav_struct_env.photos.orientation import turn_camera, turn_image, turn_points, turn_pose, upright_turns
 from uav_struct_env.photos.prior import PhotoPrior, prior_from_metadata, prior_from_string
 
 __all__ = ["MAX_DISTANCE_M", "PhotoJob", "PhotoPlan", "PhotoPose", "localize_photos", "plan_photos",
@@ -154,6 +157,7 @@ def prepare_photos(photos: Sequence[str | os.PathLike], site: Any, *, georef: Ge
     jobs = []
     for photo in photos:
         meta = read_metadata(photo)
+        upright_turns(meta.orientation, str(meta.path))
         cam = resolve_camera(camera, meta)
         p = (prior_from_string(prior, prior_sigmas) if prior is not None
              else prior_from_metadata(meta, georef, takeoff_z=takeoff_z, sigmas=prior_sigmas))
@@ -194,16 +198,20 @@ class _Stacks:
 
 
 def _localize_one(job: PhotoJob, stacks: _Stacks) -> PhotoPose:
-    stack = stacks(job.camera)
+    """Localize on the upright image with the upright camera, report the sensor's (orientation.py)."""
+    turns = upright_turns(job.meta.orientation, str(job.meta.path))
+    cam = job.camera
+    K, dist, size = turn_camera(cam.K, cam.distortion, cam.image_size, turns)
+    stack = stacks(CameraModel(K, dist, size, cam.source, cam.calibrated))
     t0 = time.perf_counter()
-    frame = stack.localize(_load_rgb(job.meta.path), None, job.prior.cam_from_world,
-                           prior_sigmas=job.prior.sigmas)
+    frame = stack.localize(turn_image(_load_rgb(job.meta.path), turns), None,
+                           turn_pose(job.prior.cam_from_world, turns), prior_sigmas=job.prior.sigmas)
     est = frame.estimate
     ids = np.where(est.assignment >= 0, stack.model_ids[np.maximum(est.assignment, 0)], -1)
     return PhotoPose(
-        photo=job.meta.path, success=bool(est.success), cam_from_world=est.cam_from_world,
+        photo=job.meta.path, success=bool(est.success), cam_from_world=turn_pose(est.cam_from_world, -turns),
         covariance=est.covariance if est.success else np.full((6, 6), np.inf), identities=ids,
-        detections_uv=np.asarray(frame.detections.uv, dtype=np.float64).reshape(-1, 2),
+        detections_uv=turn_points(frame.detections.uv, size, -turns),
         failure_reason=est.failure_reason, prior=job.prior, camera=job.camera,
         n_inliers=int(est.n_inliers), reprojection_rmse_px=float(est.reprojection_rmse_px),
         latency_s=time.perf_counter() - t0, orientation=job.meta.orientation,

@@ -1,11 +1,11 @@
 """Pictures of a photo localization: the per-photo overlay and the flight summary.
 
-:func:`plot_overlay`: the photo with the BIM's structural edges (every built element's outline at
-its top and bottom, and its vertical corner edges) projected through the camera (distortion
-included) at the prior (orange, dashed) and at the estimate (green), the model landmarks at the
-estimate (green +), the detections (red circles) labelled with the landmark id each was
-identified as, and a title with the status, the position and rotation standard deviations or
-the failure reason.
+:func:`plot_overlay`: the photo, turned upright by its EXIF orientation tag, with the BIM's
+structural edges (every built element's outline at its top and bottom, and its vertical corner
+edges) projected through the camera (distortion included) at the prior (orange, dashed) and at
+the estimate (green), the model landmarks at the estimate (green +), the detections (red
+circles) labelled with the landmark id each was identified as, and a title with the status, the
+position and rotation standard deviations or the failure reason.
 
 :func:`plot_flight_summary`: the building's plan with every camera's prior (grey x), its
 estimate (dot) joined to the prior, and the estimate's 2-sigma horizontal ellipse (magnified by
@@ -26,6 +26,13 @@ from localization.geometry.distortion import distort_points
 from localization.geometry.transforms import project
 from uav_struct_env.outputs import save_figure
 from uav_struct_env.photos.localize import PhotoPose
+from uav_struct_env.photos.orientation import (
+    ORIENTATION_TURNS,
+    turn_camera,
+    turn_image,
+    turn_points,
+    turn_pose,
+)
 
 __all__ = ["element_edges", "plot_flight_summary", "plot_overlay"]
 
@@ -78,23 +85,27 @@ def plot_overlay(pose: PhotoPose, rgb: NDArray[np.uint8], site: Any, landmarks_x
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    # Shown as a viewer shows the photo: turned upright by its EXIF orientation tag.
+    turns = ORIENTATION_TURNS.get(pose.orientation, 0)
+    rgb = turn_image(rgb, turns)
+    K, dist, _ = turn_camera(pose.camera.K, pose.camera.distortion, pose.camera.image_size, turns)
+    prior_cw, est_cw = turn_pose(pose.prior.cam_from_world, turns), turn_pose(pose.cam_from_world, turns)
     h, w = rgb.shape[:2]
-    K, dist = pose.camera.K, pose.camera.distortion
     scale = min(1.0, OVERLAY_MAX_SIDE / max(w, h))
     fig, ax = plt.subplots(figsize=(w * scale / 100, h * scale / 100 + 0.6), dpi=100)
     ax.imshow(rgb, extent=(-0.5, w - 0.5, h - 0.5, -0.5))
     segs = element_edges(site)
-    for cw, colour, style, label in ((pose.prior.cam_from_world, "orange", "--", "BIM at prior"),
-                                     (pose.cam_from_world, "lime", "-", "BIM at estimate")):
-        if cw is pose.cam_from_world and not pose.success:
+    for cw, colour, style, label in ((prior_cw, "orange", "--", "BIM at prior"),
+                                     (est_cw, "lime", "-", "BIM at estimate")):
+        if cw is est_cw and not pose.success:
             continue
         for k, s in enumerate(_project_segments(cw, K, dist, segs, (w, h))):
             ax.plot(s[:, 0], s[:, 1], style, color=colour, lw=0.8, label=label if k == 0 else None)
     if pose.success and len(landmarks_xyz):
-        uv, depth = project(K, pose.cam_from_world, landmarks_xyz)
+        uv, depth = project(K, est_cw, landmarks_xyz)
         uv = distort_points(uv[depth > 0], K, dist)
         ax.plot(uv[:, 0], uv[:, 1], "+", color="lime", ms=8, mew=1.5, label="landmarks at estimate")
-    det = pose.detections_uv
+    det = turn_points(pose.detections_uv, pose.camera.image_size, turns)
     if len(det):
         ax.plot(det[:, 0], det[:, 1], "o", mfc="none", mec="red", ms=9, mew=1.2, label="detections")
         for (u, v), i in zip(det, pose.identities, strict=True):

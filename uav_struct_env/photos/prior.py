@@ -12,7 +12,8 @@ Uncertainty (:func:`prior_sigmas`), 1 sigma, as :class:`localization.PriorSigmas
 
 * ``RtkFlag`` 50 (RTK fixed): horizontal ``max(RtkStdLon, RtkStdLat)``, vertical ``RtkStdHgt``
   (each at least :data:`RTK_FLOOR_M`), else :data:`RTK_FIXED_M` when the stds are absent;
-* ``RtkFlag`` 34 (RTK float): :data:`RTK_FLOAT_M`;
+* ``RtkFlag`` 32-49 (RTK float; DJI's user manuals: "32~49 - Floating point solution
+  positioning", 34 the usual value): :data:`RTK_FLOAT_M`;
 * otherwise consumer GNSS, :data:`CONSUMER_M` (horizontal, vertical; a vertical of
   :data:`RELATIVE_ALTITUDE_M` with ``takeoff_z``);
 * attitude always :data:`ATTITUDE_DEG` (tilt about x and y, yaw): the gimbal's tilt is
@@ -58,7 +59,7 @@ CONSUMER_M = (3.0, 5.0)
 RELATIVE_ALTITUDE_M = 1.0
 #: RTK fixed (RtkFlag 50) without RtkStd fields, m.
 RTK_FIXED_M = (0.05, 0.1)
-#: RTK float (RtkFlag 34), m.
+#: RTK float (RtkFlag 32-49), m.
 RTK_FLOAT_M = (0.5, 1.0)
 #: Smallest sigma taken from RtkStd fields, m.
 RTK_FLOOR_M = 0.02
@@ -102,7 +103,7 @@ def prior_sigmas(meta: PhotoMetadata, relative_altitude: bool = False) -> tuple[
             h = max(stds[0], stds[1], RTK_FLOOR_M)
             return _sigmas(h, max(stds[2], RTK_FLOOR_M)), "RTK fixed (RtkStd)"
         return _sigmas(*RTK_FIXED_M), "RTK fixed"
-    if flag == 34:
+    if flag is not None and 32 <= flag < 50:
         return _sigmas(*RTK_FLOAT_M), "RTK float"
     v = RELATIVE_ALTITUDE_M if relative_altitude else CONSUMER_M[1]
     return _sigmas(CONSUMER_M[0], v), "consumer GNSS"

@@ -18,6 +18,9 @@ Two steps, both seeded:
    and applies photometric augmentation; loss = binary cross-entropy of the three scores + L1 of
    the offset of every type present within the positive radius. Checkpoints are chosen by the F1
    at 3 px of the whole detector (keypoint network + this refiner) on a validation dataset.
+   ``--jpeg P,QLO,QHI`` (off by default) also JPEG-compresses that fraction of the windows
+   (:mod:`uav_struct_env.training.jpeg_augment`), for photos: the refiner is the stage a camera's
+   JPEG costs accuracy (``benchmarks/photo_jpeg_gap.py``, docs/photos.md).
 
 Example (the committed refiner, see ``localization/detect/models/MODEL_CARD.md``)::
 
@@ -32,6 +35,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
+from dataclasses import asdict
 from pathlib import Path
 
 import cv2
@@ -43,8 +47,10 @@ from torch.nn import functional as F
 from localization.detect.learned import DEFAULT_MODEL, LANDMARK_TYPES, LearnedDetector, match_detections
 from localization.detect.refiner import HALF, PATCH, POSITIVE_RADIUS, extract_patches
 from uav_struct_env.datasets.landmarks import load_labels
+from uav_struct_env.errors import ConfigError, UsageError
 from uav_struct_env.outputs import atomic_path, atomic_write_json, prepare_output_dir
 from uav_struct_env.training.init_weights import load_onnx_weights
+from uav_struct_env.training.jpeg_augment import JpegAugment
 from uav_struct_env.training.train_detector import LandmarkCrops, conv_bn_relu, export_checked
 from uav_struct_env.training.train_loop import (
     add_training_arguments,
@@ -168,13 +174,20 @@ def mine(data: str | Sequence[str], out: str, model: str | None = None, negative
 
 # ------------------------------------------------------------------------------------ data
 class PatchSamples(torch.utils.data.Dataset):
-    """Augmented training patches cut from mined windows (see the module docstring)."""
+    """Augmented training patches cut from mined windows (see the module docstring).
 
-    def __init__(self, arrays: dict, seed: int, augment: bool = True) -> None:
+    ``jpeg``: also JPEG-compress the windows (:class:`~uav_struct_env.training.jpeg_augment.JpegAugment`;
+    None, the default: never). With it the photometric augmentation is applied to the window
+    before the compression, as a camera does; without it to the patch, as the committed weights
+    were trained.
+    """
+
+    def __init__(self, arrays: dict, seed: int, augment: bool = True,
+                 jpeg: JpegAugment | None = None) -> None:
         self.windows = arrays["windows"]
         self.offsets = arrays["offsets"]
         self.kind = arrays["kind"]
-        self.seed, self.augment = seed, augment
+        self.seed, self.augment, self.jpeg = seed, augment, jpeg
         self.calls = 0
 
     def __len__(self) -> int:
@@ -196,12 +209,17 @@ class PatchSamples(torch.utils.data.Dataset):
         self.calls += 1
         su, sv = self._shift(int(self.kind[index]), rng) if self.augment else (0, 0)
         c = WINDOW // 2
-        patch = self.windows[index, c + sv - HALF:c + sv + HALF + 1, c + su - HALF:c + su + HALF + 1]
+        window = self.windows[index]
+        if self.augment and self.jpeg is not None:
+            # The camera's imaging first, then its JPEG, on the whole window (the block grid
+            # spans the patch's surroundings as in a photo).
+            window = self.jpeg(LandmarkCrops.photometric(window, rng), rng)
+        patch = window[c + sv - HALF:c + sv + HALF + 1, c + su - HALF:c + su + HALF + 1]
         off = self.offsets[index] - np.array([su, sv], np.float32)
         if self.augment and rng.random() < 0.5:
             patch = patch[:, ::-1]
             off = off * np.array([-1.0, 1.0], np.float32)
-        if self.augment:
+        if self.augment and self.jpeg is None:
             patch = LandmarkCrops.photometric(np.ascontiguousarray(patch), rng)
         present = np.isfinite(off[:, 0]) & (np.hypot(off[:, 0], off[:, 1]) <= POSITIVE_RADIUS)
         off = np.where(present[:, None], off, 0.0).astype(np.float32)
@@ -256,7 +274,7 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
           max_steps: int | None = None, batch: int = 128, lr: float = 2e-3, width: int = 16,
           seed: int = 0, threads: int = 2, eval_every: int = 500, workers: int = 1,
           detector_model: str | None = None, init: str | Path | None = None,
-          warmup_steps: int = 100, log=print) -> dict:
+          warmup_steps: int = 100, jpeg: JpegAugment | None = None, log=print) -> dict:
     """Train from scratch (or from ``init``) on mined windows; returns the summary.
 
     Writes ``out/{last,best}.pt``, ``out/log.jsonl``, ``out/refiner.onnx`` and
@@ -264,13 +282,14 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
     Validation runs the refiner behind ``detector_model`` (None: the committed keypoint network).
     ``init``: an exported refiner (ONNX, same ``width``) to fine-tune
     (:func:`~uav_struct_env.training.init_weights.load_onnx_weights`: its batch norms stay frozen).
+    ``jpeg``: JPEG-compress training windows (:class:`PatchSamples`; None: never).
     """
     torch.manual_seed(seed)
     torch.set_num_threads(threads)
     cv2.setNumThreads(1)
     out_dir = Path(out)
     out_dir.mkdir(parents=True, exist_ok=True)
-    ds = PatchSamples(dict(np.load(windows)), seed)
+    ds = PatchSamples(dict(np.load(windows)), seed, jpeg=jpeg)
     val_labels = load_labels(val) if val else None
     # Channels-last (NHWC) convolutions: faster on a CPU, so a wall-time budget trains more steps
     # (docs/benchmarks.md).
@@ -299,8 +318,27 @@ def train(windows: str, out: str, val: str | None = None, minutes: float = 15.0,
                    onnx=str(onnx_path), seed=seed, batch=batch, width=width,
                    detector_model=str(Path(detector_model or DEFAULT_MODEL).resolve()),
                    init=None if init is None else str(Path(init).resolve()))
+    if jpeg is not None:
+        summary["jpeg"] = asdict(jpeg)
     atomic_write_json(out_dir / "summary.json", summary, indent=2)
     return summary
+
+
+def parse_jpeg(text: str) -> JpegAugment:
+    """``--jpeg P,QLO,QHI`` as a :class:`JpegAugment`.
+
+    Raises:
+        UsageError: naming the option, for anything but three numbers a JpegAugment accepts.
+    """
+    parts = text.split(",")
+    try:
+        if len(parts) != 3:
+            raise ValueError
+        return JpegAugment(probability=float(parts[0]), quality=(int(parts[1]), int(parts[2])))
+    except (ValueError, ConfigError) as err:
+        detail = f" ({err})" if str(err) else ""
+        raise UsageError(f"--jpeg must be P,QLO,QHI (a fraction and two JPEG qualities 1-100), got "
+                         f"{text!r}{detail}") from None
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -317,12 +355,17 @@ def main(argv: list[str] | None = None) -> dict:
                     help="keypoint network whose candidates are mined and behind which the "
                          "refiner is validated (default: the committed one); give the new "
                          "one when retraining both networks")
+    ap.add_argument("--jpeg", default=None, metavar="P,QLO,QHI",
+                    help="JPEG-compress this fraction P of the training windows at a quality drawn "
+                         "from QLO..QHI and a chroma subsampling drawn from 4:4:4, 4:2:2 and 4:2:0 "
+                         "(e.g. 0.75,80,100; default: never)")
     add_training_arguments(ap, minutes=15.0, batch=128, lr=2e-3)
     a = ap.parse_args(argv)
     try:  # every input before any work or any file
         if a.detector_model is not None:
             check_input_file(a.detector_model, option="--detector-model", what="ONNX file")
         check_training_arguments(a)
+        jpeg = None if a.jpeg is None else parse_jpeg(a.jpeg)
     except INPUT_ERRORS as err:
         raise SystemExit(refuse(ap.prog, err)) from None
     prepare_output_dir(a.out, overwrite=a.overwrite)
@@ -330,7 +373,7 @@ def main(argv: list[str] | None = None) -> dict:
     if not windows.exists():
         mine(a.data, str(windows), model=a.detector_model, seed=a.seed)
     summary = train(str(windows), a.out, a.val, a.minutes, a.max_steps, a.batch, a.lr, a.width,
-                    a.seed, a.threads, a.eval_every, a.workers, a.detector_model, a.init)
+                    a.seed, a.threads, a.eval_every, a.workers, a.detector_model, a.init, jpeg=jpeg)
     print(json.dumps(summary, indent=2))
     return summary
 
