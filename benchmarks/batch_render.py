@@ -98,11 +98,18 @@ def _make(spec: str, overrides: dict, renderer: str):
     return uav_struct_env.parallel_env(spec, renderer=renderer, **overrides)
 
 
-def throughput(steps: int, seed: int = 0, block: int = 20) -> dict[str, dict[str, dict[str, float]]]:
-    """Agent-steps per second of each :data:`THROUGHPUT` entry with each renderer, alternating."""
+def throughput(
+    steps: int, seed: int = 0, block: int = 20, only: list[str] | None = None
+) -> dict[str, dict[str, dict[str, float]]]:
+    """Agent-steps per second of each :data:`THROUGHPUT` entry with each renderer, alternating.
+
+    ``only``: the names of the entries to measure (None: all).
+    """
     out = {}
     print(f"{'configuration':34s} {'renderer':8s} {'agent-steps/s wall':>19s} {'cpu':>8s}")
     for name, (spec, overrides) in THROUGHPUT.items():
+        if only is not None and name not in only:
+            continue
         envs = {r: _make(spec, overrides, r) for r in ("tiny", "batch")}
         rngs = {r: np.random.default_rng(seed) for r in envs}
         tally = {r: np.zeros(3) for r in envs}  # wall s, cpu s, agent-steps
@@ -131,14 +138,16 @@ def throughput(steps: int, seed: int = 0, block: int = 20) -> dict[str, dict[str
     return out
 
 
-def main(part: str = "all", views: int = 500, steps: int = 400, seed: int = 0) -> dict:
+def main(
+    part: str = "all", views: int = 500, steps: int = 400, seed: int = 0, only: list[str] | None = None
+) -> dict:
     warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
     print(f"load average (1, 5, 15 min): {os.getloadavg()}, {os.cpu_count()} cores")
     out: dict = {}
     if part in ("all", "agreement"):
         out["agreement"] = agreement(views, seed)
     if part in ("all", "throughput"):
-        out["throughput"] = throughput(steps, seed)
+        out["throughput"] = throughput(steps, seed, only=only)
     print(f"load average (1, 5, 15 min): {os.getloadavg()}")
     return out
 
@@ -152,5 +161,7 @@ if __name__ == "__main__":
     parser.add_argument("--views", type=int, default=500, help="random views per world")
     parser.add_argument("--steps", type=int, default=400, help="env steps per configuration and renderer")
     parser.add_argument("--seed", type=int, default=0, help="seed of the views and sites")
+    parser.add_argument("--only", action="append", choices=list(THROUGHPUT), metavar="NAME",
+                        help=f"throughput: only this configuration (repeatable), one of {list(THROUGHPUT)}")
     args = parser.parse_args()
-    main(args.part, args.views, args.steps, args.seed)
+    main(args.part, args.views, args.steps, args.seed, args.only)

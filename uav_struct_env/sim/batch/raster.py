@@ -281,8 +281,8 @@ def _draw_ground(
             izbuf[v, u] = inv_z
             ids[v, u] = GROUND_ID
             a, b = g[0] + i, g[2] + j
-            bary[v, u, 0] = gu[a] + (x - gx[a]) * (gu[a + 1] - gu[a]) / (gx[a + 1] - gx[a])
-            bary[v, u, 1] = gv[b] + (y - gy[b]) * (gv[b + 1] - gv[b]) / (gy[b + 1] - gy[b])
+            bary[v, u, 0] = gu[a, 0] + (x - gx[a]) * gu[a, 1]
+            bary[v, u, 1] = gv[b, 0] + (y - gy[b]) * gv[b, 1]
 
 
 @njit(cache=True, nogil=True)

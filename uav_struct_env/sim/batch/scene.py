@@ -158,6 +158,13 @@ class BatchScene:
         return poses[:, :3, :3], poses[:, :3, 3], halves, rgba[:, :3] * 255.0, ids
 
 
+def _with_slopes(breaks: NDArray, coords: NDArray) -> NDArray:
+    """(N, 2): ``coords`` and the slope from each break to the next (0 at the last)."""
+    slopes = np.zeros(len(breaks))
+    slopes[:-1] = np.diff(coords) / np.diff(breaks)
+    return np.ascontiguousarray(np.column_stack([coords, slopes]))
+
+
 class PackedScenes:
     """The static arrays of several scenes, concatenated for :func:`~.raster.render_views`.
 
@@ -165,8 +172,10 @@ class PackedScenes:
         key: the scenes' uids, in order.
         scene_tris: (S, 2) each scene's triangle range.
         scene_ground: (S, 7) each scene's ground grid: the ranges of its x breaks (and ``u``) and
-            y breaks (and ``v``) in ``ground_x`` / ``ground_y``, the offset of its cells (x-major)
-            in ``ground_cells``, its texture index and its body id; texture -1: no grid ground.
+            y breaks (and ``v``) in ``ground_x`` / ``ground_y`` (``ground_u`` / ``ground_v``: (N, 2),
+            the coordinate at each break and its slope to the next, 0 at the last), the offset of
+            its cells (x-major) in ``ground_cells``, its texture index and its body id; texture
+            -1: no grid ground.
     """
 
     def __init__(self, scenes: Sequence[BatchScene]) -> None:
@@ -200,8 +209,12 @@ class PackedScenes:
             np.array(tex, dtype=np.int64), np.array([s.ground_seg for s in scenes], dtype=np.int64),
         ], axis=1)
         present = [g for g in grids if g is not None]
-        self.ground_x, self.ground_u, self.ground_y, self.ground_v = (
-            np.concatenate([np.zeros(0)] + [g[i] for g in present]) for i in range(4)
+        self.ground_x, self.ground_y = (
+            np.concatenate([np.zeros(0)] + [g[i] for g in present]) for i in (0, 2)
+        )
+        self.ground_u, self.ground_v = (
+            np.concatenate([np.zeros((0, 2))] + [_with_slopes(g[i - 1], g[i]) for g in present])
+            for i in (1, 3)
         )
         self.ground_cells = np.concatenate([np.zeros(0, np.uint8)] + [g.cells.ravel() for g in present])
 
