@@ -4,9 +4,11 @@ One call renders every view of a batch (:func:`render_views`); each view reads t
 its own scene (a range of the packed triangle arrays), its ground grid (:func:`.scene.ground_grid`)
 and the boxes of its scene (a range of the box arrays). Per view:
 
-0. **Ground pass.** The ground, a grid of quads at z = 0 facing up, is drawn per pixel rather
-   than per triangle: each pixel's ray meets z = 0 at a point whose ``1/z`` is affine on the
-   image; it is kept when it lies within ``[near, far]``, on the grid and not in a missing cell
+0. **Ground pass** (after the triangles and boxes of pass 1, over the pixels where the ground is
+   nearest or as near: it wins ties, as if drawn first). The ground, a grid of quads at z = 0
+   facing up, is drawn per pixel rather than per triangle: each pixel's ray meets z = 0 at a
+   point whose ``1/z`` is affine on the image; it is kept when it lies within ``[near, far]``,
+   on the grid, not behind what is drawn there and not in a missing cell
    (a hole under a marker sheet; a point on a hole's edge belongs to the quad beside it, as a
    pixel centre on an edge is covered), and its texture coordinate is interpolated linearly in
    x and y within its cell -- what the perspective-correct interpolation over the cell's two
@@ -241,6 +243,9 @@ def _draw_ground(
 ) -> None:
     """Draw the ground grid ``g`` (a row of ``scene_ground``) per pixel (module docstring, pass 0).
 
+    Drawn after the triangles: a pixel they hold nearer keeps them, so the ground's cell and
+    texture coordinate are worked out only where it shows.
+
     Pixels it covers get :data:`GROUND_ID` and its texture coordinate ``(u, v)`` in ``bary``.
     """
     H, W = izbuf.shape
@@ -264,7 +269,8 @@ def _draw_ground(
         sx, sy, sz = R[0, 0] / fx, R[0, 1] / fx, R[0, 2] / fx
         for u in range(W):
             inv_z = -(bz + u * sz) * inv_oz
-            if inv_z < inv_far or inv_z > inv_near:  # beyond the far plane, nearer than near, or up
+            # beyond the far plane, nearer than near, looking up, or behind what is drawn (ties: ours)
+            if inv_z < inv_far or inv_z > inv_near or inv_z < izbuf[v, u]:
                 continue
             z = 1.0 / inv_z
             x = ox + (bx + u * sx) * z
@@ -424,14 +430,14 @@ def render_views(
         izbuf[:] = 0.0
         ids[:] = -1
         R, t, intr, hide = view_R[k], view_t[k], view_intr[k], view_hide[k]
-        g = scene_ground[s]
-        if g[5] >= 0 and g[6] != hide:
-            _draw_ground(R, t, intr, near, far, g, ground_x, ground_u, ground_y, ground_v, ground_cells,
-                         izbuf, ids, bary)
         _draw_triangles(R, t, intr, near, far, hide, tri_v, tri_seg, scene_tris[s, 0], scene_tris[s, 1],
                         izbuf, ids, bary)
         _draw_boxes(R, t, intr, near, far, hide, tri_v.shape[0], box_R, box_c, box_h, box_seg,
                     scene_boxes[s, 0], scene_boxes[s, 1], izbuf, ids, bary)
+        g = scene_ground[s]
+        if g[5] >= 0 and g[6] != hide:
+            _draw_ground(R, t, intr, near, far, g, ground_x, ground_u, ground_y, ground_v, ground_cells,
+                         izbuf, ids, bary)
         _shade_pass(ids, bary, izbuf, view_light[k], sky, far, tri_uv, tri_n, tri_tex, tri_seg,
                     tex_data, tex_off, tex_w, tex_h, g[5], g[6], box_R, box_rgb, box_seg,
                     rgb[k], depth[k], seg[k])
