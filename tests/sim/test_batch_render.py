@@ -9,6 +9,7 @@ import uav_struct_env
 from uav_struct_env.errors import ClosedError, ConfigError
 from uav_struct_env.sim.batch import MAX_BATCH_PIXELS, BatchScene, BatchView, render_batch
 from uav_struct_env.sim.batch.agreement import compare, random_views
+from uav_struct_env.sim.batch.scene import ground_grid
 from uav_struct_env.sim.camera import Camera
 from uav_struct_env.sim.world import SiteWorld
 from uav_struct_env.site import make_site, paper_site
@@ -67,6 +68,59 @@ def test_depth_and_ids_match_pybullet(columns):
     assert np.abs(ours.depth - ref.depth)[same].max() < 0.01  # metres
     assert (ours.depth[ours.segmentation < 0] == SMALL.far).all()
     assert set(np.unique(ours.segmentation)) <= {-1, *world.body_ids.values()}
+
+
+def _looking(xyz, down: bool) -> np.ndarray:
+    """cam_from_world of a camera at ``xyz`` looking straight down (or up), image x along world x."""
+    z = np.array([0.0, 0.0, -1.0 if down else 1.0])
+    x = np.array([1.0, 0.0, 0.0])
+    world_from_cam = np.eye(4)
+    world_from_cam[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+    world_from_cam[:3, 3] = xyz
+    return np.linalg.inv(world_from_cam)
+
+
+def test_ground_grid_reads_the_ground_mesh(columns):
+    world, scene = columns
+    ground = next(e for e in world.elements if e.kind == "ground")
+    grid = scene.ground
+    assert grid is not None and scene.ground_seg == world.body_ids["ground"]
+    assert 2 * int(grid.cells.sum()) == len(ground.mesh.faces) == 1666
+    assert grid.cells.shape == (len(grid.x) - 1, len(grid.y) - 1)
+    # one missing cell under each of the paper site's 8 ground markers (1.5 m sheets)
+    assert (grid.cells == 0).sum() == 8
+    assert np.all(np.diff(grid.x) > 0) and np.all(np.diff(grid.u) > 0)
+    assert grid.u[0] == 0.0 and grid.u[-1] == 1.0
+    # not a grid: a marker sheet (above z = 0), a ground whose u is not a function of x alone
+    assert ground_grid(next(e for e in world.elements if e.kind == "marker")) is None
+    uv = ground.uv.copy()
+    uv[5, 0] += 1e-3
+    bent = type(ground)("ground", "ground", ground.mesh.copy(), ground.texture)
+    bent.mesh.visual.uv = uv
+    assert ground_grid(bent) is None
+    assert BatchScene(world, ground_per_pixel=False).n_triangles == scene.n_triangles + 1666
+
+
+def test_per_pixel_ground_renders_what_its_triangles_do(columns):
+    world, scene = columns
+    triangles = BatchScene(world, ground_per_pixel=False)
+    marker = world.body_ids["marker 0"]
+    poses = random_views(world, np.random.default_rng(7), 40)
+    views = [BatchView(scene, T, SMALL) for T in poses]
+    views += [BatchView(scene, _looking((2.0, -3.3, 4.0), True), SMALL, marker),  # its hole, seen
+              BatchView(scene, _looking((2.0, -3.3, 4.0), True), SMALL),
+              BatchView(scene, _looking((2.0, -3.3, -2.0), False), SMALL)]  # from below: culled
+    ours = render_batch(views)
+    ref = render_batch([view._replace(scene=triangles) for view in views])
+    for a, b in zip(ours, ref, strict=True):
+        assert (a.segmentation == b.segmentation).mean() >= 0.999
+        assert (a.rgb == b.rgb).all(axis=2).mean() >= 0.999
+        assert np.abs(a.depth - b.depth).max() < 1e-3
+    ground = world.body_ids["ground"]
+    hole, covered, below = ours[-3:]
+    assert (hole.segmentation == ground).mean() > 0.3 and (hole.segmentation == -1).sum() > 100
+    assert (covered.segmentation == marker).sum() == (hole.segmentation == -1).sum()
+    assert not (below.segmentation == ground).any()
 
 
 def test_views_of_several_worlds_in_one_call_equal_separate_calls(columns):

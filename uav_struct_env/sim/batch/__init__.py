@@ -99,6 +99,21 @@ def _light(world) -> NDArray[np.float64]:
     return np.array([*d, world.light["lightAmbientCoeff"], world.light["lightDiffuseCoeff"]])
 
 
+def _boxes(scenes: list[BatchScene]) -> tuple[NDArray, ...]:
+    """The added boxes of every scene, concatenated, and each scene's range of them.
+
+    Returns rotations, centres, half extents, colours, body ids and the (S, 2) ranges.
+    """
+    boxes = [s.boxes() for s in scenes]
+    counts = np.array([len(b[4]) for b in boxes], dtype=np.int64)
+    ends = np.cumsum(counts)
+    # one scene: its arrays as they are (np.concatenate of one array copies it)
+    join = (lambda arrays: arrays[0]) if len(boxes) == 1 else np.concatenate
+    arrays = (np.ascontiguousarray(join([b[i] for b in boxes]), dtype=dt)
+              for i, dt in enumerate((np.float64, np.float64, np.float64, np.float64, np.int64)))
+    return (*arrays, np.stack([ends - counts, ends], axis=1))
+
+
 def render_batch(views: Sequence[BatchView]):
     """Render every view; see the module docstring.
 
@@ -129,32 +144,24 @@ def render_batch(views: Sequence[BatchView]):
     if not views:
         return []
     packed = _packed(scenes)
-    boxes = [s.boxes() for s in scenes]
-    counts = np.array([len(b[4]) for b in boxes], dtype=np.int64)
-    ends = np.cumsum(counts)
-    scene_boxes = np.stack([ends - counts, ends], axis=1)
-    box_R, box_c, box_h, box_rgb, box_seg = (
-        np.ascontiguousarray(np.concatenate([b[i] for b in boxes]), dtype=dt)
-        for i, dt in enumerate((np.float64, np.float64, np.float64, np.float64, np.int64))
-    )
+    box_R, box_c, box_h, box_rgb, box_seg, scene_boxes = _boxes(scenes)
     lights = {s.uid: _light(s.world) for s in scenes}
     sky = np.array(SKY_RGB, dtype=np.uint8)
     results: list = [None] * len(views)
-    sizes = sorted({v.camera.size for v in views})
-    for size in sizes:
+    for size in sorted({v.camera.size for v in views}):
         group = [k for k, v in enumerate(views) if v.camera.size == size]
-        T = np.stack([np.asarray(views[k].cam_from_world, dtype=np.float64) for k in group])
+        T = np.array([views[k].cam_from_world for k in group], dtype=np.float64)
         cams = [views[k].camera for k in group]
-        intr = np.array([[c.fx, c.skew, c.cx, c.fy, c.cy] for c in cams])
-        clip = np.array([[c.near, c.far] for c in cams])
+        params = np.array([[c.fx, c.skew, c.cx, c.fy, c.cy, c.near, c.far] for c in cams])
         W, H = size
         rgb = np.empty((len(group), H, W, 3), np.uint8)
         depth = np.empty((len(group), H, W), np.float32)
         seg = np.empty((len(group), H, W), np.int32)
         render_views(
             np.array([index[views[k].scene.uid] for k in group], dtype=np.int64),
-            np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3]), intr, clip,
-            np.stack([lights[views[k].scene.uid] for k in group]),
+            np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3]),
+            np.ascontiguousarray(params[:, :5]), np.ascontiguousarray(params[:, 5:]),
+            np.array([lights[views[k].scene.uid] for k in group]),
             np.array([views[k].hidden_body for k in group], dtype=np.int64), sky,
             packed.scene_tris, scene_boxes, *packed.arrays(),
             box_R, box_c, box_h, box_rgb, box_seg, rgb, depth, seg,

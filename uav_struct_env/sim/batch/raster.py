@@ -1,9 +1,19 @@
 """The compiled rasterizer: triangles and oriented boxes into RGB, depth and body ids, many views per call.
 
 One call renders every view of a batch (:func:`render_views`); each view reads the triangles of
-its own scene (a range of the packed triangle arrays) and the boxes of its scene (a range of the
-box arrays). Per view:
+its own scene (a range of the packed triangle arrays), its ground grid (:func:`.scene.ground_grid`)
+and the boxes of its scene (a range of the box arrays). Per view:
 
+0. **Ground pass** (after the triangles and boxes of pass 1, over the pixels where the ground is
+   nearest or as near: it wins ties, as if drawn first). The ground, a grid of quads at z = 0
+   facing up, is drawn per pixel rather than per triangle: each pixel's ray meets z = 0 at a
+   point whose ``1/z`` is affine on the image; it is kept when it lies within ``[near, far]``,
+   on the grid, not behind what is drawn there and not in a missing cell
+   (a hole under a marker sheet; a point on a hole's edge belongs to the quad beside it, as a
+   pixel centre on an edge is covered), and its texture coordinate is interpolated linearly in
+   x and y within its cell -- what the perspective-correct interpolation over the cell's two
+   triangles gives, as the grid's ``u`` depends on x alone and ``v`` on y alone. Seen from
+   below (camera at ``z <= 0``) the ground is culled, as its triangles would be.
 1. **Visibility pass.** Each triangle is moved to the camera frame (OpenCV: x right, y down,
    z forward), rejected when all three corners lie beyond one side of the view frustum, clipped
    against the near plane (a polygon of at most four corners, each carrying its barycentric
@@ -31,7 +41,10 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["BOX_TRIANGLES", "render_views"]
+__all__ = ["BOX_TRIANGLES", "GROUND_ID", "render_views"]
+
+#: The value of the per-pixel triangle index where the ground (drawn per pixel) is nearest.
+GROUND_ID = -2
 
 #: The 12 triangles of the unit box ``[-1, 1]^3`` (corner signs), outward winding, two per face.
 BOX_TRIANGLES = np.array([
@@ -196,6 +209,88 @@ def _draw(
         _scan(poly, weights, 0, k, k + 1, tri, intr, far, izbuf, ids, bary)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _walk(breaks: NDArray, lo: int, hi: int, x: float, i: int) -> int:
+    """The cell ``i`` (``breaks[lo + i] <= x <= breaks[lo + i + 1]``) from the guess ``i``.
+
+    ``x`` lies within the breaks; along an image row the ground point moves monotonically, so
+    the walk from the last pixel's cell is a step or none.
+    """
+    while i > 0 and x < breaks[lo + i]:
+        i -= 1
+    while lo + i + 2 < hi and x > breaks[lo + i + 1]:
+        i += 1
+    return i
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cell_beside(gx: NDArray, gy: NDArray, g: NDArray, cells: NDArray, x: float, y: float, i: int,
+                 j: int) -> tuple[int, int]:
+    """An existing cell containing ``(x, y)`` among ``(i, j)`` and its neighbours; ``(-1, -1)``: none."""
+    nx, ny = g[1] - g[0] - 1, g[3] - g[2] - 1
+    for ii in range(max(i - 1, 0), min(i + 2, nx)):
+        for jj in range(max(j - 1, 0), min(j + 2, ny)):
+            if (cells[g[4] + ii * ny + jj] and gx[g[0] + ii] <= x <= gx[g[0] + ii + 1]
+                    and gy[g[2] + jj] <= y <= gy[g[2] + jj + 1]):
+                return ii, jj
+    return -1, -1
+
+
+@njit(cache=True, nogil=True)
+def _draw_ground(
+    R: NDArray, t: NDArray, intr: NDArray, near: float, far: float, g: NDArray, gx: NDArray, gu: NDArray,
+    gy: NDArray, gv: NDArray, cells: NDArray, izbuf: NDArray, ids: NDArray, bary: NDArray,
+) -> None:
+    """Draw the ground grid ``g`` (a row of ``scene_ground``) per pixel (module docstring, pass 0).
+
+    Drawn after the triangles: a pixel they hold nearer keeps them, so the ground's cell and
+    texture coordinate are worked out only where it shows.
+
+    Pixels it covers get :data:`GROUND_ID` and its texture coordinate ``(u, v)`` in ``bary``.
+    """
+    H, W = izbuf.shape
+    fx, sk, cx, fy, cy = intr[0], intr[1], intr[2], intr[3], intr[4]
+    # camera centre in the world, -R^T t
+    ox = -(R[0, 0] * t[0] + R[1, 0] * t[1] + R[2, 0] * t[2])
+    oy = -(R[0, 1] * t[0] + R[1, 1] * t[1] + R[2, 1] * t[2])
+    oz = -(R[0, 2] * t[0] + R[1, 2] * t[1] + R[2, 2] * t[2])
+    if not oz > 0.0:
+        return
+    x_lo, x_hi, y_lo, y_hi = gx[g[0]], gx[g[1] - 1], gy[g[2]], gy[g[3] - 1]
+    inv_far, inv_near, inv_oz = 1.0 / far, 1.0 / near, 1.0 / oz
+    ny = g[3] - g[2] - 1
+    i = j = 0
+    for v in range(H):
+        # the ray through (u, v), world frame: R^T (x/z, y/z, 1) with x/z = u / fx + e
+        dy = (v - cy) / fy
+        e = -(cx + sk * dy) / fx
+        bx, by, bz = (e * R[0, 0] + dy * R[1, 0] + R[2, 0], e * R[0, 1] + dy * R[1, 1] + R[2, 1],
+                      e * R[0, 2] + dy * R[1, 2] + R[2, 2])
+        sx, sy, sz = R[0, 0] / fx, R[0, 1] / fx, R[0, 2] / fx
+        for u in range(W):
+            inv_z = -(bz + u * sz) * inv_oz
+            # beyond the far plane, nearer than near, looking up, or behind what is drawn (ties: ours)
+            if inv_z < inv_far or inv_z > inv_near or inv_z < izbuf[v, u]:
+                continue
+            z = 1.0 / inv_z
+            x = ox + (bx + u * sx) * z
+            y = oy + (by + u * sy) * z
+            if x < x_lo or x > x_hi or y < y_lo or y > y_hi:
+                continue
+            i = _walk(gx, g[0], g[1], x, i)
+            j = _walk(gy, g[2], g[3], y, j)
+            if not cells[g[4] + i * ny + j]:
+                i, j = _cell_beside(gx, gy, g, cells, x, y, i, j)
+                if i < 0:
+                    i = j = 0
+                    continue
+            izbuf[v, u] = inv_z
+            ids[v, u] = GROUND_ID
+            a, b = g[0] + i, g[2] + j
+            bary[v, u, 0] = gu[a, 0] + (x - gx[a]) * gu[a, 1]
+            bary[v, u, 1] = gv[b, 0] + (y - gy[b]) * gv[b, 1]
+
+
 @njit(cache=True, nogil=True)
 def _draw_triangles(
     R: NDArray, t: NDArray, intr: NDArray, near: float, far: float, hide: int,
@@ -253,7 +348,7 @@ def _draw_boxes(
 def _shade_pass(
     ids: NDArray, bary: NDArray, izbuf: NDArray, light: NDArray, sky: NDArray, far: float,
     tri_uv: NDArray, tri_n: NDArray, tri_tex: NDArray, tri_seg: NDArray,
-    tex_data: NDArray, tex_off: NDArray, tex_w: NDArray, tex_h: NDArray,
+    tex_data: NDArray, tex_off: NDArray, tex_w: NDArray, tex_h: NDArray, ground_tex: int, ground_seg: int,
     box_R: NDArray, box_rgb: NDArray, box_seg: NDArray,
     rgb: NDArray, depth: NDArray, seg: NDArray,
 ) -> None:
@@ -264,20 +359,26 @@ def _shade_pass(
     for v in range(H):
         for u in range(W):
             i = ids[v, u]
-            if i < 0:
+            if i == -1:
                 rgb[v, u, 0], rgb[v, u, 1], rgb[v, u, 2] = sky[0], sky[1], sky[2]
                 depth[v, u] = far
                 seg[v, u] = -1
                 continue
             depth[v, u] = 1.0 / izbuf[v, u]
             if i < n_static:
-                seg[v, u] = tri_seg[i]
-                ndotl = tri_n[i, 0] * lx + tri_n[i, 1] * ly + tri_n[i, 2] * lz
-                b1, b2 = bary[v, u, 0], bary[v, u, 1]
-                b0 = 1.0 - b1 - b2
-                tu = b0 * tri_uv[i, 0, 0] + b1 * tri_uv[i, 1, 0] + b2 * tri_uv[i, 2, 0]
-                tv = b0 * tri_uv[i, 0, 1] + b1 * tri_uv[i, 1, 1] + b2 * tri_uv[i, 2, 1]
-                x = tri_tex[i]
+                if i == GROUND_ID:
+                    seg[v, u] = ground_seg
+                    ndotl = lz  # the ground's normal is +z
+                    tu, tv = bary[v, u, 0], bary[v, u, 1]
+                    x = ground_tex
+                else:
+                    seg[v, u] = tri_seg[i]
+                    ndotl = tri_n[i, 0] * lx + tri_n[i, 1] * ly + tri_n[i, 2] * lz
+                    b1, b2 = bary[v, u, 0], bary[v, u, 1]
+                    b0 = 1.0 - b1 - b2
+                    tu = b0 * tri_uv[i, 0, 0] + b1 * tri_uv[i, 1, 0] + b2 * tri_uv[i, 2, 0]
+                    tv = b0 * tri_uv[i, 0, 1] + b1 * tri_uv[i, 1, 1] + b2 * tri_uv[i, 2, 1]
+                    x = tri_tex[i]
                 col = min(max(int(tu * tex_w[x]), 0), tex_w[x] - 1)
                 row = min(max(int((1.0 - tv) * tex_h[x]), 0), tex_h[x] - 1)
                 base = tex_off[x] + row * tex_w[x] + col
@@ -304,14 +405,16 @@ def render_views(
     view_light: NDArray, view_hide: NDArray, sky: NDArray,
     scene_tris: NDArray, scene_boxes: NDArray,
     tri_v: NDArray, tri_uv: NDArray, tri_n: NDArray, tri_tex: NDArray, tri_seg: NDArray,
-    tex_data: NDArray, tex_off: NDArray, tex_w: NDArray, tex_h: NDArray,
+    tex_data: NDArray, tex_off: NDArray, tex_w: NDArray, tex_h: NDArray, scene_ground: NDArray,
+    ground_x: NDArray, ground_u: NDArray, ground_y: NDArray, ground_v: NDArray, ground_cells: NDArray,
     box_R: NDArray, box_c: NDArray, box_h: NDArray, box_rgb: NDArray, box_seg: NDArray,
     rgb: NDArray, depth: NDArray, seg: NDArray,
 ) -> None:
     """Render every view of a batch into ``rgb`` (V, H, W, 3), ``depth`` (V, H, W), ``seg`` (V, H, W).
 
     Per view ``k``: its scene ``view_scene[k]`` (whose triangles are ``scene_tris[s, 0]`` to
-    ``scene_tris[s, 1]`` and boxes ``scene_boxes[s, 0]`` to ``scene_boxes[s, 1]``),
+    ``scene_tris[s, 1]``, ground grid ``scene_ground[s]`` (``scene.PackedScenes``) and boxes
+    ``scene_boxes[s, 0]`` to ``scene_boxes[s, 1]``),
     ``cam_from_world`` as ``view_R[k]`` (3, 3) and ``view_t[k]`` (3,), intrinsics
     ``view_intr[k]`` = (fx, skew, cx, fy, cy), clip planes ``view_clip[k]`` = (near, far),
     light ``view_light[k]`` = (unit direction towards the sun (3,), ambient, diffuse) and a body
@@ -331,6 +434,10 @@ def render_views(
                         izbuf, ids, bary)
         _draw_boxes(R, t, intr, near, far, hide, tri_v.shape[0], box_R, box_c, box_h, box_seg,
                     scene_boxes[s, 0], scene_boxes[s, 1], izbuf, ids, bary)
+        g = scene_ground[s]
+        if g[5] >= 0 and g[6] != hide:
+            _draw_ground(R, t, intr, near, far, g, ground_x, ground_u, ground_y, ground_v, ground_cells,
+                         izbuf, ids, bary)
         _shade_pass(ids, bary, izbuf, view_light[k], sky, far, tri_uv, tri_n, tri_tex, tri_seg,
-                    tex_data, tex_off, tex_w, tex_h, box_R, box_rgb, box_seg,
+                    tex_data, tex_off, tex_w, tex_h, g[5], g[6], box_R, box_rgb, box_seg,
                     rgb[k], depth[k], seg[k])
