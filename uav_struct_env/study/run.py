@@ -150,7 +150,7 @@ def stack_spec(config: StudyConfig, method: Method) -> StackSpec:
     (:func:`localization.detect.learned.fit_pixel_sigma`).
     """
     kwargs = {}
-    if method.structural and config.detector == "learned":
+    if method.structural and config.detector in ("learned", "guided"):
         from localization.detect.learned import fit_pixel_sigma  # onnxruntime only when it is used
 
         kwargs["fit_sigma_px"] = fit_pixel_sigma(config.image_size[0])
@@ -218,6 +218,7 @@ def run_unit_tracked(config: StudyConfig, scene: Scene, viewpoint: int, overlay_
                 markers=site.markers,
                 rng=_rng(config, method, uav, viewpoint),
                 distortion=info["distortion"],
+                site=site,
             )
             frame = stack.localize(image, {method.landmarks: truth}, prior, gt)
             est = frame.estimate
