@@ -74,8 +74,10 @@ class TemplateSource(Protocol):
 def structure_edges(views: ModelViews, blur_px: float = 1.0) -> NDArray[np.float32]:
     """(V, H, W) float32 edges of the structure: where the label changes or the depth jumps, blurred.
 
-    A pixel is an edge when its label differs from its right or lower neighbour's, or its depth
-    from theirs by more than 3 %; the binary map is blurred by a Gaussian of ``blur_px``.
+    Two neighbouring pixels (along a row or a column) whose labels differ, or whose depths differ
+    by more than 3 %, both count as edge, so the edge is centred on the boundary between them
+    (half a pixel either way) as the image's gradient is; the binary map is blurred by a
+    Gaussian of ``blur_px``.
     """
     label, depth = views.label, views.depth
     edge = np.zeros(label.shape, np.float32)
@@ -86,6 +88,7 @@ def structure_edges(views: ModelViews, blur_px: float = 1.0) -> NDArray[np.float
             jump = (a[..., 1:] != a[..., :-1]) | (np.abs(d[..., 1:] - d[..., :-1]) > 0.03 * d[..., :-1])
         e = np.swapaxes(edge, axis, -1)
         e[..., 1:] = np.maximum(e[..., 1:], jump)
+        e[..., :-1] = np.maximum(e[..., :-1], jump)
     if blur_px > 0:
         for k in range(len(edge)):
             edge[k] = cv2.GaussianBlur(edge[k], (0, 0), blur_px)
