@@ -43,7 +43,8 @@ from localization.checks import check_number
 from localization.geometry.distortion import distort_points, is_pinhole
 from localization.geometry.transforms import as_points, check_intrinsics, check_transform, project
 
-__all__ = ["Matches", "ModelViews", "TemplateMatcher", "TemplateSource", "orientation_field", "structure_edges"]
+__all__ = ["Matches", "ModelViews", "TemplateMatcher", "TemplateSource", "orientation_field",
+           "structure_edges"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,7 +65,10 @@ class ModelViews:
 
 @runtime_checkable
 class TemplateSource(Protocol):
-    """Renders the building model: ``render(cam_from_world (4, 4), Ks (V, 3, 3), size (W, H)) -> ModelViews``."""
+    """Renders the building model.
+
+    ``render(cam_from_world (4, 4), Ks (V, 3, 3), size (W, H)) -> ModelViews``.
+    """
 
     def render(self, cam_from_world: ArrayLike, Ks: ArrayLike, size: tuple[int, int]) -> ModelViews:
         """The model seen from one pose through each of ``Ks``, at ``size`` (W, H)."""
@@ -95,7 +99,8 @@ def structure_edges(views: ModelViews, blur_px: float = 1.0) -> NDArray[np.float
     return edge
 
 
-def orientation_field(gray: NDArray[np.float32], blur_px: float = 1.0, power: float = 0.5) -> NDArray[np.float32]:
+def orientation_field(gray: NDArray[np.float32], blur_px: float = 1.0,
+                      power: float = 0.5) -> NDArray[np.float32]:
     """(H, W, 2) float32 gradients of a grey image in doubled-angle form, for correlation.
 
     Each pixel's gradient ``g`` at angle ``theta`` becomes ``|g|^power (cos 2 theta, sin 2 theta)``:
@@ -223,7 +228,8 @@ class TemplateMatcher:
         if len(idx) == 0:
             return _NO_MATCHES
         P = self.patch_px
-        corner = np.floor(uv[idx]).astype(np.int64) - P // 2  # patch pixel (i, j) = image pixel corner + (i, j)
+        # patch pixel (i, j) is image pixel corner + (i, j)
+        corner = np.floor(uv[idx]).astype(np.int64) - P // 2
         Ks = np.repeat(K[None], len(idx), axis=0)
         Ks[:, 0, 2] -= corner[:, 0]
         Ks[:, 1, 2] -= corner[:, 1]
@@ -257,7 +263,8 @@ class TemplateMatcher:
             if crop.shape != (side + 2 * b, side + 2 * b):  # the search leaves the padded frame
                 continue
             window = orientation_field(crop)[b:-b, b:-b]
-            x, y, best, second = _peak(cv2.matchTemplate(window, template, cv2.TM_CCOEFF_NORMED), self.exclusion_px)
+            scores = cv2.matchTemplate(window, template, cv2.TM_CCOEFF_NORMED)
+            x, y, best, second = _peak(scores, self.exclusion_px)
             if best < self.min_score or second > self.max_second_ratio * best:
                 continue
             out_uv.append((x0 - margin + x + at[k, 0], y0 - margin + y + at[k, 1]))

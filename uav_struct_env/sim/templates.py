@@ -20,7 +20,7 @@ frames at training resolution.
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from localization.detect.guided import ModelViews
 from localization.geometry.transforms import check_transform
@@ -78,7 +78,9 @@ class SiteTemplates:
         self._light = np.array([*sun, *_LIGHT_COEFFS])
 
     def render(self, cam_from_world: ArrayLike, Ks: ArrayLike, size: tuple[int, int]) -> ModelViews:
-        """Views of the model from ``cam_from_world`` (4, 4) through each of ``Ks`` (V, 3, 3), ``size`` (W, H).
+        """Views of the model from ``cam_from_world`` (4, 4), one through each of ``Ks`` (V, 3, 3).
+
+        Every view is ``size`` (W, H) pixels.
 
         Returns:
             :class:`~localization.detect.guided.ModelViews`: shading (V, H, W) in 0-1, depth
@@ -97,7 +99,8 @@ class SiteTemplates:
         intr = np.stack([Ks[:, 0, 0], Ks[:, 0, 1], Ks[:, 0, 2], Ks[:, 1, 1], Ks[:, 1, 2]], axis=1)
         empty3 = np.zeros((0, 3))
         render_views(
-            np.zeros(n, np.int64), np.repeat(T[None, :3, :3], n, axis=0), np.repeat(T[None, :3, 3], n, axis=0),
+            np.zeros(n, np.int64), np.repeat(T[None, :3, :3], n, axis=0),
+            np.repeat(T[None, :3, 3], n, axis=0),
             np.ascontiguousarray(intr), np.tile([_NEAR, _FAR], (n, 1)), np.tile(self._light, (n, 1)),
             np.full(n, -1, np.int64), np.zeros(3, np.uint8),
             np.array([[0, self.n_triangles]], np.int64), np.zeros((1, 2), np.int64),

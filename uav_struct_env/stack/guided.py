@@ -52,8 +52,11 @@ def fit_pixel_sigma(image_width: int) -> float:
     return FIT_PIXEL_SIGMA_PX * image_width / 1280.0
 
 
-def truth_ids(uv: NDArray[np.float64], truth: Mapping[str, Any] | None, match_px: float) -> NDArray[np.int64] | None:
-    """The visible true landmark within ``match_px`` of each detection (one-to-one), else -1; None without truth.
+def truth_ids(uv: NDArray[np.float64], truth: Mapping[str, Any] | None,
+              match_px: float) -> NDArray[np.int64] | None:
+    """The visible true landmark within ``match_px`` of each detection (one-to-one), else -1.
+
+    None without truth.
 
     ``truth``: one landmark set's truth (``ids``, ``uv``, ``visible``), as the env delivers it.
     """
@@ -68,8 +71,9 @@ def truth_ids(uv: NDArray[np.float64], truth: Mapping[str, Any] | None, match_px
     return out
 
 
-def merged(first: Detections, found: Matches, radius: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(uv, scores)``: the matches, then the first pass's detections farther than ``radius`` from all of them.
+def merged(first: Detections, found: Matches,
+           radius: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(uv, scores)``: the matches, then the first pass's detections farther than ``radius`` from them.
 
     Where both found a landmark the match is kept: it is placed where the building model's
     corner shows, and on buildings unlike its training data the learned detector places its
@@ -116,15 +120,18 @@ class GuidedDetector:
         self.match_px = float(match_px)
 
     def detect(self, image: Any, context: Mapping[str, Any]) -> Detections:
-        """Detections in ``image``; ``context`` holds ``prior_cam_from_world`` and ``intrinsics`` (and
-        ``distortion``, ``landmarks`` for scoring) as :meth:`~uav_struct_env.stack.LocalizationStack.localize`
-        gives them.
+        """Detections in ``image``.
+
+        ``context`` holds ``prior_cam_from_world`` (and ``landmarks``, for scoring only), as
+        :meth:`~uav_struct_env.stack.LocalizationStack.localize` gives it.
 
         Raises:
             KeyError: if the context lacks the prior.
         """
         if "prior_cam_from_world" not in context:
-            raise KeyError(f"the guided detector needs context['prior_cam_from_world']; got {sorted(context)}")
+            raise KeyError(
+                f"the guided detector needs context['prior_cam_from_world']; got {sorted(context)}"
+            )
         uv, scores, types = self.seed.detect_all(image)
         mine = np.isin(types, self.types)
         first = Detections(uv[mine], scores[mine])
@@ -138,7 +145,7 @@ class GuidedDetector:
         return Detections(uv=uv, scores=scores, true_ids=truth_ids(uv, truth, self.match_px))
 
     def near(self, first: Detections, pose: NDArray[np.float64]) -> Detections:
-        """The first-pass detections within the matcher's search radius of a landmark's projection at ``pose``.
+        """The first-pass detections within the search radius of a landmark's projection at ``pose``.
 
         The others fit no landmark at the pose the first pass found: kept, they would compete
         with the true detections in the second localization (a set of four corners and the
@@ -155,7 +162,7 @@ class GuidedDetector:
         return Detections(first.uv[keep], None if first.scores is None else first.scores[keep])
 
     def first_pose(self, first: Detections, every: Detections, prior: NDArray[np.float64]) -> NDArray | None:
-        """The first pass's ``cam_from_world``: from all candidates against the anchors, else from the set's own.
+        """The first pass's ``cam_from_world``: all candidates against the anchors, else the set's own.
 
         Every structural landmark the stage has pins the templates' pose better than one set's
         few (four slab corners of a house); the set's own localization is the fallback.

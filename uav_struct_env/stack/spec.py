@@ -350,7 +350,9 @@ def _guided(spec: StackSpec, size: tuple[int, int], localizer: Localizer, xyz: N
     from uav_struct_env.stack.guided import GuidedDetector
 
     if not isinstance(site, Site):
-        raise ConfigError(f"detector='guided' renders the building model: build_stack needs site=, got {site!r}")
+        raise ConfigError(
+            f"detector='guided' renders the building model: build_stack needs site=, got {site!r}"
+        )
     if not _TEMPLATES or _TEMPLATES[0][0] is not site:
         _TEMPLATES[:] = [(site, SiteTemplates(site))]
     matcher = TemplateMatcher(xyz, _TEMPLATES[0][1])

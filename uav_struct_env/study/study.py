@@ -139,8 +139,9 @@ def _parser() -> CommandParser:
         default="learned",
         help=f"landmark detector: {', '.join(DETECTORS)}, learned:NAME ({', '.join(WEIGHT_NAMES)}; "
         "default learned: the method from the rendered pixels with the default weights, or with those "
-        "`uav-struct adapt` made for an IFC --site when they exist; projection: "
-        "ground truth + noise, an ablation isolating association and pose)",
+        "`uav-struct adapt` made for an IFC --site when they exist; guided: the learned detector, a "
+        "first pose, then the building model rendered at that pose and matched around each "
+        "landmark; projection: ground truth + noise, an ablation isolating association and pose)",
     )
     p.add_argument("--association", default="robust", choices=ASSOCIATIONS)
     p.add_argument("--noise", default="paper", choices=NOISES, help="onboard prior model")
