@@ -239,35 +239,32 @@ class TemplateMatcher:
         if not np.any(seen):
             return _NO_MATCHES
         pred = uv[idx] if is_pinhole(distortion) else distort_points(uv[idx], K, distortion)
-        gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY).astype(np.float32)
-        return self._search(gray, structure_edges(views), idx, at, pred, seen)
+        return self._search(img, structure_edges(views), idx, at, pred, seen)
 
-    def _search(self, gray: NDArray[np.float32], edges: NDArray[np.float32], idx: NDArray, at: NDArray,
+    def _search(self, image: NDArray[np.uint8], edges: NDArray[np.float32], idx: NDArray, at: NDArray,
                 pred: NDArray, seen: NDArray) -> Matches:
         """Correlate each seen landmark's template with the image around its projection ``pred``.
 
-        The image's orientation field is computed in each search window only (with a border for
-        its filters): the windows cover a tenth of a frame or less.
+        The image's grey levels and orientation field are computed in each search window only
+        (with a border for its filters): the windows cover a tenth of a frame or less.
         """
         P, r = self.patch_px, self.search_px
-        margin = P + r + _FILTER_BORDER
-        padded = cv2.copyMakeBorder(gray, margin, margin, margin, margin, cv2.BORDER_REPLICATE)
+        b, side = _FILTER_BORDER, P + 2 * r
         out_uv, out_s, out_i = [], [], []
         for k in np.flatnonzero(seen):
             template = orientation_field(edges[k], 0.0, 1.0)
             if float(np.abs(template).max()) < 1e-3:  # nothing of the structure drawn around it
                 continue
-            x0, y0 = np.round(pred[k] - at[k]).astype(np.int64) - r + margin
-            b, side = _FILTER_BORDER, P + 2 * r
-            crop = padded[y0 - b: y0 + side + b, x0 - b: x0 + side + b]
-            if crop.shape != (side + 2 * b, side + 2 * b):  # the search leaves the padded frame
+            x0, y0 = (int(v) for v in np.round(pred[k] - at[k]).astype(np.int64) - r)
+            crop = _grey_crop(image, x0 - b, y0 - b, side + 2 * b)
+            if crop is None:  # the search window lies outside the frame
                 continue
             window = orientation_field(crop)[b:-b, b:-b]
             scores = cv2.matchTemplate(window, template, cv2.TM_CCOEFF_NORMED)
             x, y, best, second = _peak(scores, self.exclusion_px)
             if best < self.min_score or second > self.max_second_ratio * best:
                 continue
-            out_uv.append((x0 - margin + x + at[k, 0], y0 - margin + y + at[k, 1]))
+            out_uv.append((x0 + x + at[k, 0], y0 + y + at[k, 1]))
             out_s.append(best)
             out_i.append(idx[k])
         if not out_i:
@@ -278,6 +275,17 @@ class TemplateMatcher:
     def __repr__(self) -> str:
         return (f"TemplateMatcher(M={len(self.xyz)}, patch_px={self.patch_px}, search_px={self.search_px}, "
                 f"min_score={self.min_score}, max_second_ratio={self.max_second_ratio})")
+
+
+def _grey_crop(image: NDArray[np.uint8], x: int, y: int, size: int) -> NDArray[np.float32] | None:
+    """The ``size`` square of ``image`` from ``(x, y)``, grey float32, border-replicated; None outside."""
+    h, w = image.shape[:2]
+    x1, y1, x2, y2 = max(x, 0), max(y, 0), min(x + size, w), min(y + size, h)
+    if x2 <= x1 or y2 <= y1:
+        return None
+    crop = cv2.cvtColor(np.ascontiguousarray(image[y1:y2, x1:x2]), cv2.COLOR_RGB2GRAY).astype(np.float32)
+    pads = (y1 - y, y + size - y2, x1 - x, x + size - x2)
+    return cv2.copyMakeBorder(crop, *pads, cv2.BORDER_REPLICATE) if any(pads) else crop
 
 
 def _unhidden(depth: NDArray[np.float32], at: NDArray, z: NDArray) -> NDArray[np.bool_]:
