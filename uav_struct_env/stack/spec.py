@@ -341,7 +341,7 @@ def _guided(spec: StackSpec, size: tuple[int, int], localizer: Localizer, xyz: N
     """The guided detector of ``spec``'s set: the learned one (all types) as its seed, templates of ``site``.
 
     Its anchors are every structural landmark of the site's stage, localized like the set (the
-    same arguments), unless the set is ``"all"`` or the stage has fewer than four of them.
+    same arguments), unless the stage has no landmark besides the set's.
     """
     from localization.detect.guided import TemplateMatcher
     from localization.detect.learned import LANDMARK_TYPES
@@ -360,7 +360,7 @@ def _guided(spec: StackSpec, size: tuple[int, int], localizer: Localizer, xyz: N
     types = range(len(LANDMARK_TYPES)) if spec.landmarks == "all" else [LANDMARK_TYPES.index(spec.landmarks)]
     every = site.landmarks("all").xyz
     anchors = None
-    if spec.landmarks != "all" and len(every) >= 4:
+    if spec.landmarks != "all" and len(every) > len(xyz):
         anchors = Localizer(every, localizer.K, association=spec.association, distortion=localizer.distortion,
                             **spec.localizer_arguments(size))
     return GuidedDetector(seed, types, localizer, matcher, spec.landmarks, anchors=anchors)
