@@ -37,20 +37,7 @@ from localization.detect.learned import match_detections
 from localization.geometry.distortion import distort_points
 from localization.geometry.transforms import project
 
-__all__ = ["FIT_PIXEL_SIGMA_PX", "GuidedDetector", "fit_pixel_sigma", "merged", "truth_ids"]
-
-#: The guided detector's pixel noise (per axis) at 1280 px wide images, as the localizer's fit
-#: tests should assume it. Its template matches lie 1.1-1.2 px (RMS, 2D) from their landmarks,
-#: twice the learned detector's 0.56 px, so its tests assume more than the learned detector's
-#: :data:`localization.detect.learned.FIT_PIXEL_SIGMA_PX`; measured on train buildings only
-#: (docs/study.md, "The BIM-guided detector").
-FIT_PIXEL_SIGMA_PX = 1.0
-
-
-def fit_pixel_sigma(image_width: int) -> float:
-    """:data:`FIT_PIXEL_SIGMA_PX` for images ``image_width`` px wide (scaled with the width)."""
-    return FIT_PIXEL_SIGMA_PX * image_width / 1280.0
-
+__all__ = ["GuidedDetector", "merged", "truth_ids"]
 
 def truth_ids(uv: NDArray[np.float64], truth: Mapping[str, Any] | None,
               match_px: float) -> NDArray[np.int64] | None:
