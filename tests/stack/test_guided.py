@@ -92,3 +92,12 @@ def test_guided_stack_needs_the_site_and_localizes_a_frame(slab_view):
     frame = stack.localize(image, info["landmarks"], invert(info["prior_world_from_cam"]), gt)
     assert frame.estimate.success and frame.translation_error_m < 0.5
     assert frame.detections.true_ids is not None and np.sum(frame.detections.true_ids >= 0) >= 4
+
+
+def test_the_study_detects_with_the_guided_detector_on_ifc_buildings_unless_told():
+    from uav_struct_env.study.study import _parser, study_config
+
+    duplex = "tests/data/ifc/duplex.ifc"
+    assert study_config(_parser().parse_args(["--site", duplex])).detector == "guided"
+    assert study_config(_parser().parse_args(["--site", duplex, "--detector", "learned"])).detector == "learned"
+    assert study_config(_parser().parse_args([])).detector == "learned"  # the paper site
