@@ -21,9 +21,9 @@ from uav_struct_env.wrappers.localize import LocalizePoses
 
 
 def test_choice_lists_derive_from_the_stack():
-    assert protocol.DETECTORS == STRUCTURAL_DETECTORS == ("projection", "learned")
+    assert protocol.DETECTORS == STRUCTURAL_DETECTORS == ("projection", "learned", "guided")
     assert protocol.ASSOCIATIONS == ASSOCIATIONS == ("paper", "robust")
-    assert wrapper_module.DETECTORS == DETECTORS == ("projection", "learned", "aruco")
+    assert wrapper_module.DETECTORS == DETECTORS == ("projection", "learned", "guided", "aruco")
     assert wrapper_module.MODES == ASSOCIATIONS
 
 

@@ -102,7 +102,7 @@ def test_bad_study_options_are_rejected_with_the_value():
     ):
         StudyConfig(association="best")
     with pytest.raises(
-        ConfigError, match=r"detector must be one of \('projection', 'learned'\), got 'vlm'"
+        ConfigError, match=r"detector must be one of \('projection', 'learned', 'guided'\), got 'vlm'"
     ):
         StudyConfig(detector="vlm")
     with pytest.raises(
@@ -122,7 +122,7 @@ def test_learned_detector_weights_by_path(tmp_path, monkeypatch):
     from uav_struct_env.stack import build_stack
     from uav_struct_env.study.run import stack_spec
 
-    with pytest.raises(ConfigError, match=r"detector_model applies to detector='learned' only, "
+    with pytest.raises(ConfigError, match=r"detector_model applies to detector='learned' or 'guided' only, "
                                           r"got detector='projection'"):
         StudyConfig(detector_model=str(DEFAULT_MODEL))
     with pytest.raises(ConfigError, match=r"refiner_model must be an existing ONNX file, got 'no.onnx'"):
@@ -161,9 +161,10 @@ def test_learned_detector_weights_by_name():
 
 def test_cli_reports_bad_options_without_a_traceback(capsys):
     assert main(["--detector", "magic", "--out", "unused"]) == 2
-    assert "detector must be one of ('projection', 'learned'), got 'magic'" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "detector must be one of ('projection', 'learned', 'guided'), got 'magic'" in err
     assert main(["--detector", "projection", "--detector-model", "kp.onnx", "--out", "unused"]) == 2
-    assert "detector_model applies to detector='learned' only" in capsys.readouterr().err
+    assert "detector_model applies to detector='learned' or 'guided' only" in capsys.readouterr().err
     assert main(["--detector", "learned:magic", "--out", "unused"]) == 2
     assert "names unknown weights 'magic'" in capsys.readouterr().err
 

@@ -36,7 +36,7 @@ def test_learned_detector_column_tops_paper_camera_at_half_size(tmp_path):
 
 
 def test_learned_weights_are_rejected_for_other_detectors_and_missing_files(tmp_path):
-    with pytest.raises(ConfigError, match=r"detector_model applies to detector='learned' only, "
+    with pytest.raises(ConfigError, match=r"detector_model applies to detector='learned' or 'guided' only, "
                                           r"got detector='projection'"):
         make_localization_env("column_tops", detector_model=DEFAULT_MODEL)
     missing = tmp_path / "nope.onnx"

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -53,7 +53,7 @@ __all__ = [
 ]
 
 #: Detectors of structural landmarks, by name (any :class:`localization.Detector` object works too).
-STRUCTURAL_DETECTORS: tuple[str, ...] = ("projection", "learned")
+STRUCTURAL_DETECTORS: tuple[str, ...] = ("projection", "learned", "guided")
 #: Every detector name: the structural ones and the ArUco markers' own (``landmarks="aruco"``).
 DETECTORS: tuple[str, ...] = (*STRUCTURAL_DETECTORS, "aruco")
 #: Association methods of :class:`localization.Localizer`.
@@ -62,6 +62,8 @@ ASSOCIATIONS: tuple[str, ...] = tuple(ASSOCIATION_METHODS)
 PAPER_WIDTH_PX: int = PAPER_IMAGE_SIZE[0]
 #: ArUco pose modes of :class:`localization.aruco.ArucoLocalizer`.
 _ARUCO_MODES = ("average", "joint")
+#: Detectors that run the learned detector's networks (and take its weight files).
+_LEARNED_DETECTORS = ("learned", "guided")
 #: ``"learned:NAME"`` runs the learned detector with the weight set ``NAME``.
 _LEARNED_PREFIX = "learned:"
 
@@ -94,15 +96,15 @@ def resolve_learned(detector: Any, detector_model: Any, refiner_model: Any) -> t
 
 
 def check_weights(name: str, path: Any, detector: Any) -> str | Path | None:
-    """Return ``path`` (None allowed) if it is an existing file and ``detector`` is ``"learned"``.
+    """Return ``path`` (None allowed) if it is an existing file and ``detector`` runs the learned networks.
 
     Raises:
         ConfigError: naming ``name``, for weights given to another detector or a missing file.
     """
     if path is None:
         return None
-    if detector != "learned":
-        raise ConfigError(f"{name} applies to detector='learned' only, got detector={detector!r}")
+    if detector not in _LEARNED_DETECTORS:
+        raise ConfigError(f"{name} applies to detector='learned' or 'guided' only, got detector={detector!r}")
     if not isinstance(path, (str, Path)) or not Path(path).is_file():
         raise ConfigError(f"{name} must be an existing ONNX file, got {path!r}")
     stat = Path(path).stat()
@@ -136,6 +138,9 @@ class StackSpec:
             the default weights), ``"learned:NAME"`` (the same with the weight set ``NAME`` of
             :mod:`localization.detect.weights`, e.g. ``"learned:active"``; stored as
             ``"learned"`` with that set's two files in ``detector_model`` and ``refiner_model``),
+            ``"guided"`` (:class:`uav_struct_env.stack.guided.GuidedDetector`: the learned
+            detector, a first pose, then the building model's templates matched at that pose;
+            needs the site: ``build_stack(..., site=)``),
             ``"aruco"`` (OpenCV markers; needs ``landmarks="aruco"``), or any object with
             ``detect(image, context) -> Detections`` (used as given).
         association: ``"robust"`` or ``"paper"``.
@@ -145,8 +150,10 @@ class StackSpec:
         scale_gates: scale the robust gates with the image width (module docstring).
         miss_rate: projection detector: probability of missing a visible landmark.
         false_positives: projection detector: mean clutter detections per image.
-        detector_model: learned detector: keypoint-network ONNX file (None: the default weights').
-        refiner_model: learned detector: patch-refiner ONNX file (None: the default weights').
+        detector_model: learned (or guided) detector: keypoint-network ONNX file (None: the
+            default weights').
+        refiner_model: learned (or guided) detector: patch-refiner ONNX file (None: the default
+            weights').
         prior_sigmas: the onboard prior's sigmas for the localizer (None: 3 m, 2/2/5 deg).
         aruco_mode: ``"joint"`` (one PnP over all corners) or ``"average"`` (the paper's).
         aruco_prior: the prior chooses each marker's IPPE solution (False: the lowest
@@ -187,8 +194,8 @@ class StackSpec:
                 f"detector must be one of {DETECTORS} or an object with detect(image, context), "
                 f"got {self.detector!r}"
             )
-        if self.detector == "learned" and self.landmarks == "aruco":
-            raise ConfigError("detector='learned' detects structural landmarks, not 'aruco'")
+        if self.detector in _LEARNED_DETECTORS and self.landmarks == "aruco":
+            raise ConfigError(f"detector={self.detector!r} detects structural landmarks, not 'aruco'")
         if self.detector == "aruco" and self.landmarks != "aruco":
             raise ConfigError(f"detector='aruco' needs landmarks='aruco', got {self.landmarks!r}")
         check_choice("association", self.association, ASSOCIATIONS, error=ConfigError)
@@ -292,7 +299,8 @@ class LocalizationStack:
                 gt_cam_from_world,
                 use_prior=self.spec.aruco_prior,
             )
-        context = {"landmarks": dict(landmark_truth or {}), "image_size": self.image_size}
+        context = {"landmarks": dict(landmark_truth or {}), "image_size": self.image_size,
+                   "prior_cam_from_world": prior_cam_from_world}
         return localize_frame(
             self.detector,
             self.localizer,
@@ -325,6 +333,39 @@ def _learned(spec: StackSpec, width: int) -> Any:
     return _LEARNED[key]
 
 
+_TEMPLATES: list[tuple[Any, Any]] = []  # (site, its SiteTemplates): the last site's only
+
+
+def _guided(spec: StackSpec, size: tuple[int, int], localizer: Localizer, xyz: NDArray[np.float64],
+            site: Any) -> Any:
+    """The guided detector of ``spec``'s set: the learned one (all types) as its seed, templates of ``site``.
+
+    Its anchors are every structural landmark of the site's stage, localized like the set (the
+    same arguments), unless the stage has no landmark besides the set's.
+    """
+    from localization.detect.guided import TemplateMatcher
+    from localization.detect.learned import LANDMARK_TYPES
+    from uav_struct_env.sim.templates import SiteTemplates
+    from uav_struct_env.site import Site
+    from uav_struct_env.stack.guided import GuidedDetector
+
+    if not isinstance(site, Site):
+        raise ConfigError(
+            f"detector='guided' renders the building model: build_stack needs site=, got {site!r}"
+        )
+    if not _TEMPLATES or _TEMPLATES[0][0] is not site:
+        _TEMPLATES[:] = [(site, SiteTemplates(site))]
+    matcher = TemplateMatcher(xyz, _TEMPLATES[0][1])
+    seed = _learned(replace(spec, landmarks="all"), size[0])
+    types = range(len(LANDMARK_TYPES)) if spec.landmarks == "all" else [LANDMARK_TYPES.index(spec.landmarks)]
+    every = site.landmarks("all").xyz
+    anchors = None
+    if spec.landmarks != "all" and len(every) > len(xyz):
+        anchors = Localizer(every, localizer.K, association=spec.association, distortion=localizer.distortion,
+                            **spec.localizer_arguments(size))
+    return GuidedDetector(seed, types, localizer, matcher, spec.landmarks, anchors=anchors)
+
+
 def build_stack(
     spec: StackSpec,
     K: ArrayLike,
@@ -335,6 +376,7 @@ def build_stack(
     markers: Sequence[Any] = (),
     rng: np.random.Generator | None = None,
     distortion: ArrayLike | None = None,
+    site: Any = None,
 ) -> LocalizationStack:
     """Build the stack of ``spec`` for a camera ``K`` with images of ``image_size`` (W, H).
 
@@ -349,9 +391,12 @@ def build_stack(
         distortion: the frames' OpenCV distortion coefficients (``info["distortion"]``), or
             None for a pinhole; the localizer (or the ArUco localizer) undistorts detections
             with them at its entry.
+        site: the site as designed (a :class:`~uav_struct_env.site.Site`): the building model
+            that ``detector="guided"`` renders its templates from.
 
     Raises:
-        ConfigError: with fewer than 4 landmarks, or no markers for ArUco.
+        ConfigError: with fewer than 4 landmarks, no markers for ArUco, or no site for
+            ``detector="guided"``.
     """
     w, h = (int(v) for v in image_size)
     K = np.asarray(K, dtype=np.float64)
@@ -383,6 +428,8 @@ def build_stack(
         detector = spec.detector
     elif spec.detector == "learned":
         detector = _learned(spec, w)
+    elif spec.detector == "guided":
+        detector = _guided(spec, (w, h), localizer, xyz, site)
     else:
         detector = ProjectionDetector(
             spec.landmarks, spec.detector_sigma(w), spec.miss_rate, spec.false_positives, rng=rng

@@ -185,8 +185,10 @@ def settings_line(results: dict) -> str:
     sw = results.get("software") or {}
     noise = (f"miss rate {c.pop('miss_rate')}, false positives {c.pop('false_positives')}/image")
     sigma = c.pop("pixel_sigma")
-    if c.pop("detector") == "learned":
-        detector = (f"learned detector ({_name(c.pop('detector_model'), DEFAULT_MODEL)} + "
+    kind = c.pop("detector")
+    if kind in ("learned", "guided"):
+        detector = (f"{'BIM-guided' if kind == 'guided' else 'learned'} detector "
+                    f"({_name(c.pop('detector_model'), DEFAULT_MODEL)} + "
                     f"{_name(c.pop('refiner_model'), DEFAULT_REFINER)}; localizer noise model "
                     f"pixel sigma {sigma} px, {noise})")
     else:

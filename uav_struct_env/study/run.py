@@ -146,11 +146,11 @@ def stack_spec(config: StudyConfig, method: Method) -> StackSpec:
 
     The study's own policies: the localizer's noise model is floored at 0.5 px (a noise-free
     projection detector must not collapse the gates) and the gates stay in px of the image; with
-    the learned detector the verification's fit tests assume its declared noise
-    (:func:`localization.detect.learned.fit_pixel_sigma`).
+    the learned detector (and the guided one, which runs it) the verification's fit tests assume
+    the learned detector's declared noise (:func:`localization.detect.learned.fit_pixel_sigma`).
     """
     kwargs = {}
-    if method.structural and config.detector == "learned":
+    if method.structural and config.detector in ("learned", "guided"):
         from localization.detect.learned import fit_pixel_sigma  # onnxruntime only when it is used
 
         kwargs["fit_sigma_px"] = fit_pixel_sigma(config.image_size[0])
@@ -218,6 +218,7 @@ def run_unit_tracked(config: StudyConfig, scene: Scene, viewpoint: int, overlay_
                 markers=site.markers,
                 rng=_rng(config, method, uav, viewpoint),
                 distortion=info["distortion"],
+                site=site,
             )
             frame = stack.localize(image, {method.landmarks: truth}, prior, gt)
             est = frame.estimate

@@ -136,11 +136,13 @@ def _parser() -> CommandParser:
     p.add_argument("--seed", type=int, default=0, help="seed of textures, detector noise and priors")
     p.add_argument(
         "--detector",
-        default="learned",
+        default=None,
         help=f"landmark detector: {', '.join(DETECTORS)}, learned:NAME ({', '.join(WEIGHT_NAMES)}; "
-        "default learned: the method from the rendered pixels with the default weights, or with those "
-        "`uav-struct adapt` made for an IFC --site when they exist; projection: "
-        "ground truth + noise, an ablation isolating association and pose)",
+        "default: guided for an IFC --site, learned otherwise; learned: the method from the rendered "
+        "pixels with the default weights, or with those "
+        "`uav-struct adapt` made for an IFC --site when they exist; guided: the learned detector, a "
+        "first pose, then the building model rendered at that pose and matched around each "
+        "landmark; projection: ground truth + noise, an ablation isolating association and pose)",
     )
     p.add_argument("--association", default="robust", choices=ASSOCIATIONS)
     p.add_argument("--noise", default="paper", choices=NOISES, help="onboard prior model")
@@ -274,20 +276,32 @@ def study_config(args, **overrides) -> StudyConfig:
         upright_workers=args.upright_workers,
     )
     fields.update(overrides)
+    if fields["detector"] is None:
+        fields["detector"] = default_detector(fields["site"])
     adapted = adapted_for(*(fields[k] for k in ("site", "detector", "detector_model", "refiner_model")))
     if adapted is not None:
         fields.update(detector_model=str(adapted.model), refiner_model=str(adapted.refiner))
     return StudyConfig(**fields)
 
 
+def default_detector(site: str) -> str:
+    """The detector a study runs unless told: ``guided`` on an IFC building, else ``learned``.
+
+    On an IFC building the guided detector beat the learned one on the train buildings
+    (docs/study.md, "The BIM-guided detector"); it needs the building model, which the IFC is.
+    """
+    return "guided" if isinstance(site, str) and site.lower().endswith(".ifc") else "learned"
+
+
 def adapted_for(site: str, detector: str, detector_model: str | None,
                 refiner_model: str | None) -> WeightSet | None:
-    """The weights ``uav-struct adapt`` made for ``site``, if the plain default learned detector runs there.
+    """The weights ``uav-struct adapt`` made for ``site``, if the default learned networks run there.
 
-    None unless ``detector`` is ``"learned"`` (not ``learned:NAME``) with no weight files given and
-    ``site`` is an IFC file with an adapted set (:func:`localization.detect.weights.adapted_weights`).
+    None unless ``detector`` is ``"learned"`` or ``"guided"`` (not ``learned:NAME``) with no weight
+    files given and ``site`` is an IFC file with an adapted set
+    (:func:`localization.detect.weights.adapted_weights`).
     """
-    if detector != "learned" or detector_model is not None or refiner_model is not None:
+    if detector not in ("learned", "guided") or detector_model is not None or refiner_model is not None:
         return None
     if not (isinstance(site, str) and site.lower().endswith(".ifc") and Path(site).is_file()):
         return None
@@ -303,7 +317,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_output_dir(args.out, overwrite=args.overwrite)
     except INPUT_ERRORS as err:
         return refuse("uav-struct study", err)
-    adapted = adapted_for(args.site, args.detector, args.detector_model, args.refiner_model)
+    if args.detector is None and config.detector == "guided":
+        print("uav-struct study: note: an IFC building: detecting with the BIM-guided detector (--detector "
+              "guided, the default here); --detector learned runs the learned detector alone",
+              file=sys.stderr)
+    adapted = adapted_for(args.site, config.detector, args.detector_model, args.refiner_model)
     if adapted is not None:
         print(f"uav-struct study: note: running the detector weights adapted to this building by uav-struct "
               f"adapt ({adapted.model.parent}); --detector learned:landmarks_v1 runs the default ones",

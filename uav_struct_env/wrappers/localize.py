@@ -160,6 +160,7 @@ class LocalizePoses(ParallelWrapper):
                 markers=base.site.markers,
                 rng=self._rng,
                 distortion=np.asarray(config.camera.distortion, dtype=np.float64),
+                site=base.site,
             )
         except ConfigError as e:
             if spec.structural and len(model.xyz) < 4:

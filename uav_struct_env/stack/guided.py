@@ -1,0 +1,165 @@
+"""The BIM-guided detector: a first pose from the learned detector, then the building model's templates.
+
+:class:`GuidedDetector` follows :class:`localization.Detector` and is what ``detector="guided"``
+builds (:func:`uav_struct_env.stack.build_stack`). Per frame:
+
+1. **First pass.** The learned detector runs once for every landmark type. All its candidates
+   are localized from the onboard prior against every structural landmark of the stage
+   (``anchors``: the building model knows them all, and more landmarks pin the pose better than
+   one set's few) by a :class:`localization.Localizer` like the stack's (association, PnP,
+   verification); without a pose there, the candidates of the set's type are localized against
+   the set by the stack's own. Without any pose, the set's candidates are the detections (the
+   learned detector's result).
+2. **Second pass.** At that pose, the building model is rendered around every landmark it
+   shows (:class:`uav_struct_env.sim.templates.SiteTemplates`) and matched in the image within
+   a few pixels (:class:`localization.detect.guided.TemplateMatcher`). The detections are the
+   set's candidates that lie where a landmark projects at that pose (within the search radius;
+   the others fit no landmark there), where no match lies within ``merge_px`` of them, and the
+   matches.
+
+The stack then localizes the detections again from the prior, exactly as for any detector, so
+the final pose rests on the association and verification of every detector (the identities the
+templates were matched under are not passed on). Ground truth in the context fills
+``Detections.true_ids`` for scoring only (:func:`truth_ids`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from localization import Detections, Localizer
+from localization.detect.guided import Matches, TemplateMatcher
+from localization.detect.learned import match_detections
+from localization.geometry.distortion import distort_points
+from localization.geometry.transforms import project
+
+__all__ = ["GuidedDetector", "merged", "truth_ids"]
+
+def truth_ids(uv: NDArray[np.float64], truth: Mapping[str, Any] | None,
+              match_px: float) -> NDArray[np.int64] | None:
+    """The visible true landmark within ``match_px`` of each detection (one-to-one), else -1.
+
+    None without truth.
+
+    ``truth``: one landmark set's truth (``ids``, ``uv``, ``visible``), as the env delivers it.
+    """
+    if truth is None:
+        return None
+    visible = np.asarray(truth["visible"], dtype=bool).reshape(-1)
+    ids = np.asarray(truth["ids"]).astype(np.int64).reshape(-1)
+    gt_uv = np.asarray(truth["uv"], dtype=np.float64).reshape(-1, 2)
+    match, _ = match_detections(uv, gt_uv[visible], match_px)
+    out = np.full(len(match), -1, dtype=np.int64)
+    out[match >= 0] = ids[visible][match[match >= 0]]
+    return out
+
+
+def merged(first: Detections, found: Matches,
+           radius: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(uv, scores)``: the matches, then the first pass's detections farther than ``radius`` from them.
+
+    Where both found a landmark the match is kept: it is placed where the building model's
+    corner shows, and on buildings unlike its training data the learned detector places its
+    corners a few pixels off it (a finish layer, a parapet's edge), close enough to compete with
+    the match in the association, too far to fit with it.
+    """
+    scores = first.scores if first.scores is not None else np.ones(len(first))
+    if len(found.uv) == 0:
+        return first.uv, scores
+    if len(first) == 0:
+        return found.uv, found.score
+    gap = np.hypot(*(first.uv[:, None, :] - found.uv[None, :, :]).transpose(2, 0, 1)).min(axis=1)
+    rest = gap > radius
+    return np.vstack([found.uv, first.uv[rest]]), np.concatenate([found.score, scores[rest]])
+
+
+class GuidedDetector:
+    """Learned candidates, a first pose, and the building model's templates at it (module docstring).
+
+    Args:
+        seed: the first pass's detector: ``detect_all(image) -> (uv, scores, types)`` over every
+            landmark type (a :class:`~localization.detect.learned.LearnedDetector` of ``"all"``).
+        types: the ``types`` values of the set's candidates.
+        localizer: the localizer of the landmark set (the stack's).
+        matcher: the landmark set's :class:`~localization.detect.guided.TemplateMatcher`.
+        landmarks: the set's name in ``context["landmarks"]`` (scoring only).
+        anchors: a localizer of every structural landmark of the stage, tried on all the
+            candidates when the set's own give no pose (None: the set's only).
+        merge_px: a first-pass detection this close to a match is the same landmark (the match is
+            kept), px.
+        match_px: radius of the ground-truth matching that fills ``true_ids``, px.
+    """
+
+    def __init__(self, seed: Any, types: Sequence[int], localizer: Localizer, matcher: TemplateMatcher,
+                 landmarks: str, anchors: Localizer | None = None, merge_px: float = 8.0,
+                 match_px: float = 3.0) -> None:
+        self.seed = seed
+        self.types = tuple(int(t) for t in types)
+        self.localizer = localizer
+        self.anchors = anchors
+        self.matcher = matcher
+        self.landmarks = landmarks
+        self.merge_px = float(merge_px)
+        self.match_px = float(match_px)
+
+    def detect(self, image: Any, context: Mapping[str, Any]) -> Detections:
+        """Detections in ``image``.
+
+        ``context`` holds ``prior_cam_from_world`` (and ``landmarks``, for scoring only), as
+        :meth:`~uav_struct_env.stack.LocalizationStack.localize` gives it.
+
+        Raises:
+            KeyError: if the context lacks the prior.
+        """
+        if "prior_cam_from_world" not in context:
+            raise KeyError(
+                f"the guided detector needs context['prior_cam_from_world']; got {sorted(context)}"
+            )
+        uv, scores, types = self.seed.detect_all(image)
+        mine = np.isin(types, self.types)
+        first = Detections(uv[mine], scores[mine])
+        pose = self.first_pose(first, Detections(uv, scores), context["prior_cam_from_world"])
+        if pose is not None:
+            found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion)
+            uv, scores = merged(self.near(first, pose), found, self.merge_px)
+        else:
+            uv, scores = first.uv, first.scores
+        truth = context.get("landmarks", {}).get(self.landmarks)
+        return Detections(uv=uv, scores=scores, true_ids=truth_ids(uv, truth, self.match_px))
+
+    def near(self, first: Detections, pose: NDArray[np.float64]) -> Detections:
+        """The first-pass detections within the search radius of a landmark's projection at ``pose``.
+
+        The others fit no landmark at the pose the first pass found: kept, they would compete
+        with the true detections in the second localization (a set of four corners and the
+        learned detector's false candidates near them fit some other pose nearly as well).
+        """
+        if len(first) == 0:
+            return first
+        uv, z = project(self.localizer.K, pose, self.matcher.xyz)
+        uv = distort_points(uv[z > 0.1], self.localizer.K, self.localizer.distortion)
+        if len(uv) == 0:
+            return Detections(np.zeros((0, 2)), np.zeros(0))
+        gap = np.hypot(*(first.uv[:, None, :] - uv[None, :, :]).transpose(2, 0, 1)).min(axis=1)
+        keep = gap <= self.matcher.search_px
+        return Detections(first.uv[keep], None if first.scores is None else first.scores[keep])
+
+    def first_pose(self, first: Detections, every: Detections, prior: NDArray[np.float64]) -> NDArray | None:
+        """The first pass's ``cam_from_world``: all candidates against the anchors, else the set's own.
+
+        Every structural landmark the stage has pins the templates' pose better than one set's
+        few (four slab corners of a house); the set's own localization is the fallback.
+        """
+        if self.anchors is not None and len(every) > len(first):
+            est = self.anchors.localize(every, prior)
+            if est.success:
+                return est.cam_from_world
+        est = self.localizer.localize(first, prior)
+        return est.cam_from_world if est.success else None
+
+    def __repr__(self) -> str:
+        return f"GuidedDetector(landmarks={self.landmarks!r}, seed={self.seed!r}, matcher={self.matcher!r})"
