@@ -8,9 +8,10 @@ uniform clutter over the image (500 or 2,000 points); the learned detector's fal
 real renders, replayed. Case ``k`` is drawn from ``default_rng((19, k))`` as in the test, and its
 corruption from ``default_rng((44, k))``.
 
-A success counts as confidently wrong when its position error exceeds ``max(1 m, 10 x its
-reported position std)`` (the fuzz test's rule). Prints, per mode: cases, successes, confident
-wrong poses, the worst of them, and the median, P99 and slowest localization time; with
+The localizer holds its poses to :data:`localization.verify.CONFIRM_TOLERANCE_M` (``tolerance_m``),
+as the study's learned detector does. A success counts as confidently wrong when its position
+error exceeds ``max(1 m, 10 x its reported position std)`` (the fuzz test's rule). Prints, per
+mode: cases, successes, confident wrong poses, the worst of them, and the median, P99 and slowest localization time; with
 ``--compare``, the same without the verification (:mod:`localization.verify`) beside it.
 
     .venv/bin/python benchmarks/integrity_fuzz.py --cases 300 [--compare]
@@ -42,20 +43,28 @@ from localization.testing.fuzz import (
     corrupt_detections,
     draw_case,
 )
+from localization.verify import CONFIRM_TOLERANCE_M
 from localization.warmup import warm_up
 
 #: A false detection within this distance of a landmark is recorded by its offset from it, px.
 NEAR_PX = 80.0
 
 
-def run(mode: str, cases: int, verify: bool = True, library: FalseDetections | None = None) -> dict:
-    """Localize ``cases`` fuzz cases under ``mode``; counts, the worst wrong pose, timings."""
+def run(
+    mode: str, cases: int, verify: bool = True, library: FalseDetections | None = None,
+    tolerance_m: float | None = CONFIRM_TOLERANCE_M,
+) -> dict:
+    """Localize ``cases`` fuzz cases under ``mode``; counts, the worst wrong pose, timings.
+
+    ``tolerance_m``: the localizer's (:class:`localization.Localizer`), the study's
+    :data:`localization.verify.CONFIRM_TOLERANCE_M` by default, as the learned detector runs.
+    """
     wrong, ok, times, codes = [], 0, [], defaultdict(int)
     for k in range(cases):
         case = draw_case(np.random.default_rng((19, k)))
         det = corrupt_detections(case, mode, np.random.default_rng((44, k)), library)
         loc = Localizer(case.landmarks_xyz, case.K, association="robust", image_size=case.image_size,
-                        pixel_sigma=case.pixel_sigma, verify=verify)
+                        pixel_sigma=case.pixel_sigma, verify=verify, tolerance_m=tolerance_m)
         t0 = time.perf_counter()
         est = loc.localize(det, case.prior_cam_from_world)
         times.append(time.perf_counter() - t0)

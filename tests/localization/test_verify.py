@@ -14,13 +14,15 @@ import numpy as np
 import pytest
 
 from localization import FailureCode, Localizer
-from localization.detect.learned import FIT_PIXEL_SIGMA_PX, fit_pixel_sigma
+from localization.detect.learned import FIT_PIXEL_SIGMA_PX, FIT_PIXEL_SIGMAS_PX, fit_pixel_sigma
+from localization.detect.weights import weight_set
 from localization.geometry.camera import PAPER_IMAGE_SIZE, PAPER_K
 from localization.geometry.transforms import camera_center, look_at, project
 from localization.pose.covariance import PriorSigmas
 from localization.testing.fuzz import CORRUPTIONS, FalseDetections, corrupt_detections, draw_case
 from localization.testing.synthetic import paper_prior
 from localization.verify import (
+    CONFIRM_TOLERANCE_M,
     OUTLIER_QUANTILE,
     VerifyInputs,
     chance_support,
@@ -38,9 +40,9 @@ def _case(mode: str, k: int):
     return case, corrupt_detections(case, mode, np.random.default_rng((44, k)))
 
 
-def _localize(case, det, verify=True):
+def _localize(case, det, verify=True, tolerance_m=CONFIRM_TOLERANCE_M):
     loc = Localizer(case.landmarks_xyz, case.K, image_size=case.image_size, pixel_sigma=case.pixel_sigma,
-                    verify=verify)
+                    verify=verify, tolerance_m=tolerance_m)
     return loc.localize(det, case.prior_cam_from_world)
 
 
@@ -198,9 +200,13 @@ def test_fit_sigma_must_be_positive(bad):
         Localizer(X, PAPER_K, fit_sigma_px=bad)
 
 
-def test_the_learned_detector_declares_its_fit_sigma_per_image_width():
-    assert fit_pixel_sigma(1280) == pytest.approx(FIT_PIXEL_SIGMA_PX) == pytest.approx(0.7)
-    assert fit_pixel_sigma(640) == pytest.approx(0.35)
+def test_the_learned_detector_declares_its_fit_sigma_per_weights_imaging_and_width():
+    active = weight_set("active")
+    assert fit_pixel_sigma(1280) == pytest.approx(FIT_PIXEL_SIGMAS_PX[("landmarks_v1", "ideal")]) == 0.54
+    assert fit_pixel_sigma(640, "camera") == pytest.approx(0.84 / 2)
+    assert fit_pixel_sigma(1280, "camera", str(active.model), active.refiner) == pytest.approx(0.62)
+    # weights the table does not list (a custom or adapted set) get the pooled calibration
+    assert fit_pixel_sigma(1280, "ideal", "/elsewhere/kp.onnx") == pytest.approx(FIT_PIXEL_SIGMA_PX) == 0.7
     with pytest.raises(ValueError, match="image_width"):
         fit_pixel_sigma(0)
 

@@ -146,14 +146,19 @@ def stack_spec(config: StudyConfig, method: Method) -> StackSpec:
 
     The study's own policies: the localizer's noise model is floored at 0.5 px (a noise-free
     projection detector must not collapse the gates) and the gates stay in px of the image; with
-    the learned detector the verification's fit tests assume its declared noise
-    (:func:`localization.detect.learned.fit_pixel_sigma`).
+    the learned detector the verification's fit tests assume its declared noise for the study's
+    weights and imaging (:func:`localization.detect.learned.fit_pixel_sigma`), and a pose must be
+    confirmed within :data:`localization.verify.CONFIRM_TOLERANCE_M`.
     """
     kwargs = {}
     if method.structural and config.detector == "learned":
         from localization.detect.learned import fit_pixel_sigma  # onnxruntime only when it is used
+        from localization.verify import CONFIRM_TOLERANCE_M
 
-        kwargs["fit_sigma_px"] = fit_pixel_sigma(config.image_size[0])
+        kwargs["fit_sigma_px"] = fit_pixel_sigma(
+            config.image_size[0], config.imaging, config.detector_model, config.refiner_model
+        )
+        kwargs["tolerance_m"] = CONFIRM_TOLERANCE_M
     return StackSpec(
         landmarks=method.landmarks,
         detector=config.detector if method.structural else "aruco",
