@@ -11,8 +11,9 @@ corruption from ``default_rng((44, k))``.
 The localizer holds its poses to :data:`localization.verify.CONFIRM_TOLERANCE_M` (``tolerance_m``),
 as the study's learned detector does. A success counts as confidently wrong when its position
 error exceeds ``max(1 m, 10 x its reported position std)`` (the fuzz test's rule). Prints, per
-mode: cases, successes, confident wrong poses, the worst of them, and the median, P99 and slowest localization time; with
-``--compare``, the same without the verification (:mod:`localization.verify`) beside it.
+mode: cases, successes, confident wrong poses, the worst of them, and the median, P99 and
+slowest localization time; with ``--compare``, the same without the verification
+(:mod:`localization.verify`) beside it.
 
     .venv/bin/python benchmarks/integrity_fuzz.py --cases 300 [--compare]
 
