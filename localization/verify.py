@@ -54,6 +54,22 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   residuals are identical and only the prior (and the landmarks each predicts) tell them
   apart. A rival within the ambiguity margin fails as
   :attr:`~localization.failure.FailureCode.AMBIGUOUS`.
+* *Rivals grown whole* (:func:`reassociated`, :func:`offset_starts`). A twin or a lattice rival
+  pairs only the winner's landmarks, moved; where the winner explains a patch of a ghost copy
+  (a copy shifted as a whole fits no pose exactly) or the layout one period over (its edge
+  landmarks have no counterpart), the structure's own pose pairs many more. Each rival is
+  refined and re-associated at the final gate as the association refines its hypotheses, and
+  scored as a hypothesis of its own; so are starts from the winner's predictions moved by the
+  common image offsets voted between them and the detections. One that scores within the
+  ambiguity margin of the winner, or better, fails the pose as the twin or rival would.
+* *One pair moves it too far* (:func:`leave_one_out_shifts`, with ``tolerance_m``). A pose on
+  five to seven pairs with one detection a few px off its corner passes every residual test,
+  yet the pose without that pair lies metres away (the linearized refit of regression
+  diagnostics, Cook 1977). With a tolerance (:data:`CONFIRM_TOLERANCE_M`, which the study passes
+  with the learned detector) a pose that leaving out any one pair moves farther than
+  ``max(tolerance_m, 3 x the Cramer-Rao bound of the landmarks it predicts in the image)`` at the
+  detector's noise fails as :attr:`~localization.failure.FailureCode.ILL_CONDITIONED`: the
+  detections cannot confirm it within the tolerance.
 
 :class:`VerifyInputs` carries the frame and the pose; :func:`verify_pose` returns None for a
 confirmed pose, else a :class:`Refusal`.
