@@ -18,10 +18,13 @@ slowest localization time; with ``--compare``, the same without the verification
     .venv/bin/python benchmarks/integrity_fuzz.py --cases 300 [--compare]
 
 ``record`` writes the replayed library (:class:`localization.testing.fuzz.FalseDetections`) from
-study folders of the learned detector (their ``detections.csv``): only training buildings, the
-paper site and random sites, never a held-out building.
+study folders of the learned detector (their ``detections.csv``): for the ``detector`` mode only
+training buildings, the paper site and random sites, never a held-out building; the held-out
+buildings' own library (``detector_heldout``) once, with the method fixed, into its own file.
 
     .venv/bin/python benchmarks/integrity_fuzz.py record results/paper results/duplex ...
+    .venv/bin/python benchmarks/integrity_fuzz.py record heldout/revit_tall_building ... \
+        --out localization/testing/false_detections_heldout.json
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from localization import Localizer
 from localization.geometry.transforms import camera_center
 from localization.testing.fuzz import (
     CORRUPTIONS,
+    FALSE_DETECTION_LIBRARIES,
     FALSE_DETECTIONS_PATH,
     FalseDetections,
     corrupt_detections,
@@ -87,9 +91,10 @@ def run(
 def main(cases: int = 300, modes: tuple[str, ...] = CORRUPTIONS, compare: bool = False) -> list[dict]:
     """Run every mode (and, with ``compare``, again without verification) and print the table."""
     warm_up(announce=print)
-    library = FalseDetections.load() if "detector" in modes else None
     rows = []
     for mode in modes:
+        path = FALSE_DETECTION_LIBRARIES.get(mode)
+        library = None if path is None else FalseDetections.load(path)
         for verify in (True, False) if compare else (True,):
             rows.append(run(mode, cases, verify, library))
     print(f"{'mode':<14} {'verify':>6} {'cases':>6} {'poses':>6} {'wrong':>6} {'worst (m, sigma m)':>20} "

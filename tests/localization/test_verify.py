@@ -20,7 +20,14 @@ from localization.geometry.camera import PAPER_IMAGE_SIZE, PAPER_K
 from localization.geometry.transforms import camera_center, look_at, project
 from localization.pose.covariance import PriorSigmas
 from localization.pose.pnp import refine_pose
-from localization.testing.fuzz import CORRUPTIONS, FalseDetections, corrupt_detections, draw_case
+from localization.testing.fuzz import (
+    CORRUPTIONS,
+    FALSE_DETECTION_LIBRARIES,
+    FALSE_DETECTIONS_HELDOUT_PATH,
+    FalseDetections,
+    corrupt_detections,
+    draw_case,
+)
 from localization.testing.synthetic import paper_prior
 from localization.verify import (
     CONFIRM_TOLERANCE_M,
@@ -160,16 +167,24 @@ def test_an_unknown_corruption_is_refused():
         corrupt_detections(case, "ghosts", np.random.default_rng(0))
 
 
+HELD_OUT = ("revit_tall_building", "archicad9_niedriha", "tekla_carwash", "renga_house",
+            "revit_webifc_example", "sketchup_pcert_house")
+
+
 def test_the_recorded_false_detections_come_from_no_held_out_building():
     library = FalseDetections.load()
-    held_out = ("revit_tall_building", "archicad9_niedriha", "tekla_carwash", "renga_house",
-                "revit_webifc_example", "sketchup_pcert_house")
-    assert library.views and not any(h in s for s in library.sources for h in held_out)
+    assert library.views and not any(h in s for s in library.sources for h in HELD_OUT)
+
+
+def test_the_held_out_false_detections_are_a_library_of_their_own():
+    library = FalseDetections.load(FALSE_DETECTIONS_HELDOUT_PATH)
+    assert library.views and all(any(h in s for h in HELD_OUT) for s in library.sources)
 
 
 def _run(mode: str, cases: range) -> tuple[list, int]:
     wrong, ok = [], 0
-    library = FalseDetections.load() if mode == "detector" else None
+    path = FALSE_DETECTION_LIBRARIES.get(mode)
+    library = None if path is None else FalseDetections.load(path)
     for k in cases:
         case = draw_case(np.random.default_rng((19, k)))
         det = corrupt_detections(case, mode, np.random.default_rng((44, k)), library)
