@@ -8,18 +8,23 @@ uniform clutter over the image (500 or 2,000 points); the learned detector's fal
 real renders, replayed. Case ``k`` is drawn from ``default_rng((19, k))`` as in the test, and its
 corruption from ``default_rng((44, k))``.
 
-A success counts as confidently wrong when its position error exceeds ``max(1 m, 10 x its
-reported position std)`` (the fuzz test's rule). Prints, per mode: cases, successes, confident
-wrong poses, the worst of them, and the median, P99 and slowest localization time; with
-``--compare``, the same without the verification (:mod:`localization.verify`) beside it.
+The localizer holds its poses to :data:`localization.verify.CONFIRM_TOLERANCE_M` (``tolerance_m``),
+as the study's learned detector does. A success counts as confidently wrong when its position
+error exceeds ``max(1 m, 10 x its reported position std)`` (the fuzz test's rule). Prints, per
+mode: cases, successes, confident wrong poses, the worst of them, and the median, P99 and
+slowest localization time; with ``--compare``, the same without the verification
+(:mod:`localization.verify`) beside it.
 
     .venv/bin/python benchmarks/integrity_fuzz.py --cases 300 [--compare]
 
 ``record`` writes the replayed library (:class:`localization.testing.fuzz.FalseDetections`) from
-study folders of the learned detector (their ``detections.csv``): only training buildings, the
-paper site and random sites, never a held-out building.
+study folders of the learned detector (their ``detections.csv``): for the ``detector`` mode only
+training buildings, the paper site and random sites, never a held-out building; the held-out
+buildings' own library (``detector_heldout``) once, with the method fixed, into its own file.
 
     .venv/bin/python benchmarks/integrity_fuzz.py record results/paper results/duplex ...
+    .venv/bin/python benchmarks/integrity_fuzz.py record heldout/revit_tall_building ... \
+        --out localization/testing/false_detections_heldout.json
 """
 
 from __future__ import annotations
@@ -37,25 +42,34 @@ from localization import Localizer
 from localization.geometry.transforms import camera_center
 from localization.testing.fuzz import (
     CORRUPTIONS,
+    FALSE_DETECTION_LIBRARIES,
     FALSE_DETECTIONS_PATH,
     FalseDetections,
     corrupt_detections,
     draw_case,
 )
+from localization.verify import CONFIRM_TOLERANCE_M
 from localization.warmup import warm_up
 
 #: A false detection within this distance of a landmark is recorded by its offset from it, px.
 NEAR_PX = 80.0
 
 
-def run(mode: str, cases: int, verify: bool = True, library: FalseDetections | None = None) -> dict:
-    """Localize ``cases`` fuzz cases under ``mode``; counts, the worst wrong pose, timings."""
+def run(
+    mode: str, cases: int, verify: bool = True, library: FalseDetections | None = None,
+    tolerance_m: float | None = CONFIRM_TOLERANCE_M,
+) -> dict:
+    """Localize ``cases`` fuzz cases under ``mode``; counts, the worst wrong pose, timings.
+
+    ``tolerance_m``: the localizer's (:class:`localization.Localizer`), the study's
+    :data:`localization.verify.CONFIRM_TOLERANCE_M` by default, as the learned detector runs.
+    """
     wrong, ok, times, codes = [], 0, [], defaultdict(int)
     for k in range(cases):
         case = draw_case(np.random.default_rng((19, k)))
         det = corrupt_detections(case, mode, np.random.default_rng((44, k)), library)
         loc = Localizer(case.landmarks_xyz, case.K, association="robust", image_size=case.image_size,
-                        pixel_sigma=case.pixel_sigma, verify=verify)
+                        pixel_sigma=case.pixel_sigma, verify=verify, tolerance_m=tolerance_m)
         t0 = time.perf_counter()
         est = loc.localize(det, case.prior_cam_from_world)
         times.append(time.perf_counter() - t0)
@@ -77,9 +91,10 @@ def run(mode: str, cases: int, verify: bool = True, library: FalseDetections | N
 def main(cases: int = 300, modes: tuple[str, ...] = CORRUPTIONS, compare: bool = False) -> list[dict]:
     """Run every mode (and, with ``compare``, again without verification) and print the table."""
     warm_up(announce=print)
-    library = FalseDetections.load() if "detector" in modes else None
     rows = []
     for mode in modes:
+        path = FALSE_DETECTION_LIBRARIES.get(mode)
+        library = None if path is None else FalseDetections.load(path)
         for verify in (True, False) if compare else (True,):
             rows.append(run(mode, cases, verify, library))
     print(f"{'mode':<14} {'verify':>6} {'cases':>6} {'poses':>6} {'wrong':>6} {'worst (m, sigma m)':>20} "

@@ -205,6 +205,10 @@ class Localizer:
             tests (a minimal fit's residuals, each pair's leave-one-out residual) hold the pairs
             to; None: ``pixel_sigma``. The learned detector declares one
             (:data:`localization.detect.learned.FIT_PIXEL_SIGMA_PX`).
+        tolerance_m: the position error a reported pose must be confirmed within, m (three times
+            the bound of the landmarks it predicts, where that is larger): a pose that leaving out
+            one of its pairs moves farther fails as ill-conditioned (:mod:`localization.verify`).
+            None (default): no such test.
 
     Raises:
         TypeError, ValueError: on bad arguments, naming the value and what was expected.
@@ -232,6 +236,7 @@ class Localizer:
         use_scores: bool = True,
         verify: bool = True,
         fit_sigma_px: float | None = None,
+        tolerance_m: float | None = None,
     ) -> None:
         X = as_points("landmarks_xyz", landmarks_xyz, 3)
         if X.shape[0] == 0:
@@ -283,6 +288,9 @@ class Localizer:
         self.verify = bool(verify)
         self.fit_sigma_px = (
             None if fit_sigma_px is None else check_number("fit_sigma_px", fit_sigma_px, 0, lo_open=True)
+        )
+        self.tolerance_m = (
+            None if tolerance_m is None else check_number("tolerance_m", tolerance_m, 0, lo_open=True)
         )
 
     @property
@@ -637,6 +645,7 @@ class Localizer:
                 gate_px=self.gate_px if self.gate_px is not None else max(5.0 * self.pixel_sigma, 3.0),
                 need=max(self.min_correspondences, 3),
                 fit_sigma=self.fit_sigma_px,
+                tolerance_m=self.tolerance_m,
             )
         )
         timings["verify"] = time.perf_counter() - t
