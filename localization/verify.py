@@ -83,7 +83,6 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
-from scipy.stats import binom, chi2
 
 from localization.associate.ambiguity import AMBIGUITY_MARGIN
 from localization.associate.assign_kernels import assign_rounds, refine_reassign
@@ -97,6 +96,7 @@ from localization.pose.covariance import (
     pose_jacobian,
     prior_mahalanobis_sq,
 )
+from localization.stats import binomial_log_sf, chi2_quantile
 
 __all__ = [
     "CONFIRM_TOLERANCE_M",
@@ -258,7 +258,7 @@ def chance_support(
     tests = math.log10(max(n * (n - 1), 1)) + math.log10(max(n_detections * (n_detections - 1), 1))
     if k <= 2:
         return tests
-    return tests + float(binom.logsf(k - 3, n - 2, p)) / math.log(10.0)
+    return tests + binomial_log_sf(k - 3, n - 2, p) / math.log(10.0)
 
 
 def minimal_fit_chi2_limit(n_pairs: int, need: int) -> float:
@@ -269,7 +269,7 @@ def minimal_fit_chi2_limit(n_pairs: int, need: int) -> float:
     """
     if n_pairs > need:
         return float("inf")
-    return float(chi2.ppf(MINIMAL_FIT_QUANTILE, max(2 * n_pairs - 6, 1)))
+    return chi2_quantile(MINIMAL_FIT_QUANTILE, max(2 * n_pairs - 6, 1))
 
 
 def _minimal_fit_refusal(inputs: VerifyInputs, k: int) -> Refusal | None:
@@ -404,7 +404,7 @@ def _outlier_refusal(inputs: VerifyInputs) -> Refusal | None:
     """
     rows = np.flatnonzero(inputs.assignment >= 0)
     ids = inputs.assignment[rows]
-    limit = float(chi2.ppf(OUTLIER_QUANTILE, 2))
+    limit = chi2_quantile(OUTLIER_QUANTILE, 2)
     T, dropped = inputs.cam_from_world, 0
     while True:
         t = leave_one_out_chi2(inputs.K, T, inputs.landmarks_xyz[ids], inputs.detections_uv[rows],
@@ -646,7 +646,7 @@ def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
         d = pose_difference(T_twin, inputs.cam_from_world)
         dc = d[:3]
         same = finite and float(dc @ np.linalg.lstsq(cov[:3, :3], dc, rcond=None)[0]) <= DISTINCT_POSITION_SQ
-        if not chi <= chi2.ppf(_FIT_QUANTILE, max(2 * k - 6, 1)) or same:
+        if not chi <= chi2_quantile(_FIT_QUANTILE, max(2 * k - 6, 1)) or same:
             continue
         if s_best is None:
             s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
@@ -707,7 +707,7 @@ def _lattice_refusal(inputs: VerifyInputs) -> Refusal | None:
     s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
     scored = [(_score(inputs, b, T), d) for b, T, d in rivals]
     for k, b, T, chi in reassociated(inputs, rivals):
-        if chi <= chi2.ppf(_FIT_QUANTILE, max(2 * int(np.count_nonzero(b >= 0)) - 6, 1)):
+        if chi <= chi2_quantile(_FIT_QUANTILE, max(2 * int(np.count_nonzero(b >= 0)) - 6, 1)):
             scored.append((_score(inputs, b, T), rivals[k][2]))
     s_rival, d = min(scored, key=lambda r: r[0])
     if s_rival - s_best >= AMBIGUITY_MARGIN:

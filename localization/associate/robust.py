@@ -92,7 +92,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from localization.associate.ambiguity import AMBIGUITY_MARGIN, ambiguity, translation_hypotheses
 from localization.associate.assign_kernels import refine_reassign
@@ -104,6 +103,7 @@ from localization.geometry.transforms import camera_center, make_transform, proj
 from localization.pose.batch import to_transforms
 from localization.pose.covariance import PriorSigmas, prior_mahalanobis_sq
 from localization.pose.pnp import refine_pose, reprojection_residuals
+from localization.stats import chi2_quantile
 
 __all__ = ["GRID_OFFSETS", "KernelArrays", "RobustSearch", "RobustSettings", "associate_robust"]
 
@@ -822,4 +822,4 @@ def _log_odds(scores: NDArray | None) -> NDArray | None:
 @functools.lru_cache(maxsize=64)
 def _chi2_quantiles(quantile: float, max_dof: int) -> NDArray[np.float64]:
     """Chi-square ``quantile`` for 0 .. ``max_dof`` degrees of freedom (inf at 0), cached."""
-    return np.concatenate([[np.inf], chi2.ppf(quantile, np.arange(1, max(max_dof, 1) + 1))])
+    return np.concatenate([[np.inf], chi2_quantile(quantile, np.arange(1, max(max_dof, 1) + 1))])
