@@ -38,6 +38,12 @@ _LIGHT_COEFFS = (0.55, 0.45)
 _SUN = np.array([0.45, -0.35, 1.0])
 
 
+
+#: The ground-grid arguments of ``render_views`` for a scene without a ground (texture index -1):
+#: the model views show the building alone.
+_NO_GROUND = (np.array([[0, 0, 0, 0, 0, -1, -1]], np.int64), np.zeros(0), np.zeros((0, 2)), np.zeros(0),
+              np.zeros((0, 2)), np.zeros(0, np.uint8))
+
 class SiteTemplates:
     """The building model of ``site`` as a :class:`~localization.detect.guided.TemplateSource`.
 
@@ -105,6 +111,7 @@ class SiteTemplates:
             np.full(n, -1, np.int64), np.zeros(3, np.uint8),
             np.array([[0, self.n_triangles]], np.int64), np.zeros((1, 2), np.int64),
             self._tri_v, self._tri_uv, self._tri_n, self._tri_tex, self._tri_seg, *self._texture,
+            *_NO_GROUND,
             np.zeros((0, 3, 3)), empty3, empty3, empty3, np.zeros(0, np.int64), rgb, depth, seg,
         )
         empty = seg < 0
