@@ -146,17 +146,18 @@ def stack_spec(config: StudyConfig, method: Method) -> StackSpec:
 
     The study's own policies: the localizer's noise model is floored at 0.5 px (a noise-free
     projection detector must not collapse the gates) and the gates stay in px of the image; with
-    the learned detector (and the guided one, which runs it) the verification's fit tests assume
-    the learned detector's declared noise for the study's weights and imaging
-    (:func:`localization.detect.learned.fit_pixel_sigma`), and a pose must be confirmed within
+    the learned detector the verification's fit tests assume its declared noise for the study's
+    weights and imaging (:func:`localization.detect.learned.fit_pixel_sigma`), with the guided one
+    :data:`localization.detect.guided.GUIDED_FIT_SIGMA_PX`, and a pose must be confirmed within
     :data:`localization.verify.CONFIRM_TOLERANCE_M`.
     """
     kwargs = {}
     if method.structural and config.detector in ("learned", "guided"):
+        from localization.detect.guided import GUIDED_FIT_SIGMA_PX
         from localization.detect.learned import fit_pixel_sigma  # onnxruntime only when it is used
         from localization.verify import CONFIRM_TOLERANCE_M
 
-        kwargs["fit_sigma_px"] = fit_pixel_sigma(
+        kwargs["fit_sigma_px"] = GUIDED_FIT_SIGMA_PX if config.detector == "guided" else fit_pixel_sigma(
             config.image_size[0], config.imaging, config.detector_model, config.refiner_model
         )
         kwargs["tolerance_m"] = CONFIRM_TOLERANCE_M
