@@ -68,7 +68,7 @@ def pytest_sessionstart(session) -> None:
     order = list(KERNEL_GROUPS)
     if worker is not None and int(worker.removeprefix("gw") or 0) % 2:
         order.reverse()
-    tag = hashlib.sha1(str(ROOT).encode()).hexdigest()[:12]  # one lock per checkout (its cache beside its code)
+    tag = hashlib.sha1(str(ROOT).encode()).hexdigest()[:12]  # a lock per checkout: its cache is beside it
     for name in order:
         with open(Path(tempfile.gettempdir()) / f"uav-struct-kernels-{tag}-{name}.lock", "w") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes

@@ -99,5 +99,6 @@ def test_the_study_detects_with_the_guided_detector_on_ifc_buildings_unless_told
 
     duplex = "tests/data/ifc/duplex.ifc"
     assert study_config(_parser().parse_args(["--site", duplex])).detector == "guided"
-    assert study_config(_parser().parse_args(["--site", duplex, "--detector", "learned"])).detector == "learned"
+    learned = study_config(_parser().parse_args(["--site", duplex, "--detector", "learned"]))
+    assert learned.detector == "learned"
     assert study_config(_parser().parse_args([])).detector == "learned"  # the paper site
