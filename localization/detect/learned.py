@@ -69,6 +69,7 @@ __all__ = [
     "nms",
     "operating_point_for",
     "subpixel_parabola",
+    "truth_ids",
 ]
 
 
@@ -305,6 +306,25 @@ def match_detections(
     return match, dist
 
 
+def truth_ids(uv: NDArray[np.float64], truth: Mapping[str, Any] | None,
+              match_px: float) -> NDArray[np.int64] | None:
+    """The visible true landmark within ``match_px`` of each detection (one-to-one), else -1.
+
+    None without truth. ``truth``: one landmark set's truth (``ids``, ``uv``, ``visible``), as the
+    env delivers it. Scoring bookkeeping only (:class:`~localization.detect.Detections`'
+    ``true_ids``): the detectors never read it.
+    """
+    if truth is None:
+        return None
+    visible = np.asarray(truth["visible"], dtype=bool).reshape(-1)
+    ids = np.asarray(truth["ids"]).astype(np.int64).reshape(-1)
+    gt_uv = np.asarray(truth["uv"], dtype=np.float64).reshape(-1, 2)
+    match, _ = match_detections(uv, gt_uv[visible], match_px)
+    out = np.full(len(match), -1, dtype=np.int64)  # also when nothing is visible
+    out[match >= 0] = ids[visible][match[match >= 0]]
+    return out
+
+
 class LearnedDetector:
     """The learned structural-landmark detector (see the module docstring).
 
@@ -529,18 +549,10 @@ class LearnedDetector:
         truth (``ids``, ``uv``, ``visible``): scoring bookkeeping, see the module docstring.
         """
         uv, scores, _ = self.detect_all(image)
-        true_ids = None
         truth = None
         if isinstance(context, Mapping) and isinstance(self.landmarks, str):
             truth = context.get("landmarks", {}).get(self.landmarks)
-        if truth is not None:
-            visible = np.asarray(truth["visible"], dtype=bool).reshape(-1)
-            ids = np.asarray(truth["ids"]).astype(np.int64).reshape(-1)
-            gt_uv = np.asarray(truth["uv"], dtype=np.float64).reshape(-1, 2)
-            match, _ = match_detections(uv, gt_uv[visible], self.match_px)
-            true_ids = np.full(len(match), -1, dtype=np.int64)  # also when nothing is visible
-            true_ids[match >= 0] = ids[visible][match[match >= 0]]
-        return Detections(uv=uv, scores=scores, true_ids=true_ids)
+        return Detections(uv=uv, scores=scores, true_ids=truth_ids(uv, truth, self.match_px))
 
     def __repr__(self) -> str:
         return (f"LearnedDetector(landmarks={self.landmarks!r}, model={self.model_path.name!r}, "

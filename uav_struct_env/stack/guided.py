@@ -20,7 +20,7 @@ builds (:func:`uav_struct_env.stack.build_stack`). Per frame:
 The stack then localizes the detections again from the prior, exactly as for any detector, so
 the final pose rests on the association and verification of every detector (the identities the
 templates were matched under are not passed on). Ground truth in the context fills
-``Detections.true_ids`` for scoring only (:func:`truth_ids`).
+``Detections.true_ids`` for scoring only (:func:`localization.detect.learned.truth_ids`).
 """
 
 from __future__ import annotations
@@ -33,30 +33,11 @@ from numpy.typing import NDArray
 
 from localization import Detections, Localizer
 from localization.detect.guided import Matches, TemplateMatcher
-from localization.detect.learned import match_detections
+from localization.detect.learned import truth_ids
 from localization.geometry.distortion import distort_points
 from localization.geometry.transforms import project
 
-__all__ = ["GuidedDetector", "merged", "truth_ids"]
-
-def truth_ids(uv: NDArray[np.float64], truth: Mapping[str, Any] | None,
-              match_px: float) -> NDArray[np.int64] | None:
-    """The visible true landmark within ``match_px`` of each detection (one-to-one), else -1.
-
-    None without truth.
-
-    ``truth``: one landmark set's truth (``ids``, ``uv``, ``visible``), as the env delivers it.
-    """
-    if truth is None:
-        return None
-    visible = np.asarray(truth["visible"], dtype=bool).reshape(-1)
-    ids = np.asarray(truth["ids"]).astype(np.int64).reshape(-1)
-    gt_uv = np.asarray(truth["uv"], dtype=np.float64).reshape(-1, 2)
-    match, _ = match_detections(uv, gt_uv[visible], match_px)
-    out = np.full(len(match), -1, dtype=np.int64)
-    out[match >= 0] = ids[visible][match[match >= 0]]
-    return out
-
+__all__ = ["GuidedDetector", "merged"]
 
 def merged(first: Detections, found: Matches,
            radius: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
