@@ -30,10 +30,11 @@ import hashlib
 import logging
 import os
 import pickle
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
+
+from uav_struct_env.outputs import atomic_path
 
 __all__ = ["IFC_CACHE_ENV", "cache_path", "cache_root", "entry_lock", "importer_version", "read_entry",
            "write_entry"]
@@ -105,21 +106,15 @@ def read_entry(path: Path | None) -> Any | None:
 
 
 def write_entry(path: Path | None, obj: Any) -> bool:
-    """Store ``obj`` at ``path`` (a temporary file moved into place); whether it was written."""
+    """Store ``obj`` at ``path`` (written beside it, then moved into place); whether it was written."""
     if path is None:
         return False
-    tmp = None
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-        with os.fdopen(fd, "wb") as fh:
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
             pickle.dump(obj, fh, protocol=pickle.HIGHEST_PROTOCOL)
-        os.replace(tmp, path)
         return True
     except OSError as exc:
         log.warning("IFC parse cache: cannot write %s (%s); the import goes on without it", path, exc)
-        if tmp is not None and os.path.exists(tmp):
-            os.unlink(tmp)
         return False
 
 
