@@ -198,6 +198,8 @@ _ELEMENT_CLASS = {"column": Column, "slab": Slab, "beam": Beam, "wall": Wall}
 _Row = tuple[str, str, str, str]
 # A tessellated product: vertices (V, 3) and triangles (T, 3).
 _Shape = tuple[NDArray[np.float64], NDArray[np.int64]]
+# Each element's plan outline (None: it has none), by guid.
+_Footprints = dict[str, NDArray[np.float64] | None]
 
 
 # ----------------------------------------------------------------------------- the report
@@ -290,23 +292,6 @@ def _safe_footprint(tri: NDArray[np.float64]) -> NDArray[np.float64] | None:
         return _footprint(tri)
     except ValueError:  # SiteGeometryError included
         return None
-
-
-class _Footprints(dict):
-    """Each element's plan outline (:func:`_safe_footprint`; None: it has none) by guid, made on first use.
-
-    The rules ask for the footprints they need: every column, beam, wall and rendered slab (its
-    outline), and the slabs the duplicate and finish-floor rules compare. A floor slab's outline
-    is its top face (rule 7), so its footprint is made only when such a rule compares it.
-    """
-
-    def __init__(self, raws: list[_Raw]) -> None:
-        super().__init__()
-        self._tri = {r.guid: r.tri for r in raws}
-
-    def __missing__(self, guid: str) -> NDArray[np.float64] | None:
-        self[guid] = footprint = _safe_footprint(self._tri[guid])
-        return footprint
 
 
 def _degenerate(guid: str, ifc_class: str, name: str, exc: Exception) -> _Row:
@@ -1091,7 +1076,7 @@ def _parse(path: Path, transform: NDArray[np.float64]) -> _Parsed:
     shapes = _tessellate(ios.geom, settings, f, include)
     tessellated, no_body = _no_body_geometry(include, shapes)
     raws = [_raw(ios.geom, settings, k, e, shapes[e.id()], transform, storeys) for k, e in tessellated]
-    footprints = _Footprints(raws)
+    footprints = {r.guid: _safe_footprint(r.tri) for r in raws}
     unique, duplicates = _coincident_duplicates(raws, footprints)
     slabs = [r for r in unique if r.kind == "slab"]
     tops = {r.guid: _slab_top(r) for r in slabs}
