@@ -1,4 +1,4 @@
-"""The import's speed tools: footprints made only where a rule needs them, and the parse's breakdown.
+"""The import's speed tool: the parse's breakdown.
 
 ``benchmarks/ifc_import.py --breakdown`` splits a cold parse into the geometry kernel, the plan
 footprints and the other rules, and the kernel's time by body representation; these tests check
@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 ifcopenshell = pytest.importorskip("ifcopenshell")
@@ -24,31 +23,6 @@ SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "ifc_import.py"
 @pytest.fixture(scope="module")
 def bench(load_script):
     return load_script(SCRIPT)
-
-
-def test_a_footprint_is_made_only_where_a_rule_needs_it(monkeypatch):
-    """Every element outlined by its footprint gets one; a floor slab only when a rule compares it.
-
-    On the duplex the finish-floor rule compares the two Level 2 floor slabs with the finish floors
-    lying on them; nothing compares the roof slab, whose outline is its top face.
-    """
-    made: list[str] = []
-    real = ifc_module._Footprints.__missing__
-
-    def counted(self, guid):
-        made.append(guid)
-        return real(self, guid)
-
-    monkeypatch.setattr(ifc_module._Footprints, "__missing__", counted)
-    parsed = ifc_module._parse(DUPLEX, np.eye(4))
-    floor_guids = {g for st in parsed.stages for g in st.floor}
-    floors = {e.guid: e.name for e in parsed.elements if e.guid in floor_guids}
-    outlined = {e.guid for e in parsed.elements if e.guid not in floors}
-    assert len(made) == len(set(made))  # each made once
-    assert outlined <= set(made) and len(outlined) == 69
-    unmade = sorted(name.split(":")[-1] for g, name in floors.items() if g not in made)
-    assert unmade == ["184483"]  # the roof slab
-    assert sum(g in made for g in floors) == 2
 
 
 def test_the_kernel_is_counted_by_body_representation(bench):

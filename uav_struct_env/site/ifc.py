@@ -94,8 +94,7 @@ A refused file is not cached. What was kept and dropped is an :class:`ImportRepo
 (29 and 64 s for 3.4 and 3.6 MB; ``benchmarks/ifc_import.py --breakdown`` splits a parse): 16 and
 46 s of it is ifcopenshell's OpenCASCADE kernel tessellating thousands of steel members (boolean
 cuts and faceted breps cost the most per element), 12 and 16 s the plan union of each element's
-triangles (:func:`_footprint`), which is made only where a rule needs it (:class:`_Footprints`: a
-floor slab's outline is its top face). The iterator runs on one thread: two threads gave the same
+triangles (:func:`_footprint`). The iterator runs on one thread: two threads gave the same
 tessellation of the carwash for 27 s CPU against 17 s on one (a machine under load). Its other
 options change either nothing or the output; a faster kernel (``cgal-simple``) drops elements; a
 faster union (without the 1 um grid) moves outlines by up to 1 mm, since the outline simplified at
