@@ -90,15 +90,17 @@ instead of parsing it again (``UAV_STRUCT_IFC_CACHE`` moves the cache or, ``off`
 A refused file is not cached. What was kept and dropped is an :class:`ImportReport` in
 ``site.source["report"]``, logged at INFO.
 
-**Speed.** A first parse takes 0.4-5.4 s CPU for the corpus's files but the two Tekla exports
-(31 and 68 s for 3.4 and 3.6 MB): about 17 and 47 s of it is ifcopenshell's OpenCASCADE kernel
-tessellating thousands of steel members (boolean cuts and faceted breps cost the most per
-element), most of the rest the plan union of each element's triangles (:func:`_footprint`). The
-iterator runs on one thread: two threads gave the same tessellation of the carwash for 27 s CPU
-against 17 s on one (a machine under load).
-``no-normals``, ``permissive-shape-reuse`` and ``disable-opening-subtractions`` change neither
-its output nor its time on those files; a faster kernel (``cgal-simple``) drops elements, and
-skipping the members that bear no landmark would change what the env renders, so neither is done.
+**Speed.** A first parse takes 0.4-5 s CPU for the corpus's files but the two Tekla exports
+(29 and 64 s for 3.4 and 3.6 MB; ``benchmarks/ifc_import.py --breakdown`` splits a parse): 16 and
+46 s of it is ifcopenshell's OpenCASCADE kernel tessellating thousands of steel members (boolean
+cuts and faceted breps cost the most per element), 12 and 16 s the plan union of each element's
+triangles (:func:`_footprint`). The iterator runs on one thread: two threads gave the same
+tessellation of the carwash for 27 s CPU against 17 s on one (a machine under load). Its other
+options change either nothing or the output; a faster kernel (``cgal-simple``) drops elements; a
+faster union (without the 1 um grid) moves outlines by up to 1 mm, since the outline simplified at
+:data:`OUTLINE_TOL` depends on the triangles' order; and skipping the members that bear no
+landmark would change what the env renders: so none of these is done (docs/study.md has the
+figures).
 """
 
 from __future__ import annotations
