@@ -125,7 +125,7 @@ KERNEL_FREE = (
     "tests/training/test_ensemble.py", "tests/training/test_jpeg_augment.py", "tests/test_code_shape.py",
     "tests/test_layers.py", "tests/localization/test_stats.py", "tests/test_outputs.py",
     "tests/test_doc_numbers.py", "tests/localization/detect/test_weights.py",
-    "tests/test_benchmark_help.py", "tests/sim/test_imaging_names.py",
+    "tests/test_benchmark_help.py", "tests/sim/test_imaging_names.py", "tests/site/test_ifc_speed.py",
     "tests/test_docs.py::test_docs_site_builds_in_strict_mode",
 )
 
