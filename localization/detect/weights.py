@@ -16,9 +16,10 @@ ideal pinhole; ``landmarks_active_v4`` on active sites (workers, equipment, mate
 scaffolding) through the Mavic 2 Pro camera with its sensor imaging, and keeps the first set's
 architectures and operating points. ``landmarks_v1_photo`` is ``landmarks_v1``'s keypoint network
 with a refiner trained with JPEG compression (:mod:`uav_struct_env.training.jpeg_augment`), for a
-camera's JPEG photos (``uav-struct localize``, :mod:`uav_struct_env.photos`). Alias ``active`` (:data:`WEIGHT_ALIASES`) names the
-recommended active-site set, so a caller keeps it when a newer active set replaces it. Training
-commands, data and figures of each: ``localization/detect/models/MODEL_CARD.md``.
+camera's JPEG photos (``uav-struct localize``, :mod:`uav_struct_env.photos`). Alias ``active``
+(:data:`WEIGHT_ALIASES`) names the recommended active-site set, so a caller keeps it when a newer
+active set replaces it. Training commands, data and figures of each:
+``localization/detect/models/MODEL_CARD.md``.
 
     from localization.detect.weights import weight_set
     weight_set("active").refiner   # .../models/landmarks_active_v4_refiner.onnx

@@ -15,7 +15,6 @@ takes it as ``--jpeg`` (:mod:`uav_struct_env.training.train_refiner`).
 
 from __future__ import annotations
 
-import io
 from dataclasses import dataclass
 
 import numpy as np

@@ -19,7 +19,7 @@ from localization.detect.weights import (
 
 
 def test_names_resolve_to_their_pair_of_files():
-    assert WEIGHT_NAMES == ("landmarks_v1", "landmarks_active_v4", "active")
+    assert WEIGHT_NAMES == ("landmarks_v1", "landmarks_active_v4", "landmarks_v1_photo", "active")
     assert weight_set() == weight_set(DEFAULT_WEIGHTS) == weight_set("landmarks_v1")
     assert (weight_set().model, weight_set().refiner) == (DEFAULT_MODEL, DEFAULT_REFINER)
     active = weight_set("active")
@@ -38,5 +38,5 @@ def test_the_package_ships_exactly_the_named_sets_files():
 @pytest.mark.parametrize("bad", ["landmarks_active_v3", "Active", "", "default", 3])
 def test_an_unknown_name_is_refused_with_the_known_ones(bad):
     with pytest.raises(ValueError, match=r"weights must be one of \('landmarks_v1', 'landmarks_active_v4', "
-                                         r"'active'\), got " + re.escape(repr(bad))):
+                                         r"'landmarks_v1_photo', 'active'\), got " + re.escape(repr(bad))):
         weight_set(bad)
