@@ -26,6 +26,8 @@ def test_names_resolve_to_their_pair_of_files():
     assert active is weight_set("landmarks_active_v4") and WEIGHT_ALIASES["active"] == active.name
     assert (active.model.name, active.refiner.name) == ("landmarks_active_v2.onnx",
                                                         "landmarks_active_v4_refiner.onnx")
+    photo = weight_set("landmarks_v1_photo")  # the default keypoint network, a refiner for JPEGs
+    assert (photo.model, photo.refiner.name) == (DEFAULT_MODEL, "landmarks_v1_photo_refiner.onnx")
 
 
 def test_the_package_ships_exactly_the_named_sets_files():
