@@ -11,15 +11,13 @@ sigmas (the photo path). Both paths run each ``--detectors`` entry (``learned`` 
 ``learned:NAME``, :mod:`localization.detect.weights`); the frames and priors are the same for
 every detector (the same seeds). Prints each path's success count and median / P90 translation
 and rotation errors, the photo / env ratio per detector (and, for every detector after the first,
-against the first one's env path: ``--detectors learned learned:landmarks_v1_photo`` compares the
-photo weights on JPEGs with the env's default weights on rendered pixels, the acceptance rule of
-``landmarks_v1_photo`` in localization/detect/models/MODEL_CARD.md), and the georeferencing round
-trip (project -> WGS84 -> project) over the flight's camera positions.
+against the first one's env path: ``--detectors learned learned:NAME`` compares weights NAME on
+JPEGs with the env's default weights on rendered pixels, as the photo refiners of
+localization/detect/models/MODEL_CARD.md were judged), and the georeferencing round trip
+(project -> WGS84 -> project) over the flight's camera positions.
 
     python benchmarks/photo_roundtrip.py --episodes 10 --encodings 95 100
     python benchmarks/photo_roundtrip.py --detectors learned learned:active --encodings 95 100 95:422
-    python benchmarks/photo_roundtrip.py --detectors learned learned:landmarks_v1_photo \
-        --encodings 95 100 95:422
     python benchmarks/photo_roundtrip.py --ifc tests/data/ifc/duplex.ifc --stage "Level 2/slab"
 
 ``--ifc``: another building (its IFC re-written with the same IfcMapConversion) at ``--stage``.

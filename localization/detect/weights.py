@@ -8,18 +8,14 @@ name                     keypoint network              patch refiner
 =======================  ============================  =====================================
 ``landmarks_v1``         ``landmarks_v1.onnx``         ``landmarks_v1_refiner.onnx``
 ``landmarks_active_v4``  ``landmarks_active_v2.onnx``  ``landmarks_active_v4_refiner.onnx``
-``landmarks_v1_photo``   ``landmarks_v1.onnx``         ``landmarks_v1_photo_refiner.onnx``
 =======================  ============================  =====================================
 
 ``landmarks_v1`` (the default, :data:`DEFAULT_WEIGHTS`) was trained on bare sites through an
 ideal pinhole; ``landmarks_active_v4`` on active sites (workers, equipment, materials,
 scaffolding) through the Mavic 2 Pro camera with its sensor imaging, and keeps the first set's
-architectures and operating points. ``landmarks_v1_photo`` is ``landmarks_v1``'s keypoint network
-with a refiner trained with JPEG compression (:mod:`uav_struct_env.training.jpeg_augment`), for a
-camera's JPEG photos (``uav-struct localize``, :mod:`uav_struct_env.photos`). Alias ``active``
-(:data:`WEIGHT_ALIASES`) names the recommended active-site set, so a caller keeps it when a newer
-active set replaces it. Training commands, data and figures of each:
-``localization/detect/models/MODEL_CARD.md``.
+architectures and operating points. Alias ``active`` (:data:`WEIGHT_ALIASES`) names the
+recommended active-site set, so a caller keeps it when a newer active set replaces it. Training
+commands, data and figures of each: ``localization/detect/models/MODEL_CARD.md``.
 
     from localization.detect.weights import weight_set
     weight_set("active").refiner   # .../models/landmarks_active_v4_refiner.onnx
@@ -73,9 +69,6 @@ WEIGHT_SETS: dict[str, WeightSet] = {
         WeightSet("landmarks_active_v4", MODELS_DIR / "landmarks_active_v2.onnx",
                   MODELS_DIR / "landmarks_active_v4_refiner.onnx",
                   "active sites through the Mavic 2 Pro camera and its sensor imaging"),
-        WeightSet("landmarks_v1_photo", MODELS_DIR / "landmarks_v1.onnx",
-                  MODELS_DIR / "landmarks_v1_photo_refiner.onnx",
-                  "bare sites through an ideal pinhole, the refiner's patches JPEG-compressed"),
     )
 }
 

@@ -58,7 +58,6 @@ def test_rendered_photos_localize_back_to_the_truth(flight, tmp_path):
     assert status == 0
     lines = (out / "poses.csv").read_text().splitlines()
     assert lines[0].startswith(f"# Settings: uav-struct-env {uav_struct_env.__version__}")
-    assert "learned:landmarks_v1_photo on JPEGs, learned on lossless images detector" in lines[0]
     rows = list(csv.DictReader(lines[1:]))
     doc = json.loads((out / "poses.json").read_text())
     assert doc["settings"] == lines[0][len("# Settings: "):] and doc["stage"] == STAGE
@@ -207,41 +206,3 @@ def test_a_photo_stored_turned_localizes_its_sensor_camera(flight, tmp_path, tag
     assert (w, h) == ((640, 360) if turns == 2 else (360, 640))
     uv = pose.detections_uv
     assert len(uv) >= 4 and np.all((uv > -0.5) & (uv < np.array([w, h]) - 0.5))
-
-
-def _as_png(jpeg: str, path: Path) -> Path:
-    """The JPEG's decoded pixels stored losslessly with its EXIF and XMP (PNG eXIf and iTXt chunks)."""
-    from PIL import Image, PngImagePlugin
-
-    with Image.open(jpeg) as im:
-        info = PngImagePlugin.PngInfo()
-        info.add_itxt("XML:com.adobe.xmp", im.info["xmp"].decode("utf-8"))
-        im.convert("RGB").save(path, "PNG", exif=im.info["exif"], pnginfo=info)
-    return path
-
-
-def test_jpegs_get_the_photo_weights_and_lossless_images_the_default_ones(flight, tmp_path):
-    from uav_struct_env.photos import localize_photos, read_metadata
-    from uav_struct_env.photos.localize import JPEG_DETECTOR, default_detector
-
-    jpeg = flight["photos"][0]
-    png = _as_png(jpeg, tmp_path / "DJI_uav_0.png")
-    meta_jpeg, meta_png = read_metadata(jpeg), read_metadata(png)
-    assert (meta_jpeg.format, meta_png.format) == ("JPEG", "PNG")
-    assert meta_png.dji == meta_jpeg.dji and meta_png.latitude_deg == meta_jpeg.latitude_deg
-    assert (default_detector(meta_jpeg), default_detector(meta_png)) == (JPEG_DETECTOR, "learned")
-
-    def run(photo, detector):
-        return localize_photos([photo], flight["ifc"], stage=STAGE, camera=flight["camera"],
-                               detector=detector)[0]
-
-    by_default, photo_set, plain = (run(jpeg, d) for d in (None, JPEG_DETECTOR, "learned"))
-    assert by_default.success and photo_set.success, (by_default.failure_reason, photo_set.failure_reason)
-    np.testing.assert_array_equal(by_default.detections_uv, photo_set.detections_uv)
-    np.testing.assert_array_equal(by_default.cam_from_world, photo_set.cam_from_world)
-    # another refiner: the same candidates placed elsewhere by a fraction of a pixel
-    assert by_default.detections_uv.shape != plain.detections_uv.shape or not np.array_equal(
-        by_default.detections_uv, plain.detections_uv)
-    lossless, lossless_plain = run(png, None), run(png, "learned")
-    np.testing.assert_array_equal(lossless.detections_uv, lossless_plain.detections_uv)
-    np.testing.assert_array_equal(lossless.cam_from_world, lossless_plain.cam_from_world)

@@ -88,8 +88,7 @@ def test_learned_weights_by_name():
     assert (plain.detector_model, plain.refiner_model) == (None, None)
     with pytest.raises(ConfigError, match=r"detector 'learned:landmarks_active_v3' names unknown weights "
                                           r"'landmarks_active_v3'; 'learned:NAME' takes NAME one of "
-                                          r"\('landmarks_v1', 'landmarks_active_v4', 'landmarks_v1_photo', "
-                                          r"'active'\)"):
+                                          r"\('landmarks_v1', 'landmarks_active_v4', 'active'\)"):
         StackSpec(detector="learned:landmarks_active_v3")
     with pytest.raises(ConfigError, match="detects structural landmarks, not 'aruco'"):
         StackSpec(landmarks="aruco", detector="learned:active")

@@ -155,7 +155,7 @@ def test_learned_detector_weights_by_name():
         "learned", by_name.detector_model, by_name.refiner_model)
     with pytest.raises(ConfigError, match=r"detector 'learned:v9' names unknown weights 'v9'; 'learned:NAME' "
                                           r"takes NAME one of \('landmarks_v1', 'landmarks_active_v4', "
-                                          r"'landmarks_v1_photo', 'active'\)"):
+                                          r"'active'\)"):
         StudyConfig(detector="learned:v9")
 
 

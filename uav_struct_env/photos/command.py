@@ -23,8 +23,6 @@ from localization.geometry.attitude import attitude_from_world_from_cam
 from uav_struct_env.outputs import StagedOutput, atomic_write_json
 from uav_struct_env.photos.errors import PhotoError
 from uav_struct_env.photos.localize import (
-    JPEG_DETECTOR,
-    LOSSLESS_DETECTOR,
     MAX_DISTANCE_M,
     PhotoPlan,
     PhotoPose,
@@ -93,14 +91,9 @@ def pose_row(p: PhotoPose) -> PoseRow:
     )
 
 
-def settings_line(plan: PhotoPlan, detector: str | None, camera: str | None, prior: str | None,
+def settings_line(plan: PhotoPlan, detector: str, camera: str | None, prior: str | None,
                   sigmas: PriorSigmas | None) -> str:
-    """One line saying how the outputs were made: software, IFC and stage, stack, georeferencing, prior.
-
-    ``detector`` None: each photo's default (:func:`~uav_struct_env.photos.localize.default_detector`).
-    """
-    if detector is None:
-        detector = f"{JPEG_DETECTOR} on JPEGs, {LOSSLESS_DETECTOR} on lossless images"
+    """One line saying how the outputs were made: software, IFC and stage, stack, georeferencing, prior."""
     parts = [
         version_text(), f"ifc {plan.ifc.name}, stage {plan.site.stage}", f"landmarks {plan.landmarks}",
         f"{detector} detector, robust association",
@@ -213,11 +206,9 @@ def _parser() -> CommandParser:
                    "consumer GNSS 3 m, 5 m, 2 deg, 5 deg)")
     p.add_argument("--max-distance", type=float, default=MAX_DISTANCE_M,
                    help="refuse a photo whose prior lies farther than this from the building's plan, m")
-    p.add_argument("--detector", default=None,
+    p.add_argument("--detector", default="learned",
                    help="learned (the default weights) or learned:NAME, a weight set of "
-                   f"localization.detect.weights ({', '.join(WEIGHT_NAMES)}), for every photo "
-                   f"(default: {JPEG_DETECTOR} on JPEGs, whose refiner was trained with JPEG compression, "
-                   f"{LOSSLESS_DETECTOR} on lossless images)")
+                   f"localization.detect.weights ({', '.join(WEIGHT_NAMES)})")
     p.add_argument("--out", default="localized", help="output folder")
     p.add_argument("--no-figures", action="store_true", help="write poses.csv and poses.json only")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier run in --out")
@@ -236,8 +227,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_input_file(args.ifc, option="--ifc", what="IFC file")
         if args.camera is not None:
             check_input_file(args.camera, option="--camera", what="calibration file")
-        if args.detector is not None:
-            check_detector(args.detector)
+        check_detector(args.detector)
         sigmas = parse_prior_sigmas(args.prior_sigmas)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

@@ -13,12 +13,6 @@ not an image, no prior and none given, no georeferencing and none given, a prior
 does not localize is a :class:`PhotoPose` with ``success=False`` and its reason, at its prior,
 never a pose presented as found.
 
-The detector (``detector=None``, the default: :func:`default_detector`): the learned detector with
-the weights :data:`JPEG_DETECTOR` names on a JPEG, whose refiner was trained with JPEG compression
-(``localization/detect/models/MODEL_CARD.md``, "landmarks_v1_photo"), and the default weights
-(``learned``, as the env and every study run) on a lossless image. A detector given is used for
-every photo.
-
 The EXIF orientation tag is honoured (:mod:`~uav_struct_env.photos.orientation`): the detector
 runs on the image turned upright, the localizer with the camera and prior turned with it, and
 the pose, detections and camera reported are the sensor's and the stored pixels' (the layout the
@@ -47,16 +41,11 @@ from uav_struct_env.photos.metadata import PhotoMetadata, read_metadata
 from uav_struct_env.photos.orientation import turn_camera, turn_image, turn_points, turn_pose, upright_turns
 from uav_struct_env.photos.prior import PhotoPrior, prior_from_metadata, prior_from_string
 
-__all__ = ["JPEG_DETECTOR", "LOSSLESS_DETECTOR", "MAX_DISTANCE_M", "PhotoJob", "PhotoPlan", "PhotoPose",
-           "default_detector", "localize_photos", "plan_photos", "pose_summary", "prepare_photos",
-           "resolve_georeference", "rtk_accuracy", "run_plan"]
+__all__ = ["MAX_DISTANCE_M", "PhotoJob", "PhotoPlan", "PhotoPose", "localize_photos", "plan_photos",
+           "pose_summary", "prepare_photos", "resolve_georeference", "rtk_accuracy", "run_plan"]
 
 #: A photo whose prior lies farther than this from the building's plan is refused, m.
 MAX_DISTANCE_M = 500.0
-#: The detector run on a JPEG photo unless one is given: the weights trained for camera JPEGs.
-JPEG_DETECTOR = "learned:landmarks_v1_photo"
-#: The detector run on any other (lossless) image unless one is given: the default weights.
-LOSSLESS_DETECTOR = "learned"
 
 
 @dataclass(frozen=True, eq=False)
@@ -188,28 +177,22 @@ def _load_rgb(path: Path) -> NDArray[np.uint8]:
         return np.asarray(im.convert("RGB"))
 
 
-def default_detector(meta: PhotoMetadata) -> str:
-    """The detector a photo gets unless one is given: :data:`JPEG_DETECTOR` on a JPEG, else ``learned``."""
-    return JPEG_DETECTOR if meta.format == "JPEG" else LOSSLESS_DETECTOR
-
-
 class _Stacks:
-    """One localization stack per detector and camera model (photos of one camera share it)."""
+    """One localization stack per camera model (photos of one camera share it)."""
 
     def __init__(self, site: Any, landmarks: str, detector: Any) -> None:
+        from uav_struct_env.stack import StackSpec
+
         self.model = site.landmarks(landmarks)
-        self.landmarks, self.detector = landmarks, detector
-        self._built: dict[tuple, Any] = {}
+        self.spec = StackSpec(landmarks=landmarks, detector=detector, association="robust")
+        self._built: dict[bytes, Any] = {}
 
-    def __call__(self, camera: CameraModel, meta: PhotoMetadata) -> Any:
-        from uav_struct_env.stack import StackSpec, build_stack
+    def __call__(self, camera: CameraModel) -> Any:
+        from uav_struct_env.stack import build_stack
 
-        detector = default_detector(meta) if self.detector is None else self.detector
-        key = (detector if isinstance(detector, str) else id(detector),
-               camera.K.tobytes() + camera.distortion.tobytes() + bytes(str(camera.image_size), "ascii"))
+        key = camera.K.tobytes() + camera.distortion.tobytes() + bytes(str(camera.image_size), "ascii")
         if key not in self._built:
-            spec = StackSpec(landmarks=self.landmarks, detector=detector, association="robust")
-            self._built[key] = build_stack(spec, camera.K, camera.image_size, model_xyz=self.model.xyz,
+            self._built[key] = build_stack(self.spec, camera.K, camera.image_size, model_xyz=self.model.xyz,
                                            model_ids=self.model.ids, distortion=camera.distortion)
         return self._built[key]
 
@@ -219,7 +202,7 @@ def _localize_one(job: PhotoJob, stacks: _Stacks) -> PhotoPose:
     turns = upright_turns(job.meta.orientation, str(job.meta.path))
     cam = job.camera
     K, dist, size = turn_camera(cam.K, cam.distortion, cam.image_size, turns)
-    stack = stacks(CameraModel(K, dist, size, cam.source, cam.calibrated), job.meta)
+    stack = stacks(CameraModel(K, dist, size, cam.source, cam.calibrated))
     t0 = time.perf_counter()
     frame = stack.localize(turn_image(_load_rgb(job.meta.path), turns), None,
                            turn_pose(job.prior.cam_from_world, turns), prior_sigmas=job.prior.sigmas)
@@ -283,13 +266,9 @@ def plan_photos(
     return PhotoPlan(Path(ifc), site, landmarks, geo, jobs)
 
 
-def run_plan(plan: PhotoPlan, detector: Any = None,
+def run_plan(plan: PhotoPlan, detector: Any = "learned",
              progress: Callable[[int], None] | None = None) -> list[PhotoPose]:
-    """Localize every photo of a :class:`PhotoPlan`; ``progress`` is called with 1 after each.
-
-    ``detector``: None (each photo's :func:`default_detector`), ``"learned"``, ``"learned:NAME"``
-    or a :class:`localization.Detector` object.
-    """
+    """Localize every photo of a :class:`PhotoPlan`; ``progress`` is called with 1 after each."""
     stacks = _Stacks(plan.site, plan.landmarks, detector)
     out = []
     for job in plan.jobs:
@@ -300,7 +279,7 @@ def run_plan(plan: PhotoPlan, detector: Any = None,
 
 
 def localize_photos(
-    photos: Sequence[str | os.PathLike], ifc: str | os.PathLike, *, detector: Any = None,
+    photos: Sequence[str | os.PathLike], ifc: str | os.PathLike, *, detector: Any = "learned",
     progress: Callable[[int], None] | None = None, **options: Any,
 ) -> list[PhotoPose]:
     """Localize each photo in the IFC's project frame (module docstring).
@@ -308,10 +287,7 @@ def localize_photos(
     Args:
         photos: JPEG (or any Pillow-readable) files.
         ifc: the building's IFC file.
-        detector: None (the default: :data:`JPEG_DETECTOR` on a JPEG, ``"learned"`` on a lossless
-            image; :func:`default_detector`), ``"learned"``, ``"learned:NAME"`` (a weight set of
-            :mod:`localization.detect.weights`) or a :class:`localization.Detector` object, for
-            every photo.
+        detector: ``"learned"`` (default) or a :class:`localization.Detector` object.
         progress: called with 1 after each photo.
         **options: :func:`plan_photos`'s: ``stage`` (an :func:`~uav_struct_env.site.ifc_stages`
             name; None: the last), ``landmarks`` (default ``all``), ``camera`` (a calibration file

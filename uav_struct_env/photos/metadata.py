@@ -65,8 +65,6 @@ class PhotoMetadata:
         focal_length_mm: EXIF FocalLength, or None.
         focal_length_35mm: EXIF FocalLengthIn35mmFilm, or None.
         dji: the ``drone-dji:`` fields present, by :data:`DJI_FIELDS` name, as floats.
-        format: the file's format as Pillow names it (``"JPEG"``, ``"PNG"``, ``"TIFF"``...; ""
-            when not given).
     """
 
     path: Path
@@ -80,7 +78,6 @@ class PhotoMetadata:
     focal_length_mm: float | None = None
     focal_length_35mm: float | None = None
     dji: dict[str, float] = field(default_factory=dict)
-    format: str = ""
 
     @property
     def absolute_altitude_m(self) -> float | None:
@@ -191,7 +188,6 @@ def read_metadata(path: str | Path) -> PhotoMetadata:
             size = (int(im.width), int(im.height))
             exif = im.getexif()
             xmp = im.info.get("xmp", b"")
-            fmt = str(im.format or "")
     except (UnidentifiedImageError, OSError) as err:
         raise PhotoError(f"{where} is not an image this program can read ({err})") from None
     gps = exif.get_ifd(_GPS_IFD) if _GPS_IFD in exif else {}
@@ -210,5 +206,5 @@ def read_metadata(path: str | Path) -> PhotoMetadata:
         latitude_deg=lat, longitude_deg=lon, altitude_m=alt,
         focal_length_mm=_optional_float(sub.get(_FOCAL_LENGTH)),
         focal_length_35mm=_optional_float(sub.get(_FOCAL_35MM)),
-        dji=dji, format=fmt,
+        dji=dji,
     )

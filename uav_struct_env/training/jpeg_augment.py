@@ -9,9 +9,9 @@ at a random quality and chroma subsampling and decodes it again, with the block 
 phase: a landmark lies anywhere relative to a real photo's 8 x 8 (16 x 16 with 4:2:0) grid, while
 a training window's centre is always at the same offset from its corner.
 
-Off by default everywhere; the refiner's trainer takes it as ``--jpeg``
-(:mod:`uav_struct_env.training.train_refiner`). Of the committed weights only the photo set's
-refiner, ``landmarks_v1_photo_refiner.onnx``, was trained with it (``--jpeg 0.75,80,100``).
+Off by default everywhere (no committed weights were trained with it: the refiners tried with it
+for photos are in ``localization/detect/models/MODEL_CARD.md``, none adopted); the refiner's
+trainer takes it as ``--jpeg`` (:mod:`uav_struct_env.training.train_refiner`).
 """
 
 from __future__ import annotations

@@ -28,13 +28,6 @@ Example (the committed refiner, see ``localization/detect/models/MODEL_CARD.md``
     python -m uav_struct_env.datasets /tmp/refdata/val --layouts 6 --views 10 --seed 1 --scale 1.0
     python -m uav_struct_env.training.train_refiner --data /tmp/refdata/train --val /tmp/refdata/val \\
         --out /tmp/refrun/v1 --minutes 15
-
-The refiner of the photo weights ``landmarks_v1_photo`` (``uav-struct localize`` on JPEGs): the
-same training data, the committed refiner fine-tuned with the JPEG augmentation::
-
-    python -m uav_struct_env.training.train_refiner --data /tmp/refdata/train --out /tmp/refrun/photo \\
-        --init localization/detect/models/landmarks_v1_refiner.onnx --jpeg 0.75,80,100 \\
-        --max-steps 1000 --minutes 1000 --lr 5e-4
 """
 
 from __future__ import annotations

@@ -257,5 +257,5 @@ def test_a_named_set_is_its_two_files_and_explicit_files_override_it():
     default = LearnedDetector("all")
     assert (default.model_path, default.refiner.model_path) == (DEFAULT_MODEL, DEFAULT_REFINER)
     with pytest.raises(ValueError, match=r"weights must be one of \('landmarks_v1', 'landmarks_active_v4', "
-                                         r"'landmarks_v1_photo', 'active'\), got 'landmarks_active_v3'"):
+                                         r"'active'\), got 'landmarks_active_v3'"):
         LearnedDetector("all", weights="landmarks_active_v3")

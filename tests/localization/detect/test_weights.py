@@ -19,15 +19,13 @@ from localization.detect.weights import (
 
 
 def test_names_resolve_to_their_pair_of_files():
-    assert WEIGHT_NAMES == ("landmarks_v1", "landmarks_active_v4", "landmarks_v1_photo", "active")
+    assert WEIGHT_NAMES == ("landmarks_v1", "landmarks_active_v4", "active")
     assert weight_set() == weight_set(DEFAULT_WEIGHTS) == weight_set("landmarks_v1")
     assert (weight_set().model, weight_set().refiner) == (DEFAULT_MODEL, DEFAULT_REFINER)
     active = weight_set("active")
     assert active is weight_set("landmarks_active_v4") and WEIGHT_ALIASES["active"] == active.name
     assert (active.model.name, active.refiner.name) == ("landmarks_active_v2.onnx",
                                                         "landmarks_active_v4_refiner.onnx")
-    photo = weight_set("landmarks_v1_photo")  # the default keypoint network, a refiner for JPEGs
-    assert (photo.model, photo.refiner.name) == (DEFAULT_MODEL, "landmarks_v1_photo_refiner.onnx")
 
 
 def test_the_package_ships_exactly_the_named_sets_files():
@@ -40,5 +38,5 @@ def test_the_package_ships_exactly_the_named_sets_files():
 @pytest.mark.parametrize("bad", ["landmarks_active_v3", "Active", "", "default", 3])
 def test_an_unknown_name_is_refused_with_the_known_ones(bad):
     with pytest.raises(ValueError, match=r"weights must be one of \('landmarks_v1', 'landmarks_active_v4', "
-                                         r"'landmarks_v1_photo', 'active'\), got " + re.escape(repr(bad))):
+                                         r"'active'\), got " + re.escape(repr(bad))):
         weight_set(bad)
