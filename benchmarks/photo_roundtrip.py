@@ -10,7 +10,10 @@ prior, robust association, landmarks ``all``). Each agent's frame is localized b
 sigmas (the photo path). Both paths run each ``--detectors`` entry (``learned`` or
 ``learned:NAME``, :mod:`localization.detect.weights`); the frames and priors are the same for
 every detector (the same seeds). Prints each path's success count and median / P90 translation
-and rotation errors, the photo / env ratio per detector, and the georeferencing round trip
+and rotation errors, the photo / env ratio per detector (and, for every detector after the first,
+against the first one's env path: ``--detectors learned learned:NAME`` compares weights NAME on
+JPEGs with the env's default weights on rendered pixels, as the photo refiners of
+localization/detect/models/MODEL_CARD.md were judged), and the georeferencing round trip
 (project -> WGS84 -> project) over the flight's camera positions.
 
     python benchmarks/photo_roundtrip.py --episodes 10 --encodings 95 100
@@ -102,7 +105,7 @@ def main(episodes: int = 10, encodings: tuple[str, ...] = ("95",), detectors: tu
         site = paper_site("slab") if source is None else load_ifc(source)
         ifc = write_building(site.name, site.storeys, site.elements, folder / "georef.ifc",
                              map_conversion=MAP_CONVERSION)
-        first = None
+        first, base = None, None
         for detector in detectors:
             env_t, env_r, frames, info = _env_path(ifc, stage, detector, episodes, seed)
             if first is None:
@@ -111,10 +114,14 @@ def main(episodes: int = 10, encodings: tuple[str, ...] = ("95",), detectors: tu
                 raise RuntimeError("the env rendered other frames for another detector")
             total = len(frames)
             out[(detector, "env")] = env = _summary(f"env   {detector}", env_t, env_r, total)
+            base = base or (detector, env)
             for encoding in encodings:
                 t, r = _photo_path(folder, ifc, frames, camera, detector, encoding, stage)
                 out[(detector, encoding)] = ph = _summary(f"photo {detector} q{encoding}", t, r, total)
                 print(f"    photo / env translation median x{ph[1] / env[1]:.3f}, P90 x{ph[2] / env[2]:.3f}")
+                if base[0] != detector:
+                    print(f"    photo / env of {base[0]}: translation median x{ph[1] / base[1][1]:.3f}, "
+                          f"P90 x{ph[2] / base[1][2]:.3f}")
         g = read_ifc_georeference(ifc)
         centres = np.array([T[:3, 3] for *_, T in first])
     round_trip = float(np.abs(g.project_from_wgs84(g.wgs84_from_project(centres)) - centres).max())

@@ -25,6 +25,27 @@ def test_quality_and_chroma_change_the_pixels_as_libjpeg_does():
     assert e444 < 0.5 < e420 < e80, (e444, e420, e80)
 
 
+@pytest.mark.parametrize("chroma", ["4:4:4", "4:2:2", "4:2:0"])
+@pytest.mark.parametrize("quality", [80, 95, 100])
+def test_opencv_gives_pillows_pixels(quality, chroma):
+    """The augmentation (OpenCV) makes the JPEG Pillow would make and decodes it as Pillow does."""
+    import io
+
+    from PIL import Image
+
+    from uav_struct_env.training.jpeg_augment import CHROMA_SUBSAMPLING
+
+    img = np.random.default_rng(quality).integers(0, 256, (53, 61, 3), dtype=np.uint8)
+    img[10:30, 13:33] = (200, 30, 30)
+    buf = io.BytesIO()
+    Image.fromarray(img).save(buf, "JPEG", quality=quality, subsampling=CHROMA_SUBSAMPLING[chroma])
+    with Image.open(io.BytesIO(buf.getvalue())) as im:
+        pillow = np.asarray(im.convert("RGB"))
+    out = encode_jpeg(img, quality, chroma)
+    assert out.dtype == np.uint8 and out.flags.c_contiguous
+    np.testing.assert_array_equal(out, pillow)
+
+
 def test_the_grid_phase_moves_the_artefacts_and_keeps_the_size():
     img = _edges()
     a = encode_jpeg(img, 85, "4:2:0", (0, 0))
