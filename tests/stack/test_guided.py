@@ -5,7 +5,7 @@ import pytest
 
 import uav_struct_env
 from localization import Detections
-from localization.detect.guided import Matches, TemplateMatcher, structure_edges
+from localization.detect.guided import Matches, TemplateMatcher, orientation_field, structure_shading
 from localization.geometry.camera import PAPER_K
 from localization.geometry.transforms import invert, project
 from uav_struct_env.errors import ConfigError
@@ -39,8 +39,15 @@ def test_templates_draw_the_model_where_it_projects(slab_view):
     near = views.depth[0, v - 1: v + 2, u - 1: u + 2]
     assert np.min(near) == pytest.approx(z[k], rel=0.03)  # the corner's own surface, nothing in front
     assert np.all(views.label[1] == -1) and np.all(np.isinf(views.depth[1]))
-    edges = structure_edges(views)
-    assert edges[0].max() > 0.3 and edges[1].max() == 0.0
+    shading = structure_shading(views)
+    assert np.all(shading[1] == 0.5)  # the background's level only: no edge to match
+    field = [np.hypot(*orientation_field(s, 0.7).transpose(2, 0, 1)) for s in shading]
+    assert field[0].max() > 0.3 and field[1].max() == 0.0
+    # the template's edge lies on the label boundary: its strongest response is within a pixel of it
+    row = views.label[0, v]
+    steps = np.flatnonzero(row[1:] != row[:-1]) + 0.5
+    if len(steps):
+        assert np.min(np.abs(steps - (np.argmax(field[0][v]) ))) <= 1.0
 
 
 def test_matcher_finds_the_corners_at_the_true_pose_and_nothing_in_a_blank_frame(slab_view):

@@ -25,6 +25,7 @@ templates were matched under are not passed on). Ground truth in the context fil
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -77,8 +78,12 @@ class GuidedDetector:
 
     def __init__(self, seed: Any, types: Sequence[int], localizer: Localizer, matcher: TemplateMatcher,
                  landmarks: str, anchors: Localizer | None = None, merge_px: float = 8.0,
-                 match_px: float = 3.0) -> None:
+                 match_px: float = 3.0, probe: bool = True, passes: int = 2) -> None:
         self.seed = seed
+        self.probe = probe
+        self.passes = passes
+        self._probe = copy.copy(localizer)
+        self._probe.verify = False
         self.types = tuple(int(t) for t in types)
         self.localizer = localizer
         self.anchors = anchors
@@ -105,8 +110,14 @@ class GuidedDetector:
         first = Detections(uv[mine], scores[mine])
         pose = self.first_pose(first, Detections(uv, scores), context["prior_cam_from_world"])
         if pose is not None:
-            found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion)
-            uv, scores = merged(self.near(first, pose), found, self.merge_px)
+            for k in range(self.passes):
+                found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion)
+                uv, scores = merged(self.near(first, pose), found, self.merge_px)
+                if k + 1 < self.passes:
+                    est = self.localizer.localize(Detections(uv, scores), context["prior_cam_from_world"])
+                    if not est.success:
+                        break
+                    pose = est.cam_from_world
         else:
             uv, scores = first.uv, first.scores
         truth = context.get("landmarks", {}).get(self.landmarks)
@@ -140,6 +151,8 @@ class GuidedDetector:
             if est.success:
                 return est.cam_from_world
         est = self.localizer.localize(first, prior)
+        if not est.success and self.probe:
+            est = self._probe.localize(first, prior)
         return est.cam_from_world if est.success else None
 
     def __repr__(self) -> str:
