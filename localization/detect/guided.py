@@ -206,7 +206,7 @@ class TemplateMatcher:
         self.exclusion_px = float(check_number("exclusion_px", exclusion_px, 0.0, type_error=ValueError))
 
     def find(self, image: ArrayLike, cam_from_world: ArrayLike, K: ArrayLike,
-             distortion: ArrayLike | None = None) -> Matches:
+             distortion: ArrayLike | None = None, search_px: int | None = None) -> Matches:
         """The landmarks the model shows at ``cam_from_world``, matched in ``image`` ((H, W, 3) uint8 RGB).
 
         Args:
@@ -214,9 +214,11 @@ class TemplateMatcher:
             cam_from_world: (4, 4) the pose to render the templates at.
             K: (3, 3) intrinsics.
             distortion: the frame's OpenCV distortion coefficients, or None for a pinhole.
+            search_px: half-size of the search around each projection, px (None: the
+                matcher's ``search_px``; wider for a pose known less well).
 
         Raises:
-            ValueError: for a malformed image, pose or intrinsics.
+            ValueError: for a malformed image, pose or intrinsics, or a ``search_px`` below 1.
         """
         img = np.asarray(image)
         if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
@@ -225,6 +227,8 @@ class TemplateMatcher:
             )
         T = check_transform("cam_from_world", cam_from_world)
         K = check_intrinsics("K", K)
+        r = self.search_px if search_px is None else check_number("search_px", search_px, 1, integer=True,
+                                                                   type_error=ValueError)
         h, w = img.shape[:2]
         uv, z = project(K, T, self.xyz)
         inside = (z > 0.1) & (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
@@ -243,16 +247,16 @@ class TemplateMatcher:
         if not np.any(seen):
             return _NO_MATCHES
         pred = uv[idx] if is_pinhole(distortion) else distort_points(uv[idx], K, distortion)
-        return self._search(img, structure_shading(views), idx, at, pred, seen)
+        return self._search(img, structure_shading(views), idx, at, pred, seen, r)
 
     def _search(self, image: NDArray[np.uint8], shading: NDArray[np.float32], idx: NDArray, at: NDArray,
-                pred: NDArray, seen: NDArray) -> Matches:
+                pred: NDArray, seen: NDArray, r: int) -> Matches:
         """Correlate each seen landmark's template with the image around its projection ``pred``.
 
         The image's grey levels and orientation field are computed in each search window only
         (with a border for its filters): the windows cover a tenth of a frame or less.
         """
-        P, r = self.patch_px, self.search_px
+        P = self.patch_px
         b, side = _FILTER_BORDER, P + 2 * r
         out_uv, out_s, out_i = [], [], []
         for k in np.flatnonzero(seen):

@@ -26,6 +26,7 @@ templates were matched under are not passed on). Ground truth in the context fil
 from __future__ import annotations
 
 import copy
+import os
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -78,10 +79,9 @@ class GuidedDetector:
 
     def __init__(self, seed: Any, types: Sequence[int], localizer: Localizer, matcher: TemplateMatcher,
                  landmarks: str, anchors: Localizer | None = None, merge_px: float = 8.0,
-                 match_px: float = 3.0, probe: bool = True, passes: int = 2) -> None:
+                 match_px: float = 3.0, probe_search_px: int = 16) -> None:
         self.seed = seed
-        self.probe = probe
-        self.passes = passes
+        self.probe_search_px = probe_search_px
         self._probe = copy.copy(localizer)
         self._probe.verify = False
         self.types = tuple(int(t) for t in types)
@@ -108,18 +108,23 @@ class GuidedDetector:
         uv, scores, types = self.seed.detect_all(image)
         mine = np.isin(types, self.types)
         first = Detections(uv[mine], scores[mine])
-        pose = self.first_pose(first, Detections(uv, scores), context["prior_cam_from_world"])
-        if pose is not None:
-            for k in range(self.passes):
-                found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion)
-                uv, scores = merged(self.near(first, pose), found, self.merge_px)
-                if k + 1 < self.passes:
-                    est = self.localizer.localize(Detections(uv, scores), context["prior_cam_from_world"])
-                    if not est.success:
-                        break
-                    pose = est.cam_from_world
+        prior = context["prior_cam_from_world"]
+        pose, confirmed = self.first_pose(first, Detections(uv, scores), prior)
+        if pose is not None and not confirmed:
+            found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion,
+                                      search_px=self.probe_search_px)
+            uv, scores = merged(first, found, self.merge_px)
+            est = self.localizer.localize(Detections(uv, scores), prior)
+            pose = est.cam_from_world if est.success else None
         else:
             uv, scores = first.uv, first.scores
+        if pose is not None:
+            found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion)
+            uv, scores = merged(self.near(first, pose), found, self.merge_px)
+            if (os.environ.get("GUIDED_ALT", "1") == "1" and len(uv) > len(found.uv) >= 4
+                    and not self.localizer.localize(Detections(uv, scores), prior).success
+                    and self.localizer.localize(Detections(found.uv, found.score), prior).success):
+                uv, scores = found.uv, found.score
         truth = context.get("landmarks", {}).get(self.landmarks)
         return Detections(uv=uv, scores=scores, true_ids=truth_ids(uv, truth, self.match_px))
 
@@ -140,7 +145,8 @@ class GuidedDetector:
         keep = gap <= self.matcher.search_px
         return Detections(first.uv[keep], None if first.scores is None else first.scores[keep])
 
-    def first_pose(self, first: Detections, every: Detections, prior: NDArray[np.float64]) -> NDArray | None:
+    def first_pose(self, first: Detections, every: Detections,
+                   prior: NDArray[np.float64]) -> tuple[NDArray | None, bool]:
         """The first pass's ``cam_from_world``: all candidates against the anchors, else the set's own.
 
         Every structural landmark the stage has pins the templates' pose better than one set's
@@ -149,11 +155,12 @@ class GuidedDetector:
         if self.anchors is not None and len(every) > len(first):
             est = self.anchors.localize(every, prior)
             if est.success:
-                return est.cam_from_world
+                return est.cam_from_world, True
         est = self.localizer.localize(first, prior)
-        if not est.success and self.probe:
-            est = self._probe.localize(first, prior)
-        return est.cam_from_world if est.success else None
+        if est.success:
+            return est.cam_from_world, True
+        est = self._probe.localize(first, prior)
+        return (est.cam_from_world if est.success else None), False
 
     def __repr__(self) -> str:
         return f"GuidedDetector(landmarks={self.landmarks!r}, seed={self.seed!r}, matcher={self.matcher!r})"
