@@ -26,7 +26,6 @@ templates were matched under are not passed on). Ground truth in the context fil
 from __future__ import annotations
 
 import copy
-import os
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -60,6 +59,13 @@ def merged(first: Detections, found: Matches,
     return np.vstack([found.uv, first.uv[rest]]), np.concatenate([found.score, scores[rest]])
 
 
+def _unverified(localizer: Localizer) -> Localizer:
+    """A copy of ``localizer`` that returns its best pose unconfirmed (no verification)."""
+    out = copy.copy(localizer)
+    out.verify = False
+    return out
+
+
 class GuidedDetector:
     """Learned candidates, a first pose, and the building model's templates at it (module docstring).
 
@@ -82,8 +88,7 @@ class GuidedDetector:
                  match_px: float = 3.0, probe_search_px: int = 16) -> None:
         self.seed = seed
         self.probe_search_px = probe_search_px
-        self._probe = copy.copy(localizer)
-        self._probe.verify = False
+        self._probes = tuple(_unverified(x) for x in (anchors, localizer) if x is not None)
         self.types = tuple(int(t) for t in types)
         self.localizer = localizer
         self.anchors = anchors
@@ -121,10 +126,6 @@ class GuidedDetector:
         if pose is not None:
             found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion)
             uv, scores = merged(self.near(first, pose), found, self.merge_px)
-            if (os.environ.get("GUIDED_ALT", "1") == "1" and len(uv) > len(found.uv) >= 4
-                    and not self.localizer.localize(Detections(uv, scores), prior).success
-                    and self.localizer.localize(Detections(found.uv, found.score), prior).success):
-                uv, scores = found.uv, found.score
         truth = context.get("landmarks", {}).get(self.landmarks)
         return Detections(uv=uv, scores=scores, true_ids=truth_ids(uv, truth, self.match_px))
 
@@ -152,15 +153,15 @@ class GuidedDetector:
         Every structural landmark the stage has pins the templates' pose better than one set's
         few (four slab corners of a house); the set's own localization is the fallback.
         """
+        tries = [(self.localizer, first, self._probes[-1])]
         if self.anchors is not None and len(every) > len(first):
-            est = self.anchors.localize(every, prior)
-            if est.success:
-                return est.cam_from_world, True
-        est = self.localizer.localize(first, prior)
-        if est.success:
-            return est.cam_from_world, True
-        est = self._probe.localize(first, prior)
-        return (est.cam_from_world if est.success else None), False
+            tries.insert(0, (self.anchors, every, self._probes[0]))
+        for confirmed in (True, False):
+            for localizer, detections, probe in tries:
+                est = (localizer if confirmed else probe).localize(detections, prior)
+                if est.success:
+                    return est.cam_from_world, confirmed
+        return None, False
 
     def __repr__(self) -> str:
         return f"GuidedDetector(landmarks={self.landmarks!r}, seed={self.seed!r}, matcher={self.matcher!r})"
