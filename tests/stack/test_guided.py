@@ -5,7 +5,7 @@ import pytest
 
 import uav_struct_env
 from localization import Detections
-from localization.detect.guided import Matches, TemplateMatcher, orientation_field, structure_shading
+from localization.detect.guided import Matches, ModelViews, TemplateMatcher, orientation_field, structure_shading
 from localization.geometry.camera import PAPER_K
 from localization.geometry.transforms import invert, project
 from uav_struct_env.errors import ConfigError
@@ -43,11 +43,18 @@ def test_templates_draw_the_model_where_it_projects(slab_view):
     assert np.all(shading[1] == 0.5)  # the background's level only: no edge to match
     field = [np.hypot(*orientation_field(s, 0.7).transpose(2, 0, 1)) for s in shading]
     assert field[0].max() > 0.3 and field[1].max() == 0.0
-    # the template's edge lies on the label boundary: its strongest response is within a pixel of it
-    row = views.label[0, v]
-    steps = np.flatnonzero(row[1:] != row[:-1]) + 0.5
-    if len(steps):
-        assert np.min(np.abs(steps - (np.argmax(field[0][v]) ))) <= 1.0
+
+
+def test_the_template_edge_lies_on_the_label_boundary_not_beside_it():
+    label = np.zeros((1, 32, 32), np.int32)
+    label[:, :, 20:] = 7  # a vertical boundary between columns 19 and 20
+    label[:, 24:, :] = -1  # and the model ends below row 24
+    views = ModelViews(np.zeros((1, 32, 32), np.float32), np.ones((1, 32, 32), np.float32), label)
+    field = orientation_field(structure_shading(views)[0], 0.7)
+    strength = np.hypot(field[..., 0], field[..., 1])
+    assert set(np.argsort(strength[10])[-2:].tolist()) == {19, 20}  # centred on the boundary
+    assert set(np.argsort(strength[:, 8])[-2:].tolist()) == {23, 24}
+    assert field[10, 19, 0] > 0 > field[23, 8, 0]  # doubled angle: a gradient along x vs along y
 
 
 def test_matcher_finds_the_corners_at_the_true_pose_and_nothing_in_a_blank_frame(slab_view):
