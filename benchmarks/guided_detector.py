@@ -76,10 +76,10 @@ def _frame(stacks: dict, image, info: dict, flip: bool, times: dict) -> None:
         g = guided.detector  # its parts, once more (not alternated: a breakdown, not a comparison)
         dt_seed, (uv, scores, types) = _timed(g.seed.detect_all, image)
         mine = np.isin(types, g.types)
-        dt_pose, pose = _timed(g.first_pose, Detections(uv[mine], scores[mine]), Detections(uv, scores),
-                               prior)
+        dt_pose, (pose, _) = _timed(g.first_pose, Detections(uv[mine], scores[mine]), Detections(uv, scores),
+                                    prior)
         dt_find = float("nan")
-        if pose is not None:
+        if pose is not None:  # the narrow pass (an unconfirmed first pose adds a wide one and a localization)
             dt_find = _timed(g.matcher.find, image, pose, g.localizer.K, g.localizer.distortion)[0]
         parts = (("learned, all types", dt_seed), ("first localization", dt_pose), ("templates", dt_find))
         for part, dt in parts:
