@@ -8,14 +8,21 @@ builds (:func:`uav_struct_env.stack.build_stack`). Per frame:
    (``anchors``: the building model knows them all, and more landmarks pin the pose better than
    one set's few) by a :class:`localization.Localizer` like the stack's (association, PnP,
    verification); without a pose there, the candidates of the set's type are localized against
-   the set by the stack's own. Without any pose, the set's candidates are the detections (the
-   learned detector's result).
-2. **Second pass.** At that pose, the building model is rendered around every landmark it
-   shows (:class:`uav_struct_env.sim.templates.SiteTemplates`) and matched in the image within
-   a few pixels (:class:`localization.detect.guided.TemplateMatcher`). The detections are the
-   set's candidates that lie where a landmark projects at that pose (within the search radius;
-   the others fit no landmark there), where no match lies within ``merge_px`` of them, and the
-   matches.
+   the set by the stack's own. A pose that neither confirms is still worth the templates: the
+   same two localizations are tried once more with the verification off (an *unconfirmed*
+   pose, typically 1-3 m off where the learned detector found three or four of a set's corners
+   and one of its candidates sat a few pixels off its corner).
+2. **An unconfirmed pose: a wide pass.** The templates are matched within
+   ``probe_search_px`` (16 px) of the landmarks' projections at it; the matches and every
+   candidate of the set's type are localized by the set's own localizer, with verification.
+   Only a pose confirmed there goes on; otherwise these are the detections.
+3. **The narrow pass.** At a confirmed pose, the building model is rendered around every
+   landmark it shows (:class:`uav_struct_env.sim.templates.SiteTemplates`) and matched in the
+   image within a few pixels (:class:`localization.detect.guided.TemplateMatcher`). The
+   detections are the set's candidates that lie where a landmark projects at that pose (within
+   the search radius; the others fit no landmark there), where no match lies within
+   ``merge_px`` of them, and the matches. Without any pose, the set's candidates are the
+   detections (the learned detector's result).
 
 The stack then localizes the detections again from the prior, exactly as for any detector, so
 the final pose rests on the association and verification of every detector (the identities the
@@ -81,6 +88,7 @@ class GuidedDetector:
         merge_px: a first-pass detection this close to a match is the same landmark (the match is
             kept), px.
         match_px: radius of the ground-truth matching that fills ``true_ids``, px.
+        probe_search_px: half-size of the template search at an unconfirmed first pose, px.
     """
 
     def __init__(self, seed: Any, types: Sequence[int], localizer: Localizer, matcher: TemplateMatcher,
@@ -148,10 +156,12 @@ class GuidedDetector:
 
     def first_pose(self, first: Detections, every: Detections,
                    prior: NDArray[np.float64]) -> tuple[NDArray | None, bool]:
-        """The first pass's ``cam_from_world``: all candidates against the anchors, else the set's own.
+        """``(cam_from_world, confirmed)`` of the first pass, ``(None, False)`` without one.
 
-        Every structural landmark the stage has pins the templates' pose better than one set's
-        few (four slab corners of a house); the set's own localization is the fallback.
+        All candidates against the anchors, else the set's own against the set: every structural
+        landmark the stage has pins the templates' pose better than one set's few (four slab
+        corners of a house). Both are tried with the verification first, then without it (the
+        pose is then only where the wide pass looks: ``confirmed`` False).
         """
         tries = [(self.localizer, first, self._probes[-1])]
         if self.anchors is not None and len(every) > len(first):
