@@ -116,3 +116,40 @@ def test_the_study_detects_with_the_guided_detector_on_ifc_buildings_unless_told
     learned = study_config(_parser().parse_args(["--site", duplex, "--detector", "learned"]))
     assert learned.detector == "learned"
     assert study_config(_parser().parse_args([])).detector == "learned"  # the paper site
+
+
+class _Candidates:
+    """Fixed first-pass candidates in the learned detector's ``detect_all`` form (all of one type)."""
+
+    def __init__(self, uv, kind):
+        self.uv, self.kind = np.asarray(uv, dtype=np.float64), kind
+
+    def detect_all(self, image):
+        return self.uv, np.ones(len(self.uv)), np.full(len(self.uv), self.kind)
+
+
+def test_an_unconfirmed_first_pose_leads_the_templates_to_a_confirmed_one(slab_view):
+    from localization.detect.learned import LANDMARK_TYPES
+
+    site, image, info = slab_view
+    model = site.landmarks("slab_corners")
+    stack = build_stack(StackSpec(landmarks="slab_corners", detector="guided", min_localizer_sigma_px=0.5,
+                                  scale_gates=False, localizer_kwargs={"fit_sigma_px": 0.7}),
+                        info["intrinsics"], (1280, 720), model_xyz=model.xyz, model_ids=model.ids,
+                        distortion=info["distortion"], site=site)
+    truth = info["landmarks"]["slab_corners"]
+    seen = np.flatnonzero(truth["visible"])[:4]
+    uv = np.asarray(truth["uv"])[seen] + [[0, 0], [0, 0], [0, 0], [6.0, -4.0]]  # one candidate off its corner
+    guided = stack.detector
+    guided.seed = _Candidates(uv, LANDMARK_TYPES.index("slab_corners"))
+    prior = invert(info["prior_world_from_cam"])
+    first = Detections(uv, np.ones(4))
+    pose, confirmed = guided.first_pose(first, first, prior)
+    assert pose is not None and not confirmed  # the four candidates alone are refused
+    assert not stack.localizer.localize(first, prior).success
+    frame = stack.localize(image, info["landmarks"], prior, invert(info["world_from_cam"]))
+    assert frame.estimate.success and frame.translation_error_m < 0.5
+    det = frame.detections  # the match replaced the candidate off its corner
+    assert sorted(det.true_ids.tolist()) == sorted(np.asarray(truth["ids"])[seen].tolist())
+    off = np.hypot(*(det.uv - np.asarray(truth["uv"])[np.searchsorted(truth["ids"], det.true_ids)]).T)
+    assert np.all(off < 2.0), off
