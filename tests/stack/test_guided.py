@@ -5,7 +5,13 @@ import pytest
 
 import uav_struct_env
 from localization import Detections
-from localization.detect.guided import Matches, ModelViews, TemplateMatcher, orientation_field, structure_shading
+from localization.detect.guided import (
+    Matches,
+    ModelViews,
+    TemplateMatcher,
+    orientation_field,
+    structure_shading,
+)
 from localization.geometry.camera import PAPER_K
 from localization.geometry.transforms import invert, project
 from uav_struct_env.errors import ConfigError
