@@ -6,8 +6,9 @@ four landmarks) with ``--detector learned`` and with ``--detector guided``, and 
 detector's ``detect`` on every frame, alternating which goes first (this machine's speed drifts
 by about 10 % within minutes, so only figures of the same run compare). One thread: ONNX Runtime
 runs one per network and ``cv2.setNumThreads(1)``; the template renderer is single-threaded.
-The guided figure is its whole detection: the learned detector, the first localization and the
-template matching; its parts are printed too.
+The guided figure is its whole detection: the learned detector, the first localization, the
+template matching (and, from a first pose the verification did not confirm, the wide template
+pass and its localization); its parts are printed too (the narrow pass as "templates").
 
     python benchmarks/guided_detector.py                                   # the paper site, both stages
     python benchmarks/guided_detector.py --site tests/data/ifc/duplex.ifc --stages "Roof/slab"
