@@ -10,8 +10,8 @@ wireframes):
 * each landmark in the frame that the model itself does not hide (the render's depth around its
   pixel is not in front of it) gets a ``patch_px`` square render centred on its projection (a
   view whose principal point is moved there);
-* the patch's structure (:func:`structure_shading`: every element face its own grey level, so
-  that its gradients lie on the model's edges) and the image are compared as doubled-angle
+* the patch's structure (:func:`structure_shading`: every label of the render its own grey
+  level, so that its gradients lie on the model's edges) and the image are compared as doubled-angle
   orientation fields of their gradients (:func:`orientation_field`: an edge counts whichever side
   is brighter, and texture, whose orientations scatter, averages out) by normalised correlation
   over ``search_px`` around the projection;
@@ -88,12 +88,14 @@ class TemplateSource(Protocol):
 def structure_shading(views: ModelViews) -> NDArray[np.float32]:
     """(V, H, W) float32 the structure as a grey image whose edges are the model's: one level per label.
 
-    Every label (an element's faces of one orientation) gets its own grey level in 0.2-1 (a hash
-    of the label), the background 0.5, so that the image's gradient lies where the label changes
-    and points across the boundary, as a photograph's does at a structural edge; its
-    :func:`orientation_field` is the template the image is matched against. (Gradients of a
-    blurred binary edge map would lie beside each edge, on both sides of it: a template drawn
-    that way ties its peak less tightly to the edge.)
+    Every label (``uav_struct_env.sim.templates`` labels faces by their orientation) gets its own
+    grey level in 0.2-1 (a hash of the label), the background 0.5, so that the image's gradient
+    lies where the label changes and points across the boundary, as a photograph's does at a
+    structural edge; its :func:`orientation_field` is the template the image is matched against.
+    (Gradients of a blurred binary edge map would lie beside each edge, on both sides of it: a
+    template drawn that way ties its peak less tightly to the edge.) A depth step within one
+    label (a face in front of a parallel one) is not drawn: the image shows it no more than its
+    lighting, which is the same on both.
     """
     label = views.label.astype(np.int64)
     level = ((label * 2654435761) % 1000003).astype(np.float32) * np.float32(0.8 / 1000003) + np.float32(0.2)
@@ -157,8 +159,9 @@ class Matches:
 
 
 #: Blur of the templates' structure shading, px (less than the image's 1 px: the model's edges
-#: are sharp, the image's are blurred by its optics already; 0.7 matched more corners of the
-#: train buildings within 2 px at their true poses than 0.5 or 1).
+#: are sharp, the image's are blurred by its optics already). At the true poses of two train
+#: buildings it placed the most corners within 2 px: 501 of 640, against 498 at 0.5 px and 473
+#: at 1 px.
 _TEMPLATE_BLUR_PX = 0.7
 #: Pixels around a search window that its orientation field's filters read (blur 1 px and Sobel).
 _FILTER_BORDER = 6
