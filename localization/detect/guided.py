@@ -160,8 +160,8 @@ class Matches:
 
 #: Blur of the templates' structure shading, px (less than the image's 1 px: the model's edges
 #: are sharp, the image's are blurred by its optics already). At the true poses of two train
-#: buildings it placed the most corners within 2 px: 501 of 640, against 498 at 0.5 px and 473
-#: at 1 px.
+#: buildings (labels per element then) it placed the most corners within 2 px: 501 of 640,
+#: against 498 at 0.5 px and 473 at 1 px.
 _TEMPLATE_BLUR_PX = 0.7
 #: Pixels around a search window that its orientation field's filters read (blur 1 px and Sobel).
 _FILTER_BORDER = 6
