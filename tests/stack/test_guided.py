@@ -86,6 +86,8 @@ def test_matcher_refuses_bad_input(slab_view):
         matcher.find(image[..., 0], np.eye(4), PAPER_K)
     with pytest.raises(ValueError, match="search_px"):
         TemplateMatcher(np.zeros((4, 3)), SiteTemplates(site), search_px=0)
+    with pytest.raises(ValueError, match="search_px"):
+        matcher.find(image, invert(info["world_from_cam"]), PAPER_K, search_px=0)
 
 
 def test_matches_replace_the_seeds_near_them_and_far_seeds_stay():
