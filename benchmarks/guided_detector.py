@@ -6,8 +6,9 @@ four landmarks) with ``--detector learned`` and with ``--detector guided``, and 
 detector's ``detect`` on every frame, alternating which goes first (this machine's speed drifts
 by about 10 % within minutes, so only figures of the same run compare). One thread: ONNX Runtime
 runs one per network and ``cv2.setNumThreads(1)``; the template renderer is single-threaded.
-The guided figure is its whole detection: the learned detector, the first localization and the
-template matching; its parts are printed too.
+The guided figure is its whole detection: the learned detector, the first localization, the
+template matching (and, from a first pose the verification did not confirm, the wide template
+pass and its localization); its parts are printed too (the narrow pass as "templates").
 
     python benchmarks/guided_detector.py                                   # the paper site, both stages
     python benchmarks/guided_detector.py --site tests/data/ifc/duplex.ifc --stages "Roof/slab"
@@ -76,10 +77,10 @@ def _frame(stacks: dict, image, info: dict, flip: bool, times: dict) -> None:
         g = guided.detector  # its parts, once more (not alternated: a breakdown, not a comparison)
         dt_seed, (uv, scores, types) = _timed(g.seed.detect_all, image)
         mine = np.isin(types, g.types)
-        dt_pose, pose = _timed(g.first_pose, Detections(uv[mine], scores[mine]), Detections(uv, scores),
-                               prior)
+        dt_pose, (pose, _) = _timed(g.first_pose, Detections(uv[mine], scores[mine]), Detections(uv, scores),
+                                    prior)
         dt_find = float("nan")
-        if pose is not None:
+        if pose is not None:  # the narrow pass (an unconfirmed first pose adds a wide one and a localization)
             dt_find = _timed(g.matcher.find, image, pose, g.localizer.K, g.localizer.distortion)[0]
         parts = (("learned, all types", dt_seed), ("first localization", dt_pose), ("templates", dt_find))
         for part, dt in parts:

@@ -8,14 +8,21 @@ builds (:func:`uav_struct_env.stack.build_stack`). Per frame:
    (``anchors``: the building model knows them all, and more landmarks pin the pose better than
    one set's few) by a :class:`localization.Localizer` like the stack's (association, PnP,
    verification); without a pose there, the candidates of the set's type are localized against
-   the set by the stack's own. Without any pose, the set's candidates are the detections (the
-   learned detector's result).
-2. **Second pass.** At that pose, the building model is rendered around every landmark it
-   shows (:class:`uav_struct_env.sim.templates.SiteTemplates`) and matched in the image within
-   a few pixels (:class:`localization.detect.guided.TemplateMatcher`). The detections are the
-   set's candidates that lie where a landmark projects at that pose (within the search radius;
-   the others fit no landmark there), where no match lies within ``merge_px`` of them, and the
-   matches.
+   the set by the stack's own. A pose that neither confirms is still worth the templates: the
+   same two localizations are tried once more with the verification off (an *unconfirmed*
+   pose, typically 1-3 m off where the learned detector found three or four of a set's corners
+   and one of its candidates sat a few pixels off its corner).
+2. **An unconfirmed pose: a wide pass.** The templates are matched within
+   ``probe_search_px`` (16 px) of the landmarks' projections at it; the matches and every
+   candidate of the set's type are localized by the set's own localizer, with verification.
+   Only a pose confirmed there goes on; otherwise these are the detections.
+3. **The narrow pass.** At a confirmed pose, the building model is rendered around every
+   landmark it shows (:class:`uav_struct_env.sim.templates.SiteTemplates`) and matched in the
+   image within a few pixels (:class:`localization.detect.guided.TemplateMatcher`). The
+   detections are the set's candidates that lie where a landmark projects at that pose (within
+   the search radius; the others fit no landmark there), where no match lies within
+   ``merge_px`` of them, and the matches. Without any pose, the set's candidates are the
+   detections (the learned detector's result).
 
 The stack then localizes the detections again from the prior, exactly as for any detector, so
 the final pose rests on the association and verification of every detector (the identities the
@@ -25,6 +32,7 @@ templates were matched under are not passed on). Ground truth in the context fil
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -58,6 +66,13 @@ def merged(first: Detections, found: Matches,
     return np.vstack([found.uv, first.uv[rest]]), np.concatenate([found.score, scores[rest]])
 
 
+def _unverified(localizer: Localizer) -> Localizer:
+    """A copy of ``localizer`` that returns its best pose unconfirmed (no verification)."""
+    out = copy.copy(localizer)
+    out.verify = False
+    return out
+
+
 class GuidedDetector:
     """Learned candidates, a first pose, and the building model's templates at it (module docstring).
 
@@ -73,12 +88,15 @@ class GuidedDetector:
         merge_px: a first-pass detection this close to a match is the same landmark (the match is
             kept), px.
         match_px: radius of the ground-truth matching that fills ``true_ids``, px.
+        probe_search_px: half-size of the template search at an unconfirmed first pose, px.
     """
 
     def __init__(self, seed: Any, types: Sequence[int], localizer: Localizer, matcher: TemplateMatcher,
                  landmarks: str, anchors: Localizer | None = None, merge_px: float = 8.0,
-                 match_px: float = 3.0) -> None:
+                 match_px: float = 3.0, probe_search_px: int = 16) -> None:
         self.seed = seed
+        self.probe_search_px = probe_search_px
+        self._probes = tuple(_unverified(x) for x in (anchors, localizer) if x is not None)
         self.types = tuple(int(t) for t in types)
         self.localizer = localizer
         self.anchors = anchors
@@ -103,12 +121,19 @@ class GuidedDetector:
         uv, scores, types = self.seed.detect_all(image)
         mine = np.isin(types, self.types)
         first = Detections(uv[mine], scores[mine])
-        pose = self.first_pose(first, Detections(uv, scores), context["prior_cam_from_world"])
+        prior = context["prior_cam_from_world"]
+        pose, confirmed = self.first_pose(first, Detections(uv, scores), prior)
+        if pose is not None and not confirmed:
+            found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion,
+                                      search_px=self.probe_search_px)
+            uv, scores = merged(first, found, self.merge_px)
+            est = self.localizer.localize(Detections(uv, scores), prior)
+            pose = est.cam_from_world if est.success else None
+        else:
+            uv, scores = first.uv, first.scores
         if pose is not None:
             found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion)
             uv, scores = merged(self.near(first, pose), found, self.merge_px)
-        else:
-            uv, scores = first.uv, first.scores
         truth = context.get("landmarks", {}).get(self.landmarks)
         return Detections(uv=uv, scores=scores, true_ids=truth_ids(uv, truth, self.match_px))
 
@@ -129,18 +154,24 @@ class GuidedDetector:
         keep = gap <= self.matcher.search_px
         return Detections(first.uv[keep], None if first.scores is None else first.scores[keep])
 
-    def first_pose(self, first: Detections, every: Detections, prior: NDArray[np.float64]) -> NDArray | None:
-        """The first pass's ``cam_from_world``: all candidates against the anchors, else the set's own.
+    def first_pose(self, first: Detections, every: Detections,
+                   prior: NDArray[np.float64]) -> tuple[NDArray | None, bool]:
+        """``(cam_from_world, confirmed)`` of the first pass, ``(None, False)`` without one.
 
-        Every structural landmark the stage has pins the templates' pose better than one set's
-        few (four slab corners of a house); the set's own localization is the fallback.
+        All candidates against the anchors, else the set's own against the set: every structural
+        landmark the stage has pins the templates' pose better than one set's few (four slab
+        corners of a house). Both are tried with the verification first, then without it (the
+        pose is then only where the wide pass looks: ``confirmed`` False).
         """
+        tries = [(self.localizer, first, self._probes[-1])]
         if self.anchors is not None and len(every) > len(first):
-            est = self.anchors.localize(every, prior)
-            if est.success:
-                return est.cam_from_world
-        est = self.localizer.localize(first, prior)
-        return est.cam_from_world if est.success else None
+            tries.insert(0, (self.anchors, every, self._probes[0]))
+        for confirmed in (True, False):
+            for localizer, detections, probe in tries:
+                est = (localizer if confirmed else probe).localize(detections, prior)
+                if est.success:
+                    return est.cam_from_world, confirmed
+        return None, False
 
     def __repr__(self) -> str:
         return f"GuidedDetector(landmarks={self.landmarks!r}, seed={self.seed!r}, matcher={self.matcher!r})"
