@@ -190,6 +190,9 @@ _DUPLICATE_CELL = 1.0
 #: A stage needs at least this many landmarks of a set for a camera to get a pose from it.
 _MIN_LANDMARKS = 4
 _NEIGHBOURS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+# A closing (:func:`_clean`) that loses more than this area (m2: OUTLINE_TOL squared, below the
+# outline's resolution) has failed; the union is used unclosed.
+_CLOSING_LOSS = OUTLINE_TOL**2
 _KIND_ORDER = {"column": 0, "slab": 1, "beam": 2, "wall": 3}
 _ELEMENT_CLASS = {"column": Column, "slab": Slab, "beam": Beam, "wall": Wall}
 
@@ -249,12 +252,27 @@ def _tri_polygons(tri2d: NDArray[np.float64]) -> Any:
 
 
 def _clean(geom: Any, close: float = 1e-4) -> Any:
-    """Union slivers closed (morphological closing by ``close`` m), simplified at OUTLINE_TOL."""
+    """Union slivers closed (morphological closing by ``close`` m), simplified at OUTLINE_TOL.
+
+    A closing only adds area (it fills slivers and notches narrower than ``2 * close``), so a
+    closing that returns less area than it was given has failed, not cleaned: GEOS's mitre buffer
+    can turn a valid union into an EMPTY polygon where parts touch at a vertex with another vertex
+    microns away (two 65 x 130 mm steel plates of a Tekla export were dropped as "no plan
+    footprint" that way). Where the loss exceeds :data:`_CLOSING_LOSS` the union is simplified as it
+    is, unclosed: its slivers are at most ``2 * close`` wide, and a tiny part keeps its real
+    footprint. The fallback is decided by the element's own area, not its size, so every closing
+    that works (all but the failed ones across the corpus, whose largest loss is 0.03 mm2) is kept
+    as it was; an outline degenerate in itself (no area at all) is still dropped by the callers.
+    """
     import shapely
 
-    geom = geom.buffer(close, join_style="mitre", mitre_limit=10.0).buffer(
+    closed = geom.buffer(close, join_style="mitre", mitre_limit=10.0).buffer(
         -close, join_style="mitre", mitre_limit=10.0)
-    geom = shapely.simplify(geom, OUTLINE_TOL, preserve_topology=True)
+    if geom.area - closed.area > _CLOSING_LOSS:
+        log.debug("closing by %g m lost %.3g of %.3g m2 (a failed buffer): the union is kept unclosed",
+                  close, geom.area - closed.area, geom.area)
+        closed = geom
+    geom = shapely.simplify(closed, OUTLINE_TOL, preserve_topology=True)
     return shapely.make_valid(geom) if not geom.is_valid else geom
 
 
