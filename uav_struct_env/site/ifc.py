@@ -62,7 +62,10 @@ function of the same name: :func:`_no_body_geometry`, ... :func:`_columns_beams_
 a point or direction that is not finite or absurdly far (:mod:`uav_struct_env.site.ifc_file`) is
 refused with the reason; an element whose geometry is degenerate (an outline without area at
 the tolerance, non-finite tessellation) is dropped and reported, never failing the file, and an
-opening too small to outline is dropped while its slab is kept.
+opening too small to outline is dropped while its slab is kept. An element with a real plan
+outline, however small, keeps it: a plan union is closed (slivers between triangles filled) before
+it is simplified, and where that closing fails (it returns less area than it was given, as GEOS's
+buffer can on parts touching at a vertex) the union is simplified unclosed (:func:`_clean`).
 
 Storeys come from IfcBuildingStorey, in elevation order (its placement's z in metres); an element
 belongs to the storey that contains it (through aggregates), else the highest storey at or below
@@ -259,10 +262,13 @@ def _clean(geom: Any, close: float = 1e-4) -> Any:
     can turn a valid union into an EMPTY polygon where parts touch at a vertex with another vertex
     microns away (two 65 x 130 mm steel plates of a Tekla export were dropped as "no plan
     footprint" that way). Where the loss exceeds :data:`_CLOSING_LOSS` the union is simplified as it
-    is, unclosed: its slivers are at most ``2 * close`` wide, and a tiny part keeps its real
-    footprint. The fallback is decided by the element's own area, not its size, so every closing
-    that works (all but the failed ones across the corpus, whose largest loss is 0.03 mm2) is kept
-    as it was; an outline degenerate in itself (no area at all) is still dropped by the callers.
+    is, unclosed: it is the element's exact plan (valid, snapped to the 1 um grid), left with the
+    slivers the closing would have filled (narrower than ``2 * close``), and a small part keeps its
+    real footprint. Scaling the closing to the element's size instead would change every small
+    element's outline; this test changes none whose closing works: across the corpus's 16 files
+    (5,000 closings) the working ones lose at most 0.03 mm2 (float noise along a plate's fillet),
+    the two that failed lost all. An outline degenerate in itself (no area at all) stays empty and
+    its element is still dropped by the callers, with its reason.
     """
     import shapely
 
