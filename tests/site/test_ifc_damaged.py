@@ -2,7 +2,8 @@
 
 Files are written by our own exporter (``Site.to_ifc``) and then damaged as real files are: a tiny
 opening that has no outline at the importer's tolerance, a coordinate written as NaN / Inf /
-1e300, a file cut short, a file too large; and a ground-bearing slab at terrain level.
+1e300, a file cut short, a file too large; a ground-bearing slab at terrain level; and a small
+steel plate whose plan union the outline cleaning used to empty.
 """
 
 from __future__ import annotations
@@ -11,7 +12,9 @@ import dataclasses
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
+import shapely
 
 pytest.importorskip("ifcopenshell")
 
@@ -20,7 +23,7 @@ from ifc_sites import DUPLEX, messy_site  # noqa: E402
 from uav_struct_env.errors import IfcImportError  # noqa: E402
 from uav_struct_env.site import ifc as ifc_module  # noqa: E402
 from uav_struct_env.site import ifc_report, ifc_stages, load_ifc  # noqa: E402
-from uav_struct_env.site.elements import Hole, Slab  # noqa: E402
+from uav_struct_env.site.elements import Beam, Hole, Slab, TriangleMesh  # noqa: E402
 from uav_struct_env.site.ifc_file import MAX_FILE_MB_VARIABLE  # noqa: E402
 from uav_struct_env.site.polygons import rectangle  # noqa: E402
 
@@ -142,3 +145,64 @@ def test_same_named_elements_whose_guids_share_a_long_prefix_get_unique_names(tm
     assert len(set(names)) == len(names)
     copies = sorted(n for n in names if n.startswith("Column:600x600:1 ["))
     assert copies == [f"Column:600x600:1 [0ZBert7zf3GhThdO12NKA{c}]" for c in "abc"]
+
+
+# A 65 x 130 mm steel plate with a chamfered corner where a Tekla export puts it (tekla_steel_frame's
+# angle cleat 2fpUCqylr77AsNpLdZi4sR, reduced to the vertices that matter), with a 0.7 mm2 sliver of
+# the same element touching it at one vertex and 7 um from another: the closing of this plan union
+# (GEOS's mitre buffer out and back in, by 0.1 mm) returned an EMPTY polygon, and the plate was
+# dropped as "no plan footprint".
+_PLATE = np.array([[13.02735, 6.7645], [13.02735, 6.8945], [13.09235, 6.8945], [13.09235, 6.892],
+                   [13.092212, 6.890776], [13.090284, 6.887709]])
+_SLIVER = np.array([[13.090281, 6.887702], [13.092212, 6.890776], [13.091805, 6.889614]])
+_PLATE_Z = (3.84795, 3.92795)
+
+
+def _prism(ring: np.ndarray, z0: float, z1: float) -> np.ndarray:
+    """(T, 3, 3) triangles of the prism over ``ring`` (star-shaped from its first vertex)."""
+    ring = ring if shapely.LinearRing(ring).is_ccw else ring[::-1]
+    fan = np.array([[ring[0], ring[k], ring[k + 1]] for k in range(1, len(ring) - 1)])
+    top = np.concatenate([fan, np.full((len(fan), 3, 1), z1)], axis=2)
+    bottom = np.concatenate([fan[:, ::-1], np.full((len(fan), 3, 1), z0)], axis=2)
+    lo = np.column_stack([ring, np.full(len(ring), z0)])
+    lo_next, up = np.roll(lo, -1, axis=0), np.array([0.0, 0.0, z1 - z0])
+    walls = [np.stack([lo, lo_next, lo_next + up], axis=1), np.stack([lo, lo_next + up, lo + up], axis=1)]
+    return np.concatenate([top, bottom, *walls])
+
+
+def _plate_triangles() -> np.ndarray:
+    return np.concatenate([_prism(_PLATE, *_PLATE_Z), _prism(_SLIVER, *_PLATE_Z)])
+
+
+def _mesh(tri: np.ndarray) -> TriangleMesh:
+    return TriangleMesh(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3))
+
+
+def test_a_plate_whose_closing_fails_keeps_its_real_footprint():
+    tri = _plate_triangles()
+    union = shapely.union_all(ifc_module._tri_polygons(tri[:, :, :2]), grid_size=1e-6)
+    assert union.geom_type == "MultiPolygon" and union.area == pytest.approx(4.3157e-3, rel=1e-3)
+    cleaned = ifc_module._clean(union)
+    assert cleaned.area >= union.area - 3e-6  # the simplification at OUTLINE_TOL only (was 0.0)
+    outline = ifc_module._footprint(tri)
+    assert outline is not None
+    np.testing.assert_allclose(outline.max(axis=0) - outline.min(axis=0), [0.065, 0.130], atol=1e-9)
+    assert shapely.Polygon(outline).area == pytest.approx(shapely.Polygon(_PLATE).area, rel=1e-3)
+
+
+def test_a_small_plate_is_imported_and_a_degenerate_member_still_dropped(tmp_path):
+    """Through the exporter and the whole import: the plate is a member of L1, a flat sheet is dropped."""
+    plate = Beam(guid="plate", name="plate", storey=1, outline=_PLATE, z_bottom=_PLATE_Z[0],
+                 z_top=_PLATE_Z[1], mesh=_mesh(_plate_triangles()))
+    flat = np.array([[[0, 3, 3], [1, 3, 3], [1, 3, 4]], [[0, 3, 3], [1, 3, 4], [0, 3, 4]]], dtype=float)
+    sheet = Beam(guid="sheet", name="sheet", storey=1, outline=rectangle(0, 3, 1, 3.01), z_bottom=3.0,
+                 z_top=4.0, mesh=_mesh(flat))  # a vertical sheet: no area in plan
+    site = messy_site()
+    site = dataclasses.replace(site, elements=(*site.elements, plate, sheet))
+    path = _write(site, tmp_path, "plate.ifc")
+    report = ifc_report(path)
+    assert {r[2]: r[3] for r in report.kept}["plate"] == "beam of L1"
+    assert {r[2]: r[3] for r in report.dropped}["sheet"] == "no plan footprint or no height"
+    [imported] = [e for e in load_ifc(path, stage="L1/columns").elements if e.name == "plate"]
+    np.testing.assert_allclose(imported.outline.max(axis=0) - imported.outline.min(axis=0), [0.065, 0.130],
+                               atol=1e-6)
