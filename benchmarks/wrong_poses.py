@@ -95,9 +95,10 @@ def count(folders: list[Path], structural_only: bool = True) -> dict[str, dict]:
             print(f"{name:<48} {method:<16} views {len(mine):>3} (>=4 visible {posable:>3}) "
                   f"poses {len(ok):>3} wrong {len(wrong):>2} median {med:.3f} m")
             for r in wrong:
-                print(f"    wrong: uav {r['uav']} vp {r['viewpoint']} error {float(r['translation_error_m']):.2f} m"
-                      f" limit {limit_m(float(r['crb_translation_m'])):.2f} m pairs {r['n_inliers']}"
-                      f" correct {r['n_correct']}/{r['n_assigned']} rms {float(r['reprojection_rmse_px']):.2f} px")
+                err, lim = float(r["translation_error_m"]), limit_m(float(r["crb_translation_m"]))
+                print(f"    wrong: uav {r['uav']} vp {r['viewpoint']} error {err:.2f} m limit {lim:.2f} m"
+                      f" pairs {r['n_inliers']} correct {r['n_correct']}/{r['n_assigned']}"
+                      f" rms {float(r['reprojection_rmse_px']):.2f} px")
     print(f"total: {total[0]} poses, {total[1]} wrong")
     return summary
 
@@ -106,7 +107,8 @@ def record(into: Path, command: list[str]) -> int:
     """Run ``command`` with every structural localization pickled into ``into``; its return code."""
     env = dict(os.environ)
     env["UAV_STRUCT_RECORD"] = str(into)
-    env["PYTHONPATH"] = os.pathsep.join([str(_HERE.parent), str(_HERE / "recording"), env.get("PYTHONPATH", "")])
+    paths = [str(_HERE.parent), str(_HERE / "recording"), env.get("PYTHONPATH", "")]
+    env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
     return subprocess.call(command, env=env)
 
 

@@ -654,7 +654,9 @@ class Localizer:
             return None
         return _Failure(refusal.code, refusal.reason, pose.assignment, n_hypotheses)
 
-    def _search(self, frame: _Frame, keep: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.float64]] | None:
+    def _search(
+        self, frame: _Frame, keep: NDArray[np.bool_]
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64]] | None:
         """The association over the detections ``keep`` marks (the others as NaN rows, unassigned)."""
         det = np.where(keep[:, None], frame.detections_uv, np.nan)
         assoc = self.associate(det, frame.prior, frame.prior_sigmas, frame.scores)

@@ -508,12 +508,12 @@ def _swap_sets(
 ) -> tuple[NDArray[np.int64], list[NDArray[np.bool_]]]:
     """Each pair's partner among the free detections, and the sets of pairs to swap to it.
 
-    Returns ``(partner (P,), swaps)``: ``partner[p]`` the nearest free detection (column of
-    ``free_uv``) within :data:`TWIN_RADIUS_PX` of pair ``p``, -1 for none; each swap a (P,)
-    mask of pairs that move together and the (P,) free detection each moves to. A common offset ``o`` (:func:`_offset_votes`) gives the pairs with a free
-    detection at ``+o`` and those at ``-o`` (a winner may hold some copies of each), each set
-    alone and both. With at most :data:`_ENUMERATE_PAIRS` pairs (where a mix of copies still
-    fits a pose) every choice of pairs moving to one of their nearest free detections within
+    Returns ``(partner (P,), swaps)``: ``partner[p]`` the nearest free detection (column of ``free_uv``)
+    within :data:`TWIN_RADIUS_PX` of pair ``p``, -1 for none; each swap a (P,) mask of pairs that move
+    together and the (P,) free detection each moves to. A common offset ``o`` (:func:`_offset_votes`)
+    gives the pairs with a free detection at ``+o`` and those at ``-o`` (a winner may hold some copies of
+    each), each set alone and both. With at most :data:`_ENUMERATE_PAIRS` pairs (where a mix of copies
+    still fits a pose) every choice of pairs moving to one of their nearest free detections within
     :data:`TWIN_RADIUS_PX` (:func:`_enumerated_swaps`), each swap with its own targets.
     """
     n = len(pair_uv)
@@ -551,7 +551,7 @@ def _enumerated_swaps(d: NDArray[np.float64]) -> list[tuple[NDArray[np.bool_], N
         c += 1
     order = np.argsort(d, axis=1, kind="stable")[:, :c]
     near = np.take_along_axis(d, order, axis=1) <= TWIN_RADIUS_PX
-    options = [[-1] + [int(f) for f, ok in zip(order[p], near[p]) if ok] for p in range(n)]
+    options = [[-1] + [int(f) for f, ok in zip(order[p], near[p], strict=True) if ok] for p in range(n)]
     out = []
     for choice in itertools.product(*options):
         to = np.asarray(choice, dtype=np.int64)
