@@ -38,7 +38,9 @@ from localization.verify import (
     leave_one_out_chi2,
     leave_one_out_shifts,
     minimal_fit_chi2_limit,
+    rival_search,
 )
+from localization.verify import _enumerated_swaps, _offset_votes
 
 SLICE = 1_000
 FULL = 10_000
@@ -70,7 +72,19 @@ def _error(est, case) -> float:
      # a three-level grid one period (6.65 m) over: the rival re-associated pairs every corner
      ("ghost_shift", 6055, FailureCode.AMBIGUOUS),
      # four pairs, one of them a false detection: leaving it out moves the centre 12 m
-     ("detector", 7727, FailureCode.ILL_CONDITIONED)],
+     ("detector", 7727, FailureCode.ILL_CONDITIONED),
+     # the ghost copy whole (30 pairs): its offset outvoted by the neighbourhoods of a grid's
+     ("ghost_shift", 3094, FailureCode.DUPLICATED_DETECTIONS),
+     # most pairs one period over, the edge ones elsewhere: a partial period re-associated
+     ("ghost_shift", 2037, FailureCode.DUPLICATED_DETECTIONS),
+     ("ghost_shift", 2631, FailureCode.DUPLICATED_DETECTIONS),
+     ("ghost_shift", 4716, FailureCode.AMBIGUOUS),
+     # four pairs one irregular period over (8.6-8.8 m) through a 10,000 px lens
+     ("ghost_each", 2683, FailureCode.AMBIGUOUS),
+     # nine pairs of a mix of both copies, 39 detections left: the second search finds the copy
+     ("ghost_shift", 8883, FailureCode.AMBIGUOUS),
+     # three false detections 27-47 px off their corners: the right ones are not the nearest
+     ("detector", 3978, FailureCode.DUPLICATED_DETECTIONS)],
 )
 def test_a_formerly_confident_wrong_pose_is_refused_with_its_reason(mode, k, code):
     case, det = _case(mode, k)
@@ -339,3 +353,63 @@ def test_a_period_of_the_layout_gives_rivals_with_the_same_residuals():
     Y = X + np.random.default_rng(0).normal(0.0, 0.5, X.shape)
     uv, _ = project(PAPER_K, T, Y[block])
     assert lattice_rivals(replace(inputs, landmarks_xyz=Y, detections_uv=uv)) == []
+
+
+def _grid_inputs(X, T, rows, uv, **kw):
+    return VerifyInputs(
+        detections_uv=uv, landmarks_xyz=X, K=PAPER_K, image_size=PAPER_IMAGE_SIZE, cam_from_world=T,
+        assignment=np.asarray(rows), covariance=np.eye(6), prior_cam_from_world=T,
+        prior_sigmas=PriorSigmas(), pixel_sigma=1.0, gate_px=5.0, need=4, **kw,
+    )
+
+
+def test_a_copys_offset_wins_the_vote_over_a_grids_neighbours():
+    # a 6 x 6 grid ~35 px apart in the image and its copy 41 px to the right: the offsets to the
+    # copy's neighbours fill the cells around 41 px, and only the pairs that agree rank them
+    X = np.array([[1.0 * i, 1.0 * j, 0.0] for i in range(6) for j in range(6)])
+    T = look_at([2.5, -20.0, 30.0], [2.5, 2.5, 0.0])
+    uv, _ = project(PAPER_K, T, X)
+    votes = _offset_votes(uv, uv + [41.0, 2.0], 10.0, 80.0)
+    np.testing.assert_allclose(votes[0, :2], [41.0, 2.0], atol=1e-9)
+    assert votes[0, 2] == len(X)
+
+
+def test_a_partial_period_of_the_layout_is_a_rival_start():
+    # a 6 x 6 grid 4 m apart; the pose pairs five corners, four of them one period (4 m in x)
+    # from where the fifth's shift lands off the grid: no exact period, a partial one of 4 of 5
+    X = np.array([[4.0 * i, 4.0 * j, 3.5] for i in range(6) for j in range(6)])
+    X[35] += [1.5, 0.0, 0.0]
+    T = look_at([10.0, -6.0, 30.0], [10.0, 10.0, 3.5])
+    rows = [14, 15, 20, 21, 29]
+    uv, _ = project(PAPER_K, T, X[rows])
+    inputs = _grid_inputs(X, T, rows, uv)
+    assert not any(np.allclose(d, [4.0, 0.0, 0.0]) for _, _, d in lattice_rivals(inputs))
+    partial = [(b, d) for b, _, d in lattice_rivals(inputs, 0.5, 1.0, 3) if np.allclose(d, [4.0, 0.0, 0.0])]
+    assert len(partial) == 1
+    b, _ = partial[0]
+    np.testing.assert_array_equal(b, [20, 21, 26, 27, -1])  # the fifth maps onto no landmark
+
+
+def test_the_second_search_runs_only_on_a_winner_that_leaves_half_the_detections():
+    X, T, uv = _slab_view()
+    calls = []
+
+    def search(keep):
+        calls.append(int(keep.sum()))
+        return None
+
+    det = np.vstack([uv, uv[:4] + 300.0])  # twelve pairs, four free: no second search
+    rows = np.r_[np.arange(12), -np.ones(4, dtype=np.int64)]
+    assert rival_search(_grid_inputs(X, T, rows, det, search=search)) == [] and calls == []
+    rows = np.r_[np.arange(4), -np.ones(12, dtype=np.int64)]  # four pairs, twelve free
+    assert rival_search(_grid_inputs(X, T, rows, det, search=search)) == [] and calls == [12]
+
+
+@pytest.mark.parametrize(("pairs", "choices"), [(4, 3), (5, 2), (6, 1)])
+def test_a_few_pair_twin_moves_each_pair_to_one_of_its_nearest_free_detections(pairs, choices):
+    d = np.random.default_rng(pairs).uniform(5.0, 60.0, (pairs, 8))
+    swaps = _enumerated_swaps(d)
+    assert len(swaps) == (choices + 1) ** pairs - 1 <= 256
+    nearest = np.argsort(d, axis=1)[:, :choices]
+    for move, to in swaps:
+        assert all(to[p] in nearest[p] for p in np.flatnonzero(move))
