@@ -25,6 +25,7 @@ from localization.testing.fuzz import (
     FALSE_DETECTION_LIBRARIES,
     FALSE_DETECTIONS_HELDOUT_PATH,
     FalseDetections,
+    _ghost_offsets,
     corrupt_detections,
     draw_case,
 )
@@ -33,6 +34,8 @@ from localization.verify import (
     CONFIRM_TOLERANCE_M,
     OUTLIER_QUANTILE,
     VerifyInputs,
+    _enumerated_swaps,
+    _offset_votes,
     chance_support,
     lattice_rivals,
     leave_one_out_chi2,
@@ -40,7 +43,6 @@ from localization.verify import (
     minimal_fit_chi2_limit,
     rival_search,
 )
-from localization.verify import _enumerated_swaps, _offset_votes
 
 SLICE = 1_000
 FULL = 10_000
@@ -364,14 +366,15 @@ def _grid_inputs(X, T, rows, uv, **kw):
 
 
 def test_a_copys_offset_wins_the_vote_over_a_grids_neighbours():
-    # a 6 x 6 grid ~35 px apart in the image and its copy 41 px to the right: the offsets to the
-    # copy's neighbours fill the cells around 41 px, and only the pairs that agree rank them
-    X = np.array([[1.0 * i, 1.0 * j, 0.0] for i in range(6) for j in range(6)])
-    T = look_at([2.5, -20.0, 30.0], [2.5, 2.5, 0.0])
-    uv, _ = project(PAPER_K, T, X)
-    votes = _offset_votes(uv, uv + [41.0, 2.0], 10.0, 80.0)
-    np.testing.assert_allclose(votes[0, :2], [41.0, 2.0], atol=1e-9)
-    assert votes[0, 2] == len(X)
+    # fuzz case ghost_shift 3094: 30 landmarks on a grid and their copy 41 px off; the offsets
+    # to the copy's neighbours fill the cells around its own, and a neighbourhood that holds
+    # several of them outvoted it (57.8 px, 19 pairs, was first): ranked by the pairs that agree
+    case = draw_case(np.random.default_rng((19, 3094)))
+    off = _ghost_offsets(np.random.default_rng((44, 3094)), 1)[0]
+    uv = case.detections_uv
+    votes = _offset_votes(uv + off, uv, 10.0, 80.0)
+    np.testing.assert_allclose(votes[0, :2], -off, atol=1e-9)
+    assert votes[0, 2] == len(uv) == 30
 
 
 def test_a_partial_period_of_the_layout_is_a_rival_start():
