@@ -685,6 +685,15 @@ def offset_starts(inputs: VerifyInputs) -> list[tuple[NDArray[np.int64], NDArray
     return out
 
 
+def _same_centre(inputs: VerifyInputs, T: NDArray[np.float64]) -> bool:
+    """Whether ``T``'s camera centre lies inside the winner's 99.9 % position ellipsoid."""
+    cov = inputs.covariance[:3, :3]
+    if not np.all(np.isfinite(cov)):
+        return False
+    dc = pose_difference(T, inputs.cam_from_world)[:3]
+    return float(dc @ np.linalg.lstsq(cov, dc, rcond=None)[0]) <= DISTINCT_POSITION_SQ
+
+
 def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
     """The refusal when a twin fits, is a distinct pose and scores about as well, else None.
 
@@ -693,15 +702,11 @@ def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
     """
     twins = twin_hypotheses(inputs)
     n = int(np.count_nonzero(inputs.assignment >= 0))
-    cov = inputs.covariance
-    finite = bool(np.all(np.isfinite(cov)))
     s_best = None
     for a_twin, T_twin, chi in twins + [r[1:] for r in reassociated(inputs, twins + offset_starts(inputs))]:
         k = int(np.count_nonzero(a_twin >= 0))
         d = pose_difference(T_twin, inputs.cam_from_world)
-        dc = d[:3]
-        same = finite and float(dc @ np.linalg.lstsq(cov[:3, :3], dc, rcond=None)[0]) <= DISTINCT_POSITION_SQ
-        if not chi <= chi2_quantile(_FIT_QUANTILE, max(2 * k - 6, 1)) or same:
+        if not chi <= chi2_quantile(_FIT_QUANTILE, max(2 * k - 6, 1)) or _same_centre(inputs, T_twin):
             continue
         if s_best is None:
             s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
@@ -789,7 +794,7 @@ def _lattice_refusal(inputs: VerifyInputs) -> Refusal | None:
     scored = [(_score(inputs, b, T), d) for b, T, d in exact]
     for k, b, T, chi in reassociated(inputs, rivals):
         if chi <= chi2_quantile(_FIT_QUANTILE, max(2 * int(np.count_nonzero(b >= 0)) - 6, 1)):
-            if float(np.linalg.norm(pose_difference(T, inputs.cam_from_world)[:3])) > LATTICE_TOL_M:
+            if not _same_centre(inputs, T):
                 scored.append((_score(inputs, b, T), rivals[k][2]))
     if not scored:
         return None
@@ -841,14 +846,11 @@ def _search_refusal(inputs: VerifyInputs) -> Refusal | None:
     rivals = rival_search(inputs)
     if not rivals:
         return None
-    cov = inputs.covariance[:3, :3]
-    finite = bool(np.all(np.isfinite(cov)))
     s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
     for b, T, chi in rivals:
         k = int(np.count_nonzero(b >= 0))
         dc = pose_difference(T, inputs.cam_from_world)[:3]
-        same = finite and float(dc @ np.linalg.lstsq(cov, dc, rcond=None)[0]) <= DISTINCT_POSITION_SQ
-        if same or not chi <= chi2_quantile(_FIT_QUANTILE, max(2 * k - 6, 1)):
+        if _same_centre(inputs, T) or not chi <= chi2_quantile(_FIT_QUANTILE, max(2 * k - 6, 1)):
             continue
         s_rival = _score(inputs, b, T)
         if s_rival - s_best < AMBIGUITY_MARGIN:
