@@ -32,6 +32,7 @@ from localization.testing.fuzz import (
 from localization.testing.synthetic import paper_prior
 from localization.verify import (
     CONFIRM_TOLERANCE_M,
+    MINIMAL_FIT_LEVERAGE,
     OUTLIER_QUANTILE,
     VerifyInputs,
     _enumerated_swaps,
@@ -416,3 +417,23 @@ def test_a_few_pair_twin_moves_each_pair_to_one_of_its_nearest_free_detections(p
     nearest = np.argsort(d, axis=1)[:, :choices]
     for move, to in swaps:
         assert all(to[p] in nearest[p] for p in np.flatnonzero(move))
+
+
+def test_a_loose_minimal_fit_stands_when_no_pair_can_have_moved_it_far():
+    # four corners at 1.5 px noise: chi-square 8.5 at the 0.5 px a detector declares, above the
+    # 95 % quantile; each pair moves the pose at most 0.34 m when left out. Within 0.4 of a 1 m
+    # tolerance the pose stands (0.1 m off); without a tolerance, or at 0.5 m, it is refused
+    X, T, uv = _four_corners(1.5)
+    prior = paper_prior(T, 3)
+
+    def localize(tolerance_m):
+        return Localizer(X, PAPER_K, image_size=PAPER_IMAGE_SIZE, fit_sigma_px=0.5,
+                         tolerance_m=tolerance_m).localize(uv, prior)
+
+    est = localize(1.0)
+    assert est.success and np.linalg.norm(est.position - camera_center(T)) < 0.15
+    assert 0.3 < leave_one_out_shifts(PAPER_K, est.cam_from_world, X, uv).max() <= MINIMAL_FIT_LEVERAGE * 1.0
+    for tolerance_m in (None, 0.5):
+        est = localize(tolerance_m)
+        assert not est.success and est.failure_code is FailureCode.UNSUPPORTED
+        assert "minimal fit (4 pairs) with residual chi-square 8.5" in est.failure_reason
