@@ -21,15 +21,19 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   near the prior fit some pose to a few pixels: among the wrong detections of a detector that
   finds few corners, the search finds such a four and its residuals pass the association's
   one-in-a-million test. A minimal fit must fit as well as 95 % of true ones do (the
-  chi-square 95 % quantile at ``pixel_sigma``); else it fails as ``UNSUPPORTED``.
+  chi-square 95 % quantile at ``pixel_sigma``); else it fails as ``UNSUPPORTED`` -- unless,
+  with a tolerance (``tolerance_m``), no one pair moves it farther than
+  :data:`MINIMAL_FIT_LEVERAGE` of the tolerance (:func:`leave_one_out_shifts`): then a corner a
+  few px off, what makes a right fit loose, cannot have carried it far.
 * *A twin hypothesis* (:func:`twin_hypotheses`). A detector that fires twice per corner (on both
   edges of a slab's thickness, on a corner and its shadow) gives a second copy of the pattern a
   few to 80 px away. The search pairs one copy; the other, left unassigned, is as consistent a
   pose. The unassigned detections that sit at one common offset from the pairs (a vote over
-  the offsets up to :data:`TWIN_RADIUS_PX`; a winner may hold some copies of each side) give
-  the twins: the same landmarks paired with those detections, refined from the winner's pose;
-  with a few pairs, where a mix of the copies still fits, every subset of the pairs moved to
-  its nearest unassigned detection is a twin too (:func:`twin_hypotheses`). A twin that passes
+  the offsets up to :data:`TWIN_RADIUS_PX`, ranked by the pairs that agree; a winner may hold
+  some copies of each side) give the twins: the same landmarks paired with those detections,
+  refined from the winner's pose; with a few pairs, where a mix of the copies still fits,
+  every choice of pairs moved to one of their nearest unassigned detections is a twin too
+  (:func:`twin_hypotheses`). A twin that passes
   the fit test, lies at a distinct camera centre (outside the winner's 99.9 % position
   ellipsoid, the ambiguity rule's test; a twin that is the winner's camera turned, at the same
   centre, leaves the position right) and scores within
@@ -60,8 +64,17 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   landmarks have no counterpart), the structure's own pose pairs many more. Each rival is
   refined and re-associated at the final gate as the association refines its hypotheses, and
   scored as a hypothesis of its own; so are starts from the winner's predictions moved by the
-  common image offsets voted between them and the detections. One that scores within the
-  ambiguity margin of the winner, or better, fails the pose as the twin or rival would.
+  common image offsets voted between them and the detections, and from the translations that
+  carry at least half of the winner's pairs onto other landmarks (a period of most of the
+  layout, or of an irregular one: :func:`lattice_rivals` with ``share``). One that scores
+  within the ambiguity margin of the winner, or better, fails the pose as the twin or rival
+  would.
+* *A second search* (:func:`rival_search`, with ``search``). A winner that pairs a patch of
+  the detections (a few of each ghost copy, each with the wrong landmark) lies no image offset
+  or period from the structure's pose. When it leaves at least as many detections unassigned
+  as it pairs, the association runs again over those alone; its hypothesis, re-associated over
+  every detection, scoring within the ambiguity margin, or better, fails the pose as
+  :attr:`~localization.failure.FailureCode.AMBIGUOUS`.
 * *One pair moves it too far* (:func:`leave_one_out_shifts`, with ``tolerance_m``). A pose on
   five to seven pairs with one detection a few px off its corner passes every residual test,
   yet the pose without that pair lies metres away (the linearized refit of regression
