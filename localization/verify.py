@@ -22,9 +22,10 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   finds few corners, the search finds such a four and its residuals pass the association's
   one-in-a-million test. A minimal fit must fit as well as 95 % of true ones do (the
   chi-square 95 % quantile at ``pixel_sigma``); else it fails as ``UNSUPPORTED`` -- unless,
-  with a tolerance (``tolerance_m``), no one pair moves it farther than
-  :data:`MINIMAL_FIT_LEVERAGE` of the tolerance (:func:`leave_one_out_shifts`): then a corner a
-  few px off, what makes a right fit loose, cannot have carried it far.
+  with a tolerance (``tolerance_m``), it is loose only at a detector's tighter declared sigma
+  and no one pair moves it farther than :data:`MINIMAL_FIT_LEVERAGE` of the tolerance
+  (:func:`leave_one_out_shifts`): then a corner a few px off, what makes a right fit loose,
+  cannot have carried it far.
 * *A twin hypothesis* (:func:`twin_hypotheses`). A detector that fires twice per corner (on both
   edges of a slab's thickness, on a corner and its shadow) gives a second copy of the pattern a
   few to 80 px away. The search pairs one copy; the other, left unassigned, is as consistent a
@@ -326,10 +327,12 @@ def minimal_fit_chi2_limit(n_pairs: int, need: int) -> float:
 def _minimal_fit_refusal(inputs: VerifyInputs, k: int) -> Refusal | None:
     """The refusal of a minimal fit beyond its quantile, unless no one pair can have moved it far.
 
-    With a tolerance (``tolerance_m``), a loose minimal fit whose pairs each move the camera
-    centre at most :data:`MINIMAL_FIT_LEVERAGE` of the tolerance when left out
-    (:func:`_leverage`) stands: a detection a few px off its corner, what makes a right fit
-    loose (a blurred or rolling-shutter corner), cannot have carried it that far.
+    With a tolerance (``tolerance_m``), a fit loose at the detector's calibrated sigma but within
+    the quantile at the association's ``pixel_sigma``, whose pairs each move the camera centre
+    at most :data:`MINIMAL_FIT_LEVERAGE` of the tolerance when left out (:func:`_leverage`),
+    stands: a detection a few px off its corner, what makes a right fit loose (a blurred or
+    rolling-shutter corner), cannot have carried it that far. A fit loose at ``pixel_sigma``
+    too may rest on two wrong pairs, whose leverage one at a time says nothing.
     """
     limit = minimal_fit_chi2_limit(k, inputs.need)
     if not np.isfinite(limit):
@@ -340,7 +343,7 @@ def _minimal_fit_refusal(inputs: VerifyInputs, k: int) -> Refusal | None:
     chi = float(np.sum((uv - inputs.detections_uv[m]) ** 2)) / sigma**2
     if chi <= limit:
         return None
-    if inputs.tolerance_m is not None:
+    if inputs.tolerance_m is not None and chi * (sigma / inputs.pixel_sigma) ** 2 <= limit:
         worst, tolerance, _, _ = _leverage(inputs)
         if worst <= MINIMAL_FIT_LEVERAGE * tolerance:
             return None
