@@ -187,14 +187,18 @@ def replay(records: Path, study: Path, show: int = 40) -> dict[str, list[int]]:
 
 def main(argv: list[str] | None = None) -> None:
     """The command line (see the module docstring)."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     sub = ap.add_subparsers(dest="command", required=True)
-    c = sub.add_parser("count", help="count wrong successes in per_image.csv files")
-    c.add_argument("folders", nargs="+", type=Path)
-    r = sub.add_parser("record", help="run a command, recording its structural localizations")
+    c = sub.add_parser("count", help="count wrong successes in per_image.csv files",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    c.add_argument("folders", nargs="+", type=Path, help="study output folders, searched for per_image.csv")
+    r = sub.add_parser("record", help="run a command, recording its structural localizations",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     r.add_argument("--into", type=Path, required=True, help="folder the pickles go to")
     r.add_argument("cmd", nargs=argparse.REMAINDER, help="the command, after --")
-    p = sub.add_parser("replay", help="localize recorded frames again with the current code")
+    p = sub.add_parser("replay", help="localize recorded frames again with the current code",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("records", type=Path, help="a folder of recordings")
     p.add_argument("--study", type=Path, required=True, help="the recorded run's output (its per_image.csv)")
     p.add_argument("--show", type=int, default=40, help="changed poses printed")
