@@ -175,9 +175,9 @@ DISTINCT_POSITION_SQ = 16.27
 MINIMAL_FIT_QUANTILE = 0.95
 
 
-#: A minimal fit beyond its quantile stands when no pair moves it farther than this share of the
-#: tolerance (``tolerance_m``): chosen on the train studies and the site-conditions table, where
-#: the loose right four-pair fits reach 0.4 and the loose wrong ones start at 0.49.
+#: A minimal fit loose only at the detector's declared sigma stands when no pair moves it farther
+#: than this share of the tolerance (``tolerance_m``; below what the loose wrong fits of the train
+#: data reach, docs/benchmarks.md).
 MINIMAL_FIT_LEVERAGE = 0.4
 
 
