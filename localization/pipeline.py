@@ -646,12 +646,23 @@ class Localizer:
                 need=max(self.min_correspondences, 3),
                 fit_sigma=self.fit_sigma_px,
                 tolerance_m=self.tolerance_m,
+                search=lambda keep: self._search(frame, keep),
             )
         )
         timings["verify"] = time.perf_counter() - t
         if refusal is None:
             return None
         return _Failure(refusal.code, refusal.reason, pose.assignment, n_hypotheses)
+
+    def _search(
+        self, frame: _Frame, keep: NDArray[np.bool_]
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64]] | None:
+        """The association over the detections ``keep`` marks (the others as NaN rows, unassigned)."""
+        det = np.where(keep[:, None], frame.detections_uv, np.nan)
+        assoc = self.associate(det, frame.prior, frame.prior_sigmas, frame.scores)
+        if assoc.failure_reason is not None:
+            return None
+        return assoc.assignment, assoc.cam_from_world
 
     @staticmethod
     def _failed(

@@ -21,15 +21,20 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   near the prior fit some pose to a few pixels: among the wrong detections of a detector that
   finds few corners, the search finds such a four and its residuals pass the association's
   one-in-a-million test. A minimal fit must fit as well as 95 % of true ones do (the
-  chi-square 95 % quantile at ``pixel_sigma``); else it fails as ``UNSUPPORTED``.
+  chi-square 95 % quantile at ``pixel_sigma``); else it fails as ``UNSUPPORTED`` -- unless,
+  with a tolerance (``tolerance_m``), it is loose only at a detector's tighter declared sigma
+  and no one pair moves it farther than :data:`MINIMAL_FIT_LEVERAGE` of the tolerance
+  (:func:`leave_one_out_shifts`): then a corner a few px off, what makes a right fit loose,
+  cannot have carried it far.
 * *A twin hypothesis* (:func:`twin_hypotheses`). A detector that fires twice per corner (on both
   edges of a slab's thickness, on a corner and its shadow) gives a second copy of the pattern a
   few to 80 px away. The search pairs one copy; the other, left unassigned, is as consistent a
   pose. The unassigned detections that sit at one common offset from the pairs (a vote over
-  the offsets up to :data:`TWIN_RADIUS_PX`; a winner may hold some copies of each side) give
-  the twins: the same landmarks paired with those detections, refined from the winner's pose;
-  with a few pairs, where a mix of the copies still fits, every subset of the pairs moved to
-  its nearest unassigned detection is a twin too (:func:`twin_hypotheses`). A twin that passes
+  the offsets up to :data:`TWIN_RADIUS_PX`, ranked by the pairs that agree; a winner may hold
+  some copies of each side) give the twins: the same landmarks paired with those detections,
+  refined from the winner's pose; with a few pairs, where a mix of the copies still fits,
+  every choice of pairs moved to one of their nearest unassigned detections is a twin too
+  (:func:`twin_hypotheses`). A twin that passes
   the fit test, lies at a distinct camera centre (outside the winner's 99.9 % position
   ellipsoid, the ambiguity rule's test; a twin that is the winner's camera turned, at the same
   centre, leaves the position right) and scores within
@@ -60,8 +65,17 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   landmarks have no counterpart), the structure's own pose pairs many more. Each rival is
   refined and re-associated at the final gate as the association refines its hypotheses, and
   scored as a hypothesis of its own; so are starts from the winner's predictions moved by the
-  common image offsets voted between them and the detections. One that scores within the
-  ambiguity margin of the winner, or better, fails the pose as the twin or rival would.
+  common image offsets voted between them and the detections, and from the translations that
+  carry at least half of the winner's pairs onto other landmarks (a period of most of the
+  layout, or of an irregular one: :func:`lattice_rivals` with ``share``). One that scores
+  within the ambiguity margin of the winner, or better, fails the pose as the twin or rival
+  would.
+* *A second search* (:func:`rival_search`, with ``search``). A winner that pairs a patch of
+  the detections (a few of each ghost copy, each with the wrong landmark) lies no image offset
+  or period from the structure's pose. When it leaves at least as many detections unassigned
+  as it pairs, the association runs again over those alone; its hypothesis, re-associated over
+  every detection, scoring within the ambiguity margin, or better, fails the pose as
+  :attr:`~localization.failure.FailureCode.AMBIGUOUS`.
 * *One pair moves it too far* (:func:`leave_one_out_shifts`, with ``tolerance_m``). A pose on
   five to seven pairs with one detection a few px off its corner passes every residual test,
   yet the pose without that pair lies metres away (the linearized refit of regression
@@ -77,7 +91,9 @@ confirmed pose, else a :class:`Refusal`.
 
 from __future__ import annotations
 
+import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -101,8 +117,11 @@ from localization.stats import binomial_log_sf, chi2_quantile
 __all__ = [
     "CONFIRM_TOLERANCE_M",
     "DISTINCT_POSITION_SQ",
+    "LATTICE_SHARE",
+    "LATTICE_SPACING_SHARE",
     "LATTICE_TOL_M",
     "MAX_LOG10_NFA",
+    "MINIMAL_FIT_LEVERAGE",
     "MINIMAL_FIT_QUANTILE",
     "OUTLIER_QUANTILE",
     "TWIN_RADIUS_PX",
@@ -116,6 +135,7 @@ __all__ = [
     "minimal_fit_chi2_limit",
     "predicted_in_image",
     "reassociated",
+    "rival_search",
     "twin_hypotheses",
     "verify_pose",
 ]
@@ -141,6 +161,10 @@ TWIN_RADIUS_PX = 80.0
 _ENUMERATE_PAIRS = 6
 
 
+#: Most choices of moved pairs enumerated per pose (:func:`_enumerated_swaps`).
+_ENUMERATE_CHOICES = 256
+
+
 #: chi-square 99.9 % quantile, 3 dof: a twin whose camera centre is farther than this from the
 #: winner's (squared Mahalanobis distance under the winner's position covariance) is a different
 #: pose (:mod:`localization.associate.ambiguity`'s rule).
@@ -149,6 +173,12 @@ DISTINCT_POSITION_SQ = 16.27
 
 #: Chi-square quantile a minimal fit's residuals must stay within.
 MINIMAL_FIT_QUANTILE = 0.95
+
+
+#: A minimal fit loose only at the detector's declared sigma stands when no pair moves it farther
+#: than this share of the tolerance (``tolerance_m``; below what the loose wrong fits of the train
+#: data reach, docs/benchmarks.md).
+MINIMAL_FIT_LEVERAGE = 0.4
 
 
 #: Chi-square quantile (2 dof) a pair's leave-one-out residual must stay within
@@ -160,12 +190,29 @@ OUTLIER_QUANTILE = 0.999
 LATTICE_TOL_M = 0.02
 
 
+#: A translation of the layout that carries at least this share of the winner's pairs onto other
+#: landmarks gives a rival start (:func:`lattice_rivals`, ``share``).
+LATTICE_SHARE = 0.5
+
+
+#: ... within this share of the layout's spacing (the median nearest-landmark distance).
+LATTICE_SPACING_SHARE = 0.25
+
+
+#: Pairs whose landmark anchors the candidate translations of a partial period.
+_LATTICE_ANCHORS = 3
+
+
 #: Chi-square quantile of the twin's fit test (the association's own).
 _FIT_QUANTILE = 1.0 - 1e-6
 
 
 #: Rounds of refinement and re-association that grow a rival (:func:`reassociated`).
 _REASSOCIATE_ROUNDS = 6
+
+
+#: Vote cells whose offsets are counted again by the pairs that agree (:func:`_offset_votes`).
+_VOTE_CELLS = 12
 
 
 #: Common image offsets of the winner's predictions tried as starts (:func:`offset_starts`).
@@ -196,6 +243,10 @@ class VerifyInputs:
         tolerance_m: the position error a reported pose must be kept within, m, unless the
             landmarks it predicts cannot locate it that well (then three times their bound): no
             single pair may move it farther (:func:`leave_one_out_shifts`); None: no such test.
+        search: the association run again on a subset of the detections: called with an (N,)
+            mask of the detections it may use, it returns ``(assignment (N,), cam_from_world)``
+            of its best hypothesis, or None when it finds none (:func:`rival_search`); None:
+            no second search.
     """
 
     detections_uv: NDArray[np.float64]
@@ -213,6 +264,7 @@ class VerifyInputs:
     miss_cost: float = 4.0
     fit_sigma: float | None = None
     tolerance_m: float | None = None
+    search: Callable[[NDArray[np.bool_]], tuple[NDArray[np.int64], NDArray[np.float64]] | None] | None = None
 
     @property
     def fit_sigma_px(self) -> float:
@@ -273,6 +325,15 @@ def minimal_fit_chi2_limit(n_pairs: int, need: int) -> float:
 
 
 def _minimal_fit_refusal(inputs: VerifyInputs, k: int) -> Refusal | None:
+    """The refusal of a minimal fit beyond its quantile, unless no one pair can have moved it far.
+
+    With a tolerance (``tolerance_m``), a fit loose at the detector's calibrated sigma but within
+    the quantile at the association's ``pixel_sigma``, whose pairs each move the camera centre
+    at most :data:`MINIMAL_FIT_LEVERAGE` of the tolerance when left out (:func:`_leverage`),
+    stands: a detection a few px off its corner, what makes a right fit loose (a blurred or
+    rolling-shutter corner), cannot have carried it that far. A fit loose at ``pixel_sigma``
+    too may rest on two wrong pairs, whose leverage one at a time says nothing.
+    """
     limit = minimal_fit_chi2_limit(k, inputs.need)
     if not np.isfinite(limit):
         return None
@@ -282,6 +343,10 @@ def _minimal_fit_refusal(inputs: VerifyInputs, k: int) -> Refusal | None:
     chi = float(np.sum((uv - inputs.detections_uv[m]) ** 2)) / sigma**2
     if chi <= limit:
         return None
+    if inputs.tolerance_m is not None and chi * (sigma / inputs.pixel_sigma) ** 2 <= limit:
+        worst, tolerance, _, _ = _leverage(inputs)
+        if worst <= MINIMAL_FIT_LEVERAGE * tolerance:
+            return None
     return Refusal(
         FailureCode.UNSUPPORTED,
         f"unsupported pose: a minimal fit ({k} pairs) with residual chi-square {chi:.1f} above the "
@@ -347,6 +412,21 @@ def _position_bound(inputs: VerifyInputs, T: NDArray[np.float64], X: NDArray[np.
     return float(np.sqrt(np.trace(cov[:3, :3]))) if np.all(np.isfinite(cov)) else float("inf")
 
 
+def _leverage(inputs: VerifyInputs) -> tuple[float, float, float, int]:
+    """``(worst, tolerance, bound, seen)``: the farthest one pair moves the camera centre, m.
+
+    ``worst`` from :func:`leave_one_out_shifts`; ``tolerance`` is ``max(tolerance_m, 3 x
+    bound)``, ``bound`` the position bound (:func:`_position_bound`, at the detector's noise) of
+    the ``seen`` landmarks the pose predicts in the image.
+    """
+    rows = np.flatnonzero(inputs.assignment >= 0)
+    X = inputs.landmarks_xyz[inputs.assignment[rows]]
+    shift = leave_one_out_shifts(inputs.K, inputs.cam_from_world, X, inputs.detections_uv[rows])
+    seen = predicted_in_image(inputs.K, inputs.cam_from_world, inputs.landmarks_xyz, inputs.image_size)
+    bound = _position_bound(inputs, inputs.cam_from_world, inputs.landmarks_xyz[seen])
+    return float(shift.max()), max(float(inputs.tolerance_m or 0.0), 3.0 * bound), bound, int(seen.sum())
+
+
 def _influence_refusal(inputs: VerifyInputs) -> Refusal | None:
     """The refusal when one pair alone moves the pose beyond the tolerance, else None.
 
@@ -359,20 +439,15 @@ def _influence_refusal(inputs: VerifyInputs) -> Refusal | None:
     """
     if inputs.tolerance_m is None:
         return None
-    rows = np.flatnonzero(inputs.assignment >= 0)
-    X = inputs.landmarks_xyz[inputs.assignment[rows]]
-    shift = leave_one_out_shifts(inputs.K, inputs.cam_from_world, X, inputs.detections_uv[rows])
-    seen = predicted_in_image(inputs.K, inputs.cam_from_world, inputs.landmarks_xyz, inputs.image_size)
-    bound = _position_bound(inputs, inputs.cam_from_world, inputs.landmarks_xyz[seen])
-    tolerance = max(inputs.tolerance_m, 3.0 * bound)
-    worst = float(shift.max())
+    worst, tolerance, bound, seen = _leverage(inputs)
     if worst <= tolerance:
         return None
+    rows = np.flatnonzero(inputs.assignment >= 0)
     return Refusal(
         FailureCode.ILL_CONDITIONED,
         f"unconfirmed pose: leaving out one of its {rows.size} pairs moves the camera centre "
         f"{worst:.2f} m, beyond the tolerance {tolerance:.2f} m (max({inputs.tolerance_m:g} m, 3 x the "
-        f"bound {bound:.2f} m of the {int(seen.sum())} landmarks it predicts at "
+        f"bound {bound:.2f} m of the {seen} landmarks it predicts at "
         f"{inputs.fit_sigma_px:g} px)): "
         "a pair a few px off would make it wrong unseen",
     )
@@ -440,10 +515,13 @@ def _offset_votes(
 ) -> NDArray[np.float64]:
     """Candidate common offsets from the pairs to the free detections, most pairs agreeing first.
 
-    The offsets between ``tol`` and ``radius`` long are binned in ``tol`` cells; the three cells
-    whose 3 x 3 neighbourhoods hold the most distinct pairs each give a candidate: the mean of
-    the offsets within ``tol`` of the cell's first, with the number of distinct pairs that have
-    an offset within ``tol`` of it. Returns (C, 3): offset (2), agreeing pairs.
+    The offsets between ``tol`` and ``radius`` long are binned in ``tol`` cells; the
+    :data:`_VOTE_CELLS` cells whose 3 x 3 neighbourhoods hold the most pairs each give a
+    candidate: the mean of the offsets within ``tol`` of the cell's first, with the number of
+    distinct pairs that have an offset within ``tol`` of it. The three candidates most pairs
+    agree with are returned, as (C, 3): offset (2), agreeing pairs. (A neighbourhood sums its
+    cells, so on a regular layout one whose cells hold the offsets to a copy's neighbours
+    outvotes the copy's own offset: the cells are ranked again by the pairs that agree.)
     """
     off = free_uv[None, :, :] - pair_uv[:, None, :]
     d = np.hypot(off[..., 0], off[..., 1])
@@ -460,13 +538,13 @@ def _offset_votes(
         at = np.clip(np.searchsorted(cells, cells + shift), 0, cells.size - 1)
         votes += np.where(cells[at] == cells + shift, per_cell[at], 0)
     out = []
-    for c in cells[np.argsort(-votes, kind="stable")[:3]]:
+    for c in cells[np.argsort(-votes, kind="stable")[:_VOTE_CELLS]]:
         first = vec[np.argmax(key == c)]
         centre = vec[np.hypot(*(vec - first).T) <= tol].mean(axis=0)
         agree = np.hypot(*(vec - centre).T) <= tol
         out.append([*centre, np.unique(pi[agree]).size])
     out.sort(key=lambda r: -r[2])
-    return np.array(out)
+    return np.array(out[:3])
 
 
 def _swap_sets(
@@ -474,13 +552,13 @@ def _swap_sets(
 ) -> tuple[NDArray[np.int64], list[NDArray[np.bool_]]]:
     """Each pair's partner among the free detections, and the sets of pairs to swap to it.
 
-    Returns ``(partner (P,), swaps)``: ``partner[p]`` the free detection (column of
-    ``free_uv``) pair ``p`` would move to, -1 for none; each swap a (P,) mask of pairs that
-    move together. A common offset ``o`` (:func:`_offset_votes`) gives the pairs with a free
-    detection at ``+o`` and those at ``-o`` (a winner may hold some copies of each), each set
-    alone and both. With at most :data:`_ENUMERATE_PAIRS` pairs (where a mix of copies still
-    fits a pose) every subset of the pairs whose nearest free detection is within
-    :data:`TWIN_RADIUS_PX` moves to it.
+    Returns ``(partner (P,), swaps)``: ``partner[p]`` the nearest free detection (column of ``free_uv``)
+    within :data:`TWIN_RADIUS_PX` of pair ``p``, -1 for none; each swap a (P,) mask of pairs that move
+    together and the (P,) free detection each moves to. A common offset ``o`` (:func:`_offset_votes`)
+    gives the pairs with a free detection at ``+o`` and those at ``-o`` (a winner may hold some copies of
+    each), each set alone and both. With at most :data:`_ENUMERATE_PAIRS` pairs (where a mix of copies
+    still fits a pose) every choice of pairs moving to one of their nearest free detections within
+    :data:`TWIN_RADIUS_PX` (:func:`_enumerated_swaps`), each swap with its own targets.
     """
     n = len(pair_uv)
     d = np.hypot(*(free_uv[None, :, :] - pair_uv[:, None, :]).transpose(2, 0, 1))
@@ -499,11 +577,32 @@ def _swap_sets(
                 swaps.append((move, to))
     has = np.flatnonzero(partner >= 0)
     if n <= _ENUMERATE_PAIRS and has.size:
-        for bits in range(1, 2 ** has.size):
-            move = np.zeros(n, dtype=bool)
-            move[has[[(bits >> i) & 1 == 1 for i in range(has.size)]]] = True
-            swaps.append((move, partner))
+        swaps += _enumerated_swaps(d)
     return partner, swaps
+
+
+def _enumerated_swaps(d: NDArray[np.float64]) -> list[tuple[NDArray[np.bool_], NDArray[np.int64]]]:
+    """Every choice, per pair, of staying or moving to one of its nearest free detections.
+
+    ``d`` (P, F) the distances from the pairs to the free detections. Each pair may move to one
+    of its ``c`` nearest within :data:`TWIN_RADIUS_PX`, ``c`` the most that keeps the choices
+    within :data:`_ENUMERATE_CHOICES` (at least the nearest): a detector that fires beside
+    several corners leaves the right detection of a pair not always the nearest free one.
+    """
+    n = d.shape[0]
+    c = 1
+    while (c + 2) ** n <= _ENUMERATE_CHOICES and c + 1 <= d.shape[1]:
+        c += 1
+    order = np.argsort(d, axis=1, kind="stable")[:, :c]
+    near = np.take_along_axis(d, order, axis=1) <= TWIN_RADIUS_PX
+    options = [[-1] + [int(f) for f, ok in zip(order[p], near[p], strict=True) if ok] for p in range(n)]
+    out = []
+    for choice in itertools.product(*options):
+        to = np.asarray(choice, dtype=np.int64)
+        move = to >= 0
+        if move.any():
+            out.append((move, to))
+    return out
 
 
 def twin_hypotheses(inputs: VerifyInputs) -> list[tuple[NDArray[np.int64], NDArray[np.float64], float]]:
@@ -630,6 +729,15 @@ def offset_starts(inputs: VerifyInputs) -> list[tuple[NDArray[np.int64], NDArray
     return out
 
 
+def _same_centre(inputs: VerifyInputs, T: NDArray[np.float64]) -> bool:
+    """Whether ``T``'s camera centre lies inside the winner's 99.9 % position ellipsoid."""
+    cov = inputs.covariance[:3, :3]
+    if not np.all(np.isfinite(cov)):
+        return False
+    dc = pose_difference(T, inputs.cam_from_world)[:3]
+    return float(dc @ np.linalg.lstsq(cov, dc, rcond=None)[0]) <= DISTINCT_POSITION_SQ
+
+
 def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
     """The refusal when a twin fits, is a distinct pose and scores about as well, else None.
 
@@ -638,15 +746,11 @@ def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
     """
     twins = twin_hypotheses(inputs)
     n = int(np.count_nonzero(inputs.assignment >= 0))
-    cov = inputs.covariance
-    finite = bool(np.all(np.isfinite(cov)))
     s_best = None
     for a_twin, T_twin, chi in twins + [r[1:] for r in reassociated(inputs, twins + offset_starts(inputs))]:
         k = int(np.count_nonzero(a_twin >= 0))
         d = pose_difference(T_twin, inputs.cam_from_world)
-        dc = d[:3]
-        same = finite and float(dc @ np.linalg.lstsq(cov[:3, :3], dc, rcond=None)[0]) <= DISTINCT_POSITION_SQ
-        if not chi <= chi2_quantile(_FIT_QUANTILE, max(2 * k - 6, 1)) or same:
+        if not chi <= chi2_quantile(_FIT_QUANTILE, max(2 * k - 6, 1)) or _same_centre(inputs, T_twin):
             continue
         if s_best is None:
             s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
@@ -665,14 +769,21 @@ def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
 
 
 def lattice_rivals(
-    inputs: VerifyInputs,
+    inputs: VerifyInputs, share: float = 1.0, tol_m: float = LATTICE_TOL_M, anchors: int = 1,
 ) -> list[tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]]:
     """The winner's pairs moved by a period of the layout: ``[(assignment, cam_from_world, d), ...]``.
 
     A translation ``d`` (m, project frame) that carries every paired landmark onto another one
-    (within :data:`LATTICE_TOL_M`; the candidates are the first pair's landmark onto every
-    other) gives a rival that pairs the same detections with the shifted landmarks, seen by the
-    camera moved by ``d`` with the same rotation: its residuals are the winner's exactly.
+    (within ``tol_m``; the candidates are the first pair's landmark onto every other) gives a
+    rival that pairs the same detections with the shifted landmarks, seen by the camera moved
+    by ``d`` with the same rotation: its residuals are the winner's exactly.
+
+    With ``share < 1`` a translation that carries at least that share of the pairs (and at
+    least ``need``) gives a rival of those pairs alone, a start for :func:`reassociated`: a
+    winner that pairs the detections with the landmarks one period over on most of the layout
+    and otherwise elsewhere at its edges, or on a layout whose spacing is irregular (``tol_m``
+    then a share of the spacing), is no exact period of its pairs. The candidates are then the
+    first ``anchors`` pairs' landmarks onto every other.
     """
     a = inputs.assignment
     rows = np.flatnonzero(a >= 0)
@@ -680,35 +791,57 @@ def lattice_rivals(
         return []
     X = inputs.landmarks_xyz
     P = X[a[rows]]
-    shifts = X - P[0]
-    dist, j = cKDTree(X).query((P[None, :, :] + shifts[:, None, :]).reshape(-1, 3))
-    dist, j = dist.reshape(len(X), rows.size), j.reshape(len(X), rows.size)
+    tree = cKDTree(X)
+    shifts = np.concatenate([X - P[i] for i in range(min(anchors, rows.size))])
+    dist, j = tree.query((P[None, :, :] + shifts[:, None, :]).reshape(-1, 3))
+    dist, j = dist.reshape(len(shifts), rows.size), j.reshape(len(shifts), rows.size)
+    hit = dist <= tol_m
+    least = rows.size if share >= 1.0 else max(int(math.ceil(share * rows.size)), inputs.need)
     R, t = inputs.cam_from_world[:3, :3], inputs.cam_from_world[:3, 3]
     out, seen = [], set()
-    for i in np.flatnonzero(np.all(dist <= LATTICE_TOL_M, axis=1)):
+    for i in np.flatnonzero(hit.sum(axis=1) >= least):
         d = shifts[i]
-        key = tuple(np.round(d / LATTICE_TOL_M).astype(int))
-        if np.linalg.norm(d) <= LATTICE_TOL_M or key in seen or np.unique(j[i]).size != rows.size:
+        key = tuple(np.round(d / max(tol_m, LATTICE_TOL_M)).astype(int))
+        if np.linalg.norm(d) <= tol_m or key in seen or np.unique(j[i][hit[i]]).size != hit[i].sum():
             continue
         seen.add(key)
         T = inputs.cam_from_world.copy()
         T[:3, 3] = t - R @ d  # camera centre C + d
         b = np.full_like(a, -1)
-        b[rows] = j[i]
+        b[rows[hit[i]]] = j[i][hit[i]]
         out.append((b, T, d))
     return out
 
 
+def _spacing_m(landmarks_xyz: NDArray[np.float64]) -> float:
+    """The median distance from a landmark to its nearest other landmark, m."""
+    if len(landmarks_xyz) < 2:
+        return 0.0
+    d, _ = cKDTree(landmarks_xyz).query(landmarks_xyz, k=2)
+    return float(np.median(d[:, 1]))
+
+
 def _lattice_refusal(inputs: VerifyInputs) -> Refusal | None:
-    """The refusal when a shift by a period of the layout scores within the ambiguity margin."""
-    rivals = lattice_rivals(inputs)
+    """The refusal when a shift by a period of the layout scores within the ambiguity margin.
+
+    The exact periods of the winner's pairs (:func:`lattice_rivals`) are scored as they are and
+    re-associated; the periods of most of them (:data:`LATTICE_SHARE` of the pairs, within
+    :data:`LATTICE_SPACING_SHARE` of the layout's spacing) re-associated only.
+    """
+    exact = lattice_rivals(inputs)
+    loose = lattice_rivals(inputs, LATTICE_SHARE, LATTICE_SPACING_SHARE * _spacing_m(inputs.landmarks_xyz),
+                           _LATTICE_ANCHORS)
+    rivals = exact + loose
     if not rivals:
         return None
     s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
-    scored = [(_score(inputs, b, T), d) for b, T, d in rivals]
+    scored = [(_score(inputs, b, T), d) for b, T, d in exact]
     for k, b, T, chi in reassociated(inputs, rivals):
         if chi <= chi2_quantile(_FIT_QUANTILE, max(2 * int(np.count_nonzero(b >= 0)) - 6, 1)):
-            scored.append((_score(inputs, b, T), rivals[k][2]))
+            if not _same_centre(inputs, T):
+                scored.append((_score(inputs, b, T), rivals[k][2]))
+    if not scored:
+        return None
     s_rival, d = min(scored, key=lambda r: r[0])
     if s_rival - s_best >= AMBIGUITY_MARGIN:
         return None
@@ -719,6 +852,60 @@ def _lattice_refusal(inputs: VerifyInputs) -> Refusal | None:
         f"{float(np.linalg.norm(d)):.2f} m) score {s_rival:.1f} against {s_best:.1f} (margin "
         f"{AMBIGUITY_MARGIN:.1f}): only the prior tells them apart",
     )
+
+
+def rival_search(inputs: VerifyInputs) -> list[tuple[NDArray[np.int64], NDArray[np.float64], float]]:
+    """The association's best hypothesis among the detections the winner leaves unexplained.
+
+    A search that settles on a patch of the detections (a few pairs of a ghost copy mixed with
+    the structure's own, each paired with the wrong landmark) leaves most of them unassigned,
+    and the structure's pose among them is one no start of the winner's reaches: no common
+    image offset or period of the layout maps the winner onto it. When the winner explains at
+    most half of the detections (its free ones at least as many as its pairs, and ``need``),
+    the search (``inputs.search``) runs again over the free ones alone; its hypothesis and the
+    same re-associated over every detection (:func:`reassociated`) are the rivals. Returns
+    ``[(assignment, cam_from_world, chi-square), ...]``.
+    """
+    if inputs.search is None:
+        return []
+    det, a = inputs.detections_uv, inputs.assignment
+    free = (a < 0) & np.isfinite(det).all(axis=1)
+    n_free, k = int(free.sum()), int(np.count_nonzero(a >= 0))
+    if n_free < max(inputs.need, k):
+        return []
+    found = inputs.search(free)
+    if found is None:
+        return []
+    b, T = found
+    m = b >= 0
+    if np.count_nonzero(m) < inputs.need:
+        return []
+    uv, _ = project(inputs.K, T, inputs.landmarks_xyz[b[m]])
+    first = (b, T, float(np.sum((uv - det[m]) ** 2)) / inputs.pixel_sigma**2)
+    return [first] + [r[1:] for r in reassociated(inputs, [first])]
+
+
+def _search_refusal(inputs: VerifyInputs) -> Refusal | None:
+    """The refusal when the second search's rival (:func:`rival_search`) scores about as well."""
+    rivals = rival_search(inputs)
+    if not rivals:
+        return None
+    s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
+    for b, T, chi in rivals:
+        k = int(np.count_nonzero(b >= 0))
+        dc = pose_difference(T, inputs.cam_from_world)[:3]
+        if _same_centre(inputs, T) or not chi <= chi2_quantile(_FIT_QUANTILE, max(2 * k - 6, 1)):
+            continue
+        s_rival = _score(inputs, b, T)
+        if s_rival - s_best < AMBIGUITY_MARGIN:
+            n = int(np.count_nonzero(inputs.assignment >= 0))
+            return Refusal(
+                FailureCode.AMBIGUOUS,
+                f"ambiguous pose: the detections its {n} pairs leave unexplained give another pose of "
+                f"{k} pairs, camera centre {float(np.linalg.norm(dc)):.2f} m away, scoring {s_rival:.1f} "
+                f"against {s_best:.1f} (margin {AMBIGUITY_MARGIN:.1f})",
+            )
+    return None
 
 
 def verify_pose(inputs: VerifyInputs) -> Refusal | None:
@@ -742,4 +929,5 @@ def verify_pose(inputs: VerifyInputs) -> Refusal | None:
         or _influence_refusal(inputs)
         or _twin_refusal(inputs)
         or _lattice_refusal(inputs)
+        or _search_refusal(inputs)
     )

@@ -25,19 +25,24 @@ from localization.testing.fuzz import (
     FALSE_DETECTION_LIBRARIES,
     FALSE_DETECTIONS_HELDOUT_PATH,
     FalseDetections,
+    _ghost_offsets,
     corrupt_detections,
     draw_case,
 )
 from localization.testing.synthetic import paper_prior
 from localization.verify import (
     CONFIRM_TOLERANCE_M,
+    MINIMAL_FIT_LEVERAGE,
     OUTLIER_QUANTILE,
     VerifyInputs,
+    _enumerated_swaps,
+    _offset_votes,
     chance_support,
     lattice_rivals,
     leave_one_out_chi2,
     leave_one_out_shifts,
     minimal_fit_chi2_limit,
+    rival_search,
 )
 
 SLICE = 1_000
@@ -70,7 +75,22 @@ def _error(est, case) -> float:
      # a three-level grid one period (6.65 m) over: the rival re-associated pairs every corner
      ("ghost_shift", 6055, FailureCode.AMBIGUOUS),
      # four pairs, one of them a false detection: leaving it out moves the centre 12 m
-     ("detector", 7727, FailureCode.ILL_CONDITIONED)],
+     ("detector", 7727, FailureCode.ILL_CONDITIONED),
+     # the ghost copy whole (30 pairs): its offset outvoted by the neighbourhoods of a grid's
+     ("ghost_shift", 3094, FailureCode.DUPLICATED_DETECTIONS),
+     # most pairs one period over, the edge ones elsewhere: a partial period re-associated
+     ("ghost_shift", 2037, FailureCode.DUPLICATED_DETECTIONS),
+     ("ghost_shift", 2631, FailureCode.DUPLICATED_DETECTIONS),
+     ("ghost_shift", 4716, FailureCode.AMBIGUOUS),
+     # four pairs one irregular period over (8.6-8.8 m) through a 10,000 px lens
+     ("ghost_each", 2683, FailureCode.AMBIGUOUS),
+     # nine pairs of a mix of both copies, 39 detections left: the second search finds the copy
+     ("ghost_shift", 8883, FailureCode.AMBIGUOUS),
+     # three false detections 27-47 px off their corners: the right ones are not the nearest
+     ("detector", 3978, FailureCode.DUPLICATED_DETECTIONS),
+     # four pairs, two of them wrong, loose at the association's own 1 px (chi-square 7.0):
+     # each pair's leverage (0.21 m) says nothing of two wrong ones, so the fit is refused
+     ("detector", 7526, FailureCode.UNSUPPORTED)],
 )
 def test_a_formerly_confident_wrong_pose_is_refused_with_its_reason(mode, k, code):
     case, det = _case(mode, k)
@@ -339,3 +359,84 @@ def test_a_period_of_the_layout_gives_rivals_with_the_same_residuals():
     Y = X + np.random.default_rng(0).normal(0.0, 0.5, X.shape)
     uv, _ = project(PAPER_K, T, Y[block])
     assert lattice_rivals(replace(inputs, landmarks_xyz=Y, detections_uv=uv)) == []
+
+
+def _grid_inputs(X, T, rows, uv, **kw):
+    return VerifyInputs(
+        detections_uv=uv, landmarks_xyz=X, K=PAPER_K, image_size=PAPER_IMAGE_SIZE, cam_from_world=T,
+        assignment=np.asarray(rows), covariance=np.eye(6), prior_cam_from_world=T,
+        prior_sigmas=PriorSigmas(), pixel_sigma=1.0, gate_px=5.0, need=4, **kw,
+    )
+
+
+def test_a_copys_offset_wins_the_vote_over_a_grids_neighbours():
+    # fuzz case ghost_shift 3094: 30 landmarks on a grid and their copy 41 px off; the offsets
+    # to the copy's neighbours fill the cells around its own, and a neighbourhood that holds
+    # several of them outvoted it (57.8 px, 19 pairs, was first): ranked by the pairs that agree
+    case = draw_case(np.random.default_rng((19, 3094)))
+    off = _ghost_offsets(np.random.default_rng((44, 3094)), 1)[0]
+    uv = case.detections_uv
+    votes = _offset_votes(uv + off, uv, 10.0, 80.0)
+    np.testing.assert_allclose(votes[0, :2], -off, atol=1e-9)
+    assert votes[0, 2] == len(uv) == 30
+
+
+def test_a_partial_period_of_the_layout_is_a_rival_start():
+    # a 6 x 6 grid 4 m apart; the pose pairs five corners, four of them one period (4 m in x)
+    # from where the fifth's shift lands off the grid: no exact period, a partial one of 4 of 5
+    X = np.array([[4.0 * i, 4.0 * j, 3.5] for i in range(6) for j in range(6)])
+    X[35] += [1.5, 0.0, 0.0]
+    T = look_at([10.0, -6.0, 30.0], [10.0, 10.0, 3.5])
+    rows = [14, 15, 20, 21, 29]
+    uv, _ = project(PAPER_K, T, X[rows])
+    inputs = _grid_inputs(X, T, rows, uv)
+    assert not any(np.allclose(d, [4.0, 0.0, 0.0]) for _, _, d in lattice_rivals(inputs))
+    partial = [(b, d) for b, _, d in lattice_rivals(inputs, 0.5, 1.0, 3) if np.allclose(d, [4.0, 0.0, 0.0])]
+    assert len(partial) == 1
+    b, _ = partial[0]
+    np.testing.assert_array_equal(b, [20, 21, 26, 27, -1])  # the fifth maps onto no landmark
+
+
+def test_the_second_search_runs_only_on_a_winner_that_leaves_half_the_detections():
+    X, T, uv = _slab_view()
+    calls = []
+
+    def search(keep):
+        calls.append(int(keep.sum()))
+        return None
+
+    det = np.vstack([uv, uv[:4] + 300.0])  # twelve pairs, four free: no second search
+    rows = np.r_[np.arange(12), -np.ones(4, dtype=np.int64)]
+    assert rival_search(_grid_inputs(X, T, rows, det, search=search)) == [] and calls == []
+    rows = np.r_[np.arange(4), -np.ones(12, dtype=np.int64)]  # four pairs, twelve free
+    assert rival_search(_grid_inputs(X, T, rows, det, search=search)) == [] and calls == [12]
+
+
+@pytest.mark.parametrize(("pairs", "choices"), [(4, 3), (5, 2), (6, 1)])
+def test_a_few_pair_twin_moves_each_pair_to_one_of_its_nearest_free_detections(pairs, choices):
+    d = np.random.default_rng(pairs).uniform(5.0, 60.0, (pairs, 8))
+    swaps = _enumerated_swaps(d)
+    assert len(swaps) == (choices + 1) ** pairs - 1 <= 256
+    nearest = np.argsort(d, axis=1)[:, :choices]
+    for move, to in swaps:
+        assert all(to[p] in nearest[p] for p in np.flatnonzero(move))
+
+
+def test_a_loose_minimal_fit_stands_when_no_pair_can_have_moved_it_far():
+    # four corners at 1.5 px noise: chi-square 8.5 at the 0.5 px a detector declares, above the
+    # 95 % quantile; each pair moves the pose at most 0.34 m when left out. Within 0.4 of a 1 m
+    # tolerance the pose stands (0.1 m off); without a tolerance, or at 0.5 m, it is refused
+    X, T, uv = _four_corners(1.5)
+    prior = paper_prior(T, 3)
+
+    def localize(tolerance_m):
+        return Localizer(X, PAPER_K, image_size=PAPER_IMAGE_SIZE, fit_sigma_px=0.5,
+                         tolerance_m=tolerance_m).localize(uv, prior)
+
+    est = localize(1.0)
+    assert est.success and np.linalg.norm(est.position - camera_center(T)) < 0.15
+    assert 0.3 < leave_one_out_shifts(PAPER_K, est.cam_from_world, X, uv).max() <= MINIMAL_FIT_LEVERAGE * 1.0
+    for tolerance_m in (None, 0.5):
+        est = localize(tolerance_m)
+        assert not est.success and est.failure_code is FailureCode.UNSUPPORTED
+        assert "minimal fit (4 pairs) with residual chi-square 8.5" in est.failure_reason

@@ -1,0 +1,216 @@
+"""Confident wrong poses from pixels: count them in study outputs, record and replay localizations.
+
+Issue 44 calls a success *wrong* when its camera centre lies farther than ``max(1 m, 3 x the
+view's Cramer-Rao bound)`` from the truth (``per_image.csv``'s ``translation_error_m`` and
+``crb_translation_m``). Three commands:
+
+``count`` prints, for every ``per_image.csv`` under the folders given, per method: the views,
+the views with at least four visible landmarks, the successes, the wrong ones and the median
+error, then each wrong row (uav, viewpoint, error, limit, pairs, RMS).
+
+    .venv/bin/python benchmarks/wrong_poses.py count results/paper results/busy ...
+
+``record`` runs a command (``uav-struct study ...`` or ``benchmarks/site_conditions_study.py``)
+with ``benchmarks/recording`` on ``PYTHONPATH``, which pickles every structural localization
+(the localizer, the detections, the prior, the truth) into ``--into``, in the spawned workers too.
+
+    .venv/bin/python benchmarks/wrong_poses.py record --into rec/paper -- \\
+        .venv/bin/uav-struct study --workers 2 --out results/paper --overwrite --no-figures
+
+``replay`` localizes every recorded frame again with the code as it is now, the detections fixed,
+and prints per method the successes and wrong poses of the recording and of the replay, the wrong
+ones of the replay, and the poses that changed. The bound comes from the study's ``per_image.csv``
+(the row with the same method and true camera centre), so ``--study`` names the run's output.
+A replay of the guided detector's runs holds its detections fixed: a change to the localizer
+that moves its first pass moves its detections in a real run, not here.
+
+    .venv/bin/python benchmarks/wrong_poses.py replay rec/paper --study results/paper
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import pickle
+import subprocess
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+#: A success farther than ``max(FLOOR_M, FACTOR x bound)`` from the truth is wrong (issue 44, item 3).
+FLOOR_M = 1.0
+FACTOR = 3.0
+
+_HERE = Path(__file__).resolve().parent
+
+
+def limit_m(bound_m: float) -> float:
+    """The error beyond which a success with this Cramer-Rao bound is wrong, m."""
+    return max(FLOOR_M, FACTOR * bound_m) if math.isfinite(bound_m) else FLOOR_M
+
+
+def is_wrong(row: dict) -> bool:
+    """Whether a ``per_image.csv`` row is a wrong success."""
+    if row["success"] not in ("True", "1", "true"):
+        return False
+    return float(row["translation_error_m"]) > limit_m(float(row["crb_translation_m"]))
+
+
+def per_image_files(folders: list[Path]) -> list[Path]:
+    """Every ``per_image.csv`` in or under ``folders``, sorted."""
+    out = []
+    for folder in folders:
+        out += [folder] if folder.name == "per_image.csv" else sorted(folder.rglob("per_image.csv"))
+    return out
+
+
+def count(folders: list[Path], structural_only: bool = True) -> dict[str, dict]:
+    """Print and return, per ``per_image.csv`` and method: views, posable views, successes, wrong."""
+    from uav_struct_env.study.cells import read_records_csv
+
+    summary = {}
+    total = [0, 0]
+    for path in per_image_files(folders):
+        rows = read_records_csv(path)
+        by_method = defaultdict(list)
+        for r in rows:
+            if structural_only and r["method"].startswith("aruco"):
+                continue
+            by_method[r["method"]].append(r)
+        name = str(path.parent)
+        for method, mine in by_method.items():
+            ok = [r for r in mine if r["success"] in ("True", "1", "true")]
+            wrong = [r for r in mine if is_wrong(r)]
+            posable = sum(int(r["n_visible"]) >= 4 for r in mine)
+            errs = [float(r["translation_error_m"]) for r in ok]
+            med = float(np.median(errs)) if errs else float("nan")
+            summary[f"{name}:{method}"] = {"views": len(mine), "posable": posable, "poses": len(ok),
+                                           "wrong": len(wrong), "median_m": med}
+            total[0] += len(ok)
+            total[1] += len(wrong)
+            print(f"{name:<48} {method:<16} views {len(mine):>3} (>=4 visible {posable:>3}) "
+                  f"poses {len(ok):>3} wrong {len(wrong):>2} median {med:.3f} m")
+            for r in wrong:
+                err, lim = float(r["translation_error_m"]), limit_m(float(r["crb_translation_m"]))
+                print(f"    wrong: uav {r['uav']} vp {r['viewpoint']} error {err:.2f} m limit {lim:.2f} m"
+                      f" pairs {r['n_inliers']} correct {r['n_correct']}/{r['n_assigned']}"
+                      f" rms {float(r['reprojection_rmse_px']):.2f} px")
+    print(f"total: {total[0]} poses, {total[1]} wrong")
+    return summary
+
+
+def record(into: Path, command: list[str]) -> int:
+    """Run ``command`` with every structural localization pickled into ``into``; its return code."""
+    env = dict(os.environ)
+    env["UAV_STRUCT_RECORD"] = str(into)
+    paths = [str(_HERE.parent), str(_HERE / "recording"), env.get("PYTHONPATH", "")]
+    env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
+    return subprocess.call(command, env=env)
+
+
+def _bounds(study: Path) -> dict[tuple, float]:
+    """(method, true centre rounded to 1 mm) -> the view's bound, from every per_image.csv under ``study``."""
+    from uav_struct_env.study.cells import read_records_csv
+
+    out = {}
+    for path in per_image_files([study]):
+        for r in read_records_csv(path):
+            key = (r["method"], *(round(float(r[k]), 3) for k in ("gt_x", "gt_y", "gt_z")))
+            out[key] = float(r["crb_translation_m"])
+    return out
+
+
+def _replay_one(rec: dict) -> tuple[bool, float, object]:
+    """Localize a recorded frame again: (success, error m, estimate)."""
+    from localization import Detections
+    from localization.metrics import pose_errors
+
+    det = Detections(rec["uv"], rec["scores"])
+    est = rec["localizer"].localize(det, rec["prior"], prior_sigmas=rec["prior_sigmas"],
+                                    warm_start=rec["warm_start"])
+    err = pose_errors(est.cam_from_world, rec["gt"])[0] if est.success else float("nan")
+    return bool(est.success), float(err), est
+
+
+def replay(records: Path, study: Path, show: int = 40) -> dict[str, list[int]]:
+    """Replay every recording in ``records`` against the bounds of ``study``; print and return counts.
+
+    Returns per method ``[poses recorded, wrong recorded, poses replayed, wrong replayed]``.
+    """
+    from localization.geometry.transforms import camera_center
+
+    bounds = _bounds(study)
+    counts: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0])
+    changed, wrong_now = [], []
+    times, verify_times = [], []
+    for path in sorted(records.glob("*.pkl")):
+        rec = pickle.loads(path.read_bytes())
+        c = camera_center(rec["gt"])
+        bound = bounds.get((rec["landmarks"], *(round(float(x), 3) for x in c)), float("nan"))
+        lim = limit_m(bound)
+        t0 = time.perf_counter()
+        ok, err, est = _replay_one(rec)
+        times.append(time.perf_counter() - t0)
+        verify_times.append(est.timings.get("verify", 0.0))
+        was_ok, was_err = rec["success"], rec["translation_error_m"]
+        n = counts[rec["landmarks"]]
+        n[0] += was_ok
+        n[1] += was_ok and was_err > lim
+        n[2] += ok
+        n[3] += ok and err > lim
+        tag = f"{path.name} {rec['landmarks']}"
+        if ok and err > lim:
+            wrong_now.append(f"{tag}: error {err:.2f} m limit {lim:.2f} pairs {est.n_inliers} "
+                             f"rms {est.reprojection_rmse_px:.2f} px")
+        if ok != was_ok:
+            why = "" if ok else f" ({est.failure_code.value}: {est.failure_reason})"
+            changed.append(f"{tag}: {'refused' if was_ok else 'gained'}, error "
+                           f"{(was_err if was_ok else err):.2f} m limit {lim:.2f}{why}")
+    for method, (p0, w0, p1, w1) in sorted(counts.items()):
+        print(f"{str(records):<48} {method:<16} poses {p0:>3} -> {p1:>3}  wrong {w0} -> {w1}")
+    for line in wrong_now:
+        print("  wrong now:", line)
+    for line in changed[:show]:
+        print("  changed:", line)
+    if len(changed) > show:
+        print(f"  ... {len(changed) - show} more changed")
+    if times:
+        ms, vms = 1e3 * np.asarray(times), 1e3 * np.asarray(verify_times)
+        print(f"  replay time per frame: median {np.median(ms):.1f} ms, P99 {np.percentile(ms, 99):.0f} ms; "
+              f"of it the verification: median {np.median(vms):.1f} ms, P99 {np.percentile(vms, 99):.0f} ms")
+    return dict(counts)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """The command line (see the module docstring)."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    sub = ap.add_subparsers(dest="command", required=True)
+    c = sub.add_parser("count", help="count wrong successes in per_image.csv files",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    c.add_argument("folders", nargs="+", type=Path, help="study output folders, searched for per_image.csv")
+    r = sub.add_parser("record", help="run a command, recording its structural localizations",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    r.add_argument("--into", type=Path, required=True, help="folder the pickles go to")
+    r.add_argument("cmd", nargs=argparse.REMAINDER, help="the command, after --")
+    p = sub.add_parser("replay", help="localize recorded frames again with the current code",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("records", type=Path, help="a folder of recordings")
+    p.add_argument("--study", type=Path, required=True, help="the recorded run's output (its per_image.csv)")
+    p.add_argument("--show", type=int, default=40, help="changed poses printed")
+    args = ap.parse_args(argv)
+    if args.command == "count":
+        count(args.folders)
+    elif args.command == "record":
+        cmd = args.cmd[1:] if args.cmd[:1] == ["--"] else args.cmd
+        sys.exit(record(args.into, cmd))
+    else:
+        replay(args.records, args.study, args.show)
+
+
+if __name__ == "__main__":
+    main()
