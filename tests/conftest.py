@@ -40,21 +40,21 @@ def _warm_localization() -> None:
 
 
 def _warm_simulator() -> None:
-    """The batched rasterizer, the landmark visibility and the ray casts: one step of a small env;
-    the training configurations' layout features."""
+    """The batched rasterizer, the landmark visibility and the ray casts: one step of a small
+    training env (batched renderer) and of the default env, each with rendered and with ray-cast
+    truth; the training configurations' layout features."""
     import uav_struct_env
     from uav_struct_env.wrappers.layout import _centroid_spread
 
     _centroid_spread(np.array([[1.0, 2.0], [3.0, 5.0]]), 640.0, 360.0)
-
-    for observe_image in (True, False):  # rendered truth, then ray-cast truth
-        env = uav_struct_env.parallel_env("train", renderer="batch", image_size=(64, 36),
-                                          observe_image=observe_image)
-        try:
-            env.reset(seed=0)
-            env.step({a: np.zeros(env.action_space(a).shape, np.float32) for a in env.agents})
-        finally:
-            env.close()
+    for settings in ({"preset": "train", "renderer": "batch"}, {}):  # the training and the default env
+        for observe_image in (True, False):  # rendered truth, then ray-cast truth
+            env = uav_struct_env.parallel_env(**settings, image_size=(64, 36), observe_image=observe_image)
+            try:
+                env.reset(seed=0)
+                env.step({a: np.zeros(env.action_space(a).shape, np.float32) for a in env.agents})
+            finally:
+                env.close()
 
 
 KERNEL_GROUPS: dict[str, Callable[[], None]] = {"localization": _warm_localization,
@@ -71,9 +71,7 @@ def _compile_group(name: str) -> None:
     with open(_lock_path(name), "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
         print("locked", flush=True)
-        devnull = os.open(os.devnull, os.O_WRONLY)  # the compilers' chatter (pybullet's banner, numba's
-        os.dup2(devnull, 1)                          # warnings) would land on the test run's terminal
-        os.dup2(devnull, 2)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # pybullet's banner; a failure still shows (stderr)
         KERNEL_GROUPS[name]()
 
 
