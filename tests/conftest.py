@@ -2,14 +2,12 @@
 ``load_script`` (a script of ``benchmarks/`` or ``examples/`` as a module) and ``shared_output``
 (an expensive run made once per test session, however many pytest-xdist workers read it).
 
-The compiled kernels (numba, cached on disk beside the package) are compiled once a session, by
-one process per group (:func:`pytest_sessionstart`): on a fresh clone the localization kernels
-(about 45 s of CPU) and the simulator's (about 20 s) compile in two processes of their own while
-the pytest-xdist workers run the tests that need neither; a worker that reaches a kernel, or starts
-a child process that may, first waits for them and then loads the kernels from the cache. Before,
-every worker compiled or loaded both groups before its first test (and before that, every worker
-and subprocess compiled what it reached first: 74 s of the fresh-clone run's wall time). Once
-cached, loading the groups costs about 2 s a session."""
+Before any test, each process that runs tests compiles (or loads from numba's cache) the
+compiled kernels, one group at a time under a file lock (:func:`pytest_sessionstart`): on a fresh
+clone the localization kernels (about a minute of CPU) and the simulator's (about 20 s) are then
+compiled once, by two workers side by side, instead of by every worker and every subprocess that
+reaches them first (74 s of the fresh-clone run's wall time before); once cached, the warm-ups
+cost about 2 s a session."""
 
 from __future__ import annotations
 
@@ -61,130 +59,24 @@ KERNEL_GROUPS: dict[str, Callable[[], None]] = {"localization": _warm_localizati
                                                 "simulator": _warm_simulator}
 
 
-def _lock_path(name: str) -> Path:
-    tag = hashlib.sha1(str(ROOT).encode()).hexdigest()[:12]  # a lock per checkout: its cache is beside it
-    return Path(tempfile.gettempdir()) / f"uav-struct-kernels-{tag}-{name}.lock"
-
-
-def _compile_group(name: str) -> None:
-    """Compile (or load) one kernel group holding its lock; ``python tests/conftest.py GROUP``."""
-    with open(_lock_path(name), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
-        print("locked", flush=True)
-        os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # pybullet's banner; a failure still shows (stderr)
-        KERNEL_GROUPS[name]()
-
-
 def pytest_sessionstart(session) -> None:
-    """Compile or load every kernel group once, beside the tests rather than before them.
+    """Compile or load every kernel group before the first test, each group by one process at a time.
 
-    Under pytest-xdist the controller (which runs no test) starts one compiler process per group,
-    each holding its group's lock, before the workers exist; a worker waits for them only when it
-    first reaches a compiled kernel or starts a child process (:func:`_wait_for_compilers`), so the
-    tests that need neither run meanwhile. Without xdist the groups compile here, one by one.
+    pytest-xdist's controller runs no test and skips this; worker ``gw<i>`` takes the groups in an
+    order of its own (odd workers reversed), so two workers compile two groups side by side and
+    each then loads the other's from the cache.
     """
-    if os.environ.get("PYTEST_XDIST_WORKER") is not None:
-        _wait_for_compilers.install()
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    if worker is None and getattr(session.config.option, "numprocesses", None):
         return
-    if not getattr(session.config.option, "numprocesses", None):
-        for name in KERNEL_GROUPS:
-            with open(_lock_path(name), "w") as lock:
-                fcntl.flock(lock, fcntl.LOCK_EX)
-                KERNEL_GROUPS[name]()
-        return
-    compilers = []
-    for name in KERNEL_GROUPS:
-        proc = subprocess.Popen([sys.executable, __file__, name], cwd=ROOT, stdout=subprocess.PIPE,
-                                text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
-        if proc.stdout.readline().strip() != "locked":  # it failed: the tests compile what they need
-            proc.wait()
-        compilers.append(proc)
-    session.config.stash[_COMPILERS] = compilers
-
-
-def pytest_sessionfinish(session) -> None:
-    for proc in session.config.stash.get(_COMPILERS, []):
-        proc.wait()
-
-
-_COMPILERS = pytest.StashKey[list]()
-
-#: Test modules that reach no compiled kernel, in their own process or a child (each checked alone
-#: with a fresh kernel cache): they run first, while the kernel groups compile, and their child
-#: processes (ruff, mkdocs, ``--help``) do not wait for the compilers. A module missing here only
-#: runs later; one listed wrongly only waits at its first kernel (tests/test_conftest.py keeps the
-#: list to existing files).
-KERNEL_FREE = (
-    "tests/site/test_activity.py", "tests/site/test_ifc_any_building.py", "tests/site/test_ifc_cache.py",
-    "tests/site/test_ifc_damaged.py", "tests/site/test_ifc_markers.py", "tests/site/test_imports.py",
-    "tests/site/test_mesh.py", "tests/site/test_model.py", "tests/site/test_site_files.py",
-    "tests/site/test_textures.py", "tests/photos/test_calibration.py", "tests/photos/test_georef.py",
-    "tests/photos/test_metadata.py", "tests/photos/test_real_dji_headers.py",
-    "tests/training/test_ensemble.py", "tests/training/test_jpeg_augment.py", "tests/test_code_shape.py",
-    "tests/test_layers.py", "tests/localization/test_stats.py", "tests/test_outputs.py",
-    "tests/test_doc_numbers.py", "tests/localization/detect/test_weights.py",
-    "tests/test_benchmark_help.py", "tests/sim/test_imaging_names.py", "tests/site/test_ifc_speed.py",
-    "tests/test_docs.py::test_docs_site_builds_in_strict_mode",
-)
-
-
-def _kernel_free(item: pytest.Item) -> bool:
-    return item.nodeid.split("::")[0] in KERNEL_FREE or item.nodeid.split("[")[0] in KERNEL_FREE
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """The kernel-free tests first (a stable sort: otherwise the collection's order)."""
-    items.sort(key=lambda item: not _kernel_free(item))
-
-
-@pytest.hookimpl(wrapper=True)
-def pytest_runtest_protocol(item: pytest.Item, nextitem):
-    _wait_for_compilers.skip_children = _kernel_free(item)
-    try:
-        return (yield)
-    finally:
-        _wait_for_compilers.skip_children = False
-
-
-class _CompilerWait:
-    """Until the compiler processes are done, the first kernel compilation and the first child
-    process of a worker wait for them (then load the kernels from numba's cache instead of
-    compiling a second copy); after that wait, nothing is patched any more. The children of a
-    kernel-free test (:data:`KERNEL_FREE`) start without waiting."""
-
-    def __init__(self) -> None:
-        self._saved: list[tuple[object, str, Callable]] = []
-        self.skip_children = False
-
-    def install(self) -> None:
-        import multiprocessing.process
-
-        from numba.core.dispatcher import Dispatcher
-
-        for owner, attr, child in ((Dispatcher, "compile", False), (subprocess.Popen, "__init__", True),
-                                   (multiprocessing.process.BaseProcess, "start", True)):
-            original = getattr(owner, attr)
-            self._saved.append((owner, attr, original))
-            setattr(owner, attr, self._waiting(original, child))
-
-    def _waiting(self, original: Callable, child: bool) -> Callable:
-        def call(*args, **kwargs):
-            if not (child and self.skip_children):
-                self.wait()
-            return original(*args, **kwargs)
-
-        return call
-
-    def wait(self) -> None:
-        saved, self._saved = self._saved, []
-        for owner, attr, original in saved:
-            setattr(owner, attr, original)
-        for name in KERNEL_GROUPS:
-            with open(_lock_path(name), "w") as lock:
-                fcntl.flock(lock, fcntl.LOCK_SH)
-
-
-_wait_for_compilers = _CompilerWait()
+    order = list(KERNEL_GROUPS)
+    if worker is not None and int(worker.removeprefix("gw") or 0) % 2:
+        order.reverse()
+    tag = hashlib.sha1(str(ROOT).encode()).hexdigest()[:12]  # a lock per checkout: its cache is beside it
+    for name in order:
+        with open(Path(tempfile.gettempdir()) / f"uav-struct-kernels-{tag}-{name}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+            KERNEL_GROUPS[name]()
 
 
 @pytest.fixture
@@ -267,7 +159,3 @@ def tiny_ppo_run(shared_output, load_script) -> tuple[Path, dict]:
     """``(out, summary)`` of a 256-agent-step PPO training run (seed 3), run once a session."""
     pytest.importorskip("stable_baselines3")
     return shared_output("tiny-ppo-run", lambda folder: _tiny_ppo_run(folder, load_script))[1]
-
-
-if __name__ == "__main__":
-    _compile_group(sys.argv[1])
