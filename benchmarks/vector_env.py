@@ -89,7 +89,8 @@ def sb3_envs(config: str, k: int, site: str, seed: int) -> dict[str, object]:
 
 
 def main(config: str = "state", steps: int = 4000, ks: tuple[int, ...] = (1, 4, 16), policy: str = "hold",
-         seed: int = 0, site: str = "paper", repeats: int = 2, sb3: bool = False) -> dict:
+         seed: int = 0, site: str = "paper", repeats: int = 2, sb3: bool = False,
+         warm_episodes: int = 2) -> dict:
     warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
     from tqdm import tqdm
 
@@ -98,7 +99,7 @@ def main(config: str = "state", steps: int = 4000, ks: tuple[int, ...] = (1, 4, 
 
     single = make_train_env(config, site=site)
     vecs = {k: make_vector_env(config, k, site=site) for k in ks}
-    warm = 2 * 31 * len(single.possible_agents)  # two whole episodes: resets and every path warm
+    warm = warm_episodes * 31 * len(single.possible_agents)  # whole episodes: resets and every path warm
     measure_single(single, warm, policy, seed)
     for vec in vecs.values():
         measure_vector(vec, warm * vec.num_envs, policy, seed)
@@ -149,9 +150,14 @@ if __name__ == "__main__":
     p.add_argument("--seed", type=int, default=0, help="first copy's seed (copy k: seed + k)")
     p.add_argument("--site", default="paper", help="'paper', 'random' (one per copy) or a site file")
     p.add_argument("--repeats", type=int, default=2, help="alternating rounds")
+    p.add_argument("--warm-episodes", type=int, default=2,
+                   help="untimed episodes per env before the rounds (resets and every path warm)")
     p.add_argument("--sb3", action="store_true",
                    help="also SB3VecEnv and SuperSuit's vector env at the largest K (SB3's VecEnv API)")
     args = p.parse_args()
     if args.steps < 1 or args.repeats < 1 or min(args.ks) < 1:
         p.error("--steps, --repeats and every K must be at least 1")
-    main(args.config, args.steps, tuple(args.ks), args.policy, args.seed, args.site, args.repeats, args.sb3)
+    if args.warm_episodes < 0:
+        p.error(f"--warm-episodes must be 0 or more, not {args.warm_episodes}")
+    main(args.config, args.steps, tuple(args.ks), args.policy, args.seed, args.site, args.repeats, args.sb3,
+         args.warm_episodes)

@@ -64,6 +64,7 @@ def pooled(shared_output):
     return shared_output("tiny-sweep", lambda _: run_sweep(TINY, ["paper", "random:1"], [0, 1], workers=2))[1]
 
 
+@pytest.mark.slow  # four studies on a process pool: a long library run
 def test_the_pool_merges_runs_that_equal_the_study_run_alone(pooled):
     assert [(r.site, r.seed) for r in pooled] == [
         ("paper", 0), ("paper", 1), ("random:1", 0), ("random:1", 1)
@@ -84,6 +85,7 @@ def test_the_pool_merges_runs_that_equal_the_study_run_alone(pooled):
     assert spread["min"] <= spread["median"] <= spread["max"]
 
 
+@pytest.mark.slow
 def test_ray_gives_the_pools_results(pooled):
     pytest.importorskip("ray", reason="Ray is not installed (pip install 'uav-struct-env[ray]')")
     on_ray = run_sweep(TINY, ["paper", "random:1"], [0, 1], workers=2, ray="local")

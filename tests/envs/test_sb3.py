@@ -42,6 +42,7 @@ def test_ppo_multi_input_policy_trains_a_few_hundred_steps(tmp_path):
 
 
 @pytest.mark.filterwarnings("ignore:The `render_mode` attribute is not defined")
+@pytest.mark.slow  # two SuperSuit worker processes, each importing the stack
 def test_vector_envs_in_subprocesses():
     vec = make_vec_env(num_vec_envs=2, num_cpus=2)
     assert vec.num_envs == 8

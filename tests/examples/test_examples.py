@@ -338,7 +338,9 @@ def test_checkpoints_evaluate_into_a_learning_curve_with_a_band_over_runs(exampl
         evaluate.main(checkpoints=(str(tmp_path),), episodes=1)
 
 
-def test_every_env_copy_gets_its_own_seed_however_they_share_processes(example):
+# num_cpus=2 starts two SuperSuit worker processes (a long library run: `make test-slow`)
+@pytest.mark.parametrize("num_cpus", [pytest.param(2, marks=pytest.mark.slow), 0])
+def test_every_env_copy_gets_its_own_seed_however_they_share_processes(example, num_cpus):
     # Copy k must play the episodes of a single env seeded seed + k: SuperSuit alone seeds the
     # copies of process i with seed + i + j, so with two copies in one process seeds repeat.
     from uav_struct_env.wrappers import make_train_env
@@ -351,14 +353,14 @@ def test_every_env_copy_gets_its_own_seed_however_they_share_processes(example):
         obs, _ = single.reset()  # the copy's second episode, from its seeded generator
         expected.append(np.concatenate([obs[a]["gnss"] for a in single.possible_agents]))
     single.close()
-    for num_cpus in (2, 0):  # two processes (two copies, then one) and none
-        vec = train.make_vec_env("state", n_envs=3, num_cpus=num_cpus, seed=7)
-        try:
-            gnss = vec.reset()["gnss"].reshape(3, -1)
-        finally:
-            vec.close()
-        for k in range(3):
-            np.testing.assert_array_equal(gnss[k], expected[k], err_msg=f"copy {k}, num_cpus={num_cpus}")
+    # two processes (two copies, then one), or none
+    vec = train.make_vec_env("state", n_envs=3, num_cpus=num_cpus, seed=7)
+    try:
+        gnss = vec.reset()["gnss"].reshape(3, -1)
+    finally:
+        vec.close()
+    for k in range(3):
+        np.testing.assert_array_equal(gnss[k], expected[k], err_msg=f"copy {k}, num_cpus={num_cpus}")
 
 
 def test_the_throughput_benchmark_replays_a_trained_policy_the_same_on_bare_and_wrapped_env(

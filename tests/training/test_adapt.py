@@ -63,6 +63,7 @@ def test_fit_refuses_a_loader_without_a_batch(tmp_path):
             validate=None, eval_every=10, log=lambda r: None)
 
 
+@pytest.mark.slow  # a fine-tune of both networks and a study: a long library run
 def test_adapt_writes_the_set_and_the_study_runs_it(tmp_path, monkeypatch):
     from uav_struct_env.study.study import _parser, study_config
 

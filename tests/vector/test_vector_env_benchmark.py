@@ -14,7 +14,7 @@ pytestmark = pytest.mark.filterwarnings("ignore:The `render_mode` attribute is n
 def test_a_short_run_reports_each_env_with_positive_rates(load_script, capsys):
     pytest.importorskip("supersuit")
     bench = load_script(SCRIPT)
-    out = bench.main(steps=16, ks=(1, 2), repeats=1, sb3=True)
+    out = bench.main(steps=16, ks=(1, 2), repeats=1, sb3=True, warm_episodes=0)
     assert list(out) == ["single", "K=1", "K=2", "SB3VecEnv K=2", "SuperSuit K=2"]
     for row in out.values():
         assert len(row["agent_steps_per_cpu_s"]) == 1 and row["agent_steps_per_cpu_s"][0] > 0
