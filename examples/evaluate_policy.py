@@ -591,7 +591,7 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--model", default=None, nargs="+", metavar="RUN",
                    help="folder(s) with model.zip and normalization.npz (several: one per training seed)")
     p.add_argument("--config", default=DEFAULTS["config"],
-                   help="TRAIN_CONFIGS name (state | image); default: the configuration the runs "
+                   help="TRAIN_CONFIGS name (state | image | pixels); default: the configuration the runs "
                    "recorded in train.json (state when none did)")
     p.add_argument("--association", default=None, choices=("paper", "robust"),
                    help="evaluate with this association instead of the configuration's")

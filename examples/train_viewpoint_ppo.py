@@ -504,6 +504,7 @@ def _build(opt: dict[str, Any], out: Path, stop: _StopRequest):
     """The vector env and the PPO model: new, or restored from the resumed run's last checkpoint."""
     import numpy as np
     from stable_baselines3 import PPO
+    from stable_baselines3.common.preprocessing import is_image_space
     from stable_baselines3.common.vec_env import VecNormalize
 
     from uav_struct_env.training.policy_files import RESUME_FILE, load_rng_state, restore_rng_state
@@ -519,7 +520,9 @@ def _build(opt: dict[str, Any], out: Path, stop: _StopRequest):
         restore_rng_state(load_rng_state(ckpt / RESUME_FILE))  # after PPO.load drew its init weights
         model._last_obs = np.zeros(1)  # learn() must not reset: each rollout starts with seeded resets
         return vec, model
-    vec = VecNormalize(vec, norm_obs=True, norm_reward=True, gamma=opt["gamma"])
+    # every vector key normalized; an image stays uint8 for the CNN, which scales it itself
+    vectors = [k for k, s in vec.observation_space.spaces.items() if not is_image_space(s)]
+    vec = VecNormalize(vec, norm_obs=True, norm_reward=True, gamma=opt["gamma"], norm_obs_keys=vectors)
     model = PPO("MultiInputPolicy", vec, n_steps=opt["n_steps"], batch_size=opt["batch_size"],
                 n_epochs=opt["n_epochs"], learning_rate=opt["learning_rate"], gamma=opt["gamma"],
                 ent_coef=opt["ent_coef"], tensorboard_log=tb, device="cpu", verbose=0,
@@ -635,7 +638,7 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--out", default=DEFAULTS["out"], help="output folder")
     p.add_argument("--overwrite", action="store_true",
                    help="train into an --out folder that already holds files (else refused)")
-    p.add_argument("--config", default=DEFAULTS["config"], help="TRAIN_CONFIGS name: state | image")
+    p.add_argument("--config", default=DEFAULTS["config"], help="TRAIN_CONFIGS name: state | image | pixels")
     p.add_argument("--total-timesteps", type=int, default=DEFAULTS["total_timesteps"])
     p.add_argument("--minutes", type=float, default=None, help="stop after this wall-clock time")
     p.add_argument(

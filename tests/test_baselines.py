@@ -73,3 +73,21 @@ def test_every_baseline_acts_and_bad_names_are_refused(env):
     wrapped_only = "needs an env wrapped by LocalizationWrapper, got UavStructParallelEnv"
     with pytest.raises(TypeError, match=wrapped_only):
         GreedyCrbPolicy(env.unwrapped)
+
+
+def test_without_a_pose_in_the_observation_the_baselines_act_on_the_wrappers_pose():
+    from uav_struct_env.wrappers import make_train_env
+
+    pixels, image = make_train_env("pixels", max_cycles=4), make_train_env("image", max_cycles=4)
+    try:
+        obs_p, _ = pixels.reset(seed=5)
+        obs_i, _ = image.reset(seed=5)
+        for name in ("orbit", "greedy"):  # the same actions as where the pose is observed
+            act_p = make_baseline(name, pixels)(obs_p, pixels)
+            act_i = make_baseline(name, image)(obs_i, image)
+            for agent in pixels.agents:
+                assert "pose" not in obs_p[agent]
+                np.testing.assert_allclose(act_p[agent], act_i[agent], atol=1e-6, err_msg=f"{name} {agent}")
+    finally:
+        pixels.close()
+        image.close()

@@ -4,7 +4,9 @@ Each policy is a callable ``policy(obs, env) -> {agent: action (5,) float32}`` o
 agents' observations of a :class:`~uav_struct_env.wrappers.LocalizationWrapper`-wrapped env (the
 training configurations of :mod:`uav_struct_env.wrappers.configs`). None reads the simulator's
 truth: they act on the wrapper's estimated pose (``obs["pose"]``, the onboard prior where the
-localization failed) and on the BIM, as a deployed policy would.
+localization failed) and on the BIM, as a deployed policy would. Where the configuration shows the
+policy no pose (``pixels``: camera, GNSS and attitude only), they read the same pose from the
+wrapper's localization layer (:func:`estimated_pose`): a scripted policy needs a pose to act on.
 
 * ``random``: uniform actions (seeded);
 * ``hold``: hover at the starting viewpoint;
@@ -26,12 +28,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from localization.geometry.transforms import invert, matrix_from_quat_wxyz
+from localization.geometry.transforms import invert, matrix_from_quat_wxyz, quat_wxyz_from_matrix
 from localization.metrics import cramer_rao_bound
 from uav_struct_env.sim.attitude import attitude_from_world_from_cam
 from uav_struct_env.sim.uav import UavState, step_uav
 
-__all__ = ["BASELINES", "GreedyCrbPolicy", "RandomPolicy", "hold_policy", "make_baseline", "orbit_policy"]
+__all__ = ["BASELINES", "GreedyCrbPolicy", "RandomPolicy", "estimated_pose", "hold_policy", "make_baseline",
+           "orbit_policy"]
 
 #: The scripted policies by name (see the module docstring).
 BASELINES = ("random", "hold", "orbit", "greedy")
@@ -65,7 +68,7 @@ def orbit_policy(obs: dict[str, Any], env: Any, speed: float = 0.5, gain: float 
     c = np.asarray(env.unwrapped.site.center, dtype=np.float64)
     out = {}
     for a, o in obs.items():
-        p = np.asarray(o["pose"][:3], dtype=np.float64)
+        p = np.asarray(estimated_pose(o, env, a)[:3], dtype=np.float64)
         turn = _turn_to(c, p, float(o["attitude"][2]), gain)
         out[a] = np.array([0.0, speed, 0.0, turn, 0.0], np.float32)
     return out
@@ -163,7 +166,20 @@ class GreedyCrbPolicy:
 
     def __call__(self, obs: dict[str, Any], env: Any) -> dict[str, NDArray[np.float32]]:
         """The greedy action of every live agent from its estimated pose."""
-        return {a: self.action(o["pose"]) for a, o in obs.items()}
+        return {a: self.action(estimated_pose(o, env, a)) for a, o in obs.items()}
+
+
+def estimated_pose(obs: dict[str, Any], env: Any, agent: str) -> NDArray[np.floating]:
+    """(7,) ``agent``'s estimated pose: its observation's ``pose``, else the wrapper's last one.
+
+    The wrapper's localization layer holds the pose it put in the observation before a
+    configuration dropped it (``pixels``): camera centre and quaternion (w, x, y, z), the prior's
+    where the localization failed.
+    """
+    if "pose" in obs:
+        return obs["pose"]
+    world_from_cam = invert(_localize_poses(env).last_frames[agent].estimate.cam_from_world)
+    return np.concatenate([world_from_cam[:3, 3], quat_wxyz_from_matrix(world_from_cam[:3, :3])])
 
 
 def _localize_poses(env: Any) -> Any:

@@ -397,3 +397,30 @@ def test_the_learning_curve_ends_at_the_final_model_where_no_checkpoint_holds_it
     assert [s for s, _ in evaluate.checkpoint_folders(run)] == [128, 256]  # the last checkpoint is it
     shutil.rmtree(run / "checkpoints" / "step_000000256")  # a run from before the trainer saved it
     assert evaluate.checkpoint_folders(run) == [(128, run / "checkpoints" / "step_000000128"), (256, run)]
+
+
+def test_a_policy_from_pixels_trains_and_the_evaluator_reads_it_back(example, tmp_path):
+    """The ``pixels`` configuration: the image reaches the CNN as uint8 (not normalized) and the
+    safe loader rebuilds the model channel-first, predicting what SB3's own loader predicts."""
+    from stable_baselines3 import PPO
+
+    from uav_struct_env.training.policy_files import load_normalization, load_ppo
+    from uav_struct_env.wrappers import make_train_env
+
+    out = tmp_path / "pixels"
+    summary = example("train_viewpoint_ppo").main(
+        out=str(out), config="pixels", total_timesteps=64, n_envs=1, num_cpus=0, n_steps=16, batch_size=16,
+        n_epochs=1, max_cycles=4, progress_bar=False, seed=2)
+    assert summary["agent_steps"] == 64
+    assert set(load_normalization(out / "normalization.npz").mean) == {"gnss", "attitude"}
+    env = make_train_env("pixels", max_cycles=4)
+    try:
+        agent = env.possible_agents[0]
+        obs, _ = env.reset(seed=1)
+        ours = load_ppo(out / "model.zip", env.observation_space(agent), env.action_space(agent))
+        sb3 = PPO.load(out / "model.zip", device="cpu")
+        batch = {k: v[None] for k, v in obs[agent].items()}
+        np.testing.assert_array_equal(ours.predict(batch, deterministic=True)[0],
+                                      sb3.predict(batch, deterministic=True)[0])
+    finally:
+        env.close()

@@ -165,7 +165,7 @@ def test_clear_errors():
     with pytest.raises(ConfigError, match="failure_penalty must be finite and >= 0"):
         LocalizationWrapper(env2, failure_penalty=-1)
     with pytest.raises(ConfigError, match="config must be one of"):
-        make_train_env("pixels")
+        make_train_env("camera")
     with pytest.raises(ValueError, match="unknown agent"):
         LocalizationWrapper(env2).observation_space("uav_9")
 
@@ -334,3 +334,29 @@ def test_each_one_job_wrapper_needs_a_localize_poses_below():
     FilterPoses(poses)
     with pytest.raises(ConfigError, match="another FilterPoses"):
         FilterPoses(poses)
+
+
+def test_the_pixels_configuration_sees_camera_gnss_and_attitude_and_is_rewarded_as_image():
+    pixels = make_train_env("pixels", max_cycles=3)
+    image = make_train_env("image", max_cycles=3)
+    try:
+        space = pixels.observation_space(pixels.possible_agents[0])
+        assert sorted(space.spaces) == ["attitude", "gnss", "image"]
+        obs_p, _ = pixels.reset(seed=4)
+        obs_i, _ = image.reset(seed=4)
+        zero = {a: np.zeros(5, np.float32) for a in pixels.agents}
+        obs_p, rew_p, *_, info_p = pixels.step(zero)
+        obs_i, rew_i, *_, info_i = image.step(zero)
+        for agent in pixels.agents:  # the same env and reward; only what the policy sees differs
+            assert sorted(obs_p[agent]) == ["attitude", "gnss", "image"] and space.contains(obs_p[agent])
+            np.testing.assert_array_equal(obs_p[agent]["image"], obs_i[agent]["image"])
+            assert rew_p[agent] == rew_i[agent] and "pose" in obs_i[agent]
+            assert info_p[agent]["reward_terms"] == info_i[agent]["reward_terms"]
+    finally:
+        pixels.close()
+        image.close()
+    env = uav_struct_env.parallel_env("train", landmark_sets=("column_tops",), **SMALL)
+    with pytest.raises(ConfigError, match="cannot drop \\['altitude'\\]"):
+        LocalizationWrapper(env, drop_keys=("layout", "altitude"))
+    with pytest.raises(ConfigError, match="not 'layout'"):
+        LocalizationWrapper(env, drop_keys="layout")

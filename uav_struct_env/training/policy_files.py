@@ -217,8 +217,10 @@ def load_ppo(path: str | Path, observation_space: Any, action_space: Any, *, dev
     """SB3 ``PPO.load`` of ``model.zip`` without unpickling its cloudpickled entries.
 
     ``observation_space`` and ``action_space`` are the env's (one agent's); the policy class is
-    ``MultiInputPolicy`` for dict observations, else ``MlpPolicy``. Training-only state (the last
-    observations, episode buffers, schedules) is replaced by empty values: the model predicts.
+    ``MultiInputPolicy`` for dict observations, else ``MlpPolicy``. An image key is given to the
+    model channel-first, as SB3 trained it (``VecTransposeImage``); its ``predict`` transposes
+    the env's channel-last images itself. Training-only state (the last observations, episode
+    buffers, schedules) is replaced by empty values: the model predicts.
 
     Raises:
         ValueError: ``path`` is not an SB3 model file, or holds a pickled entry this function
@@ -227,6 +229,8 @@ def load_ppo(path: str | Path, observation_space: Any, action_space: Any, *, dev
     from gymnasium import spaces
     from stable_baselines3 import PPO
     from stable_baselines3.common.policies import ActorCriticPolicy, MultiInputActorCriticPolicy
+    from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
+    from stable_baselines3.common.vec_env import VecTransposeImage
 
     try:
         with zipfile.ZipFile(path) as archive:
@@ -235,6 +239,12 @@ def load_ppo(path: str | Path, observation_space: Any, action_space: Any, *, dev
         raise ValueError(f"{str(path)!r} is not a stable-baselines3 model file: {err}") from None
     pickled = sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
     policy = MultiInputActorCriticPolicy if isinstance(observation_space, spaces.Dict) else ActorCriticPolicy
+    if isinstance(observation_space, spaces.Dict):
+        channel_last = {k for k, s in observation_space.spaces.items()
+                        if is_image_space(s) and not is_image_space_channels_first(s)}
+        observation_space = spaces.Dict({
+            k: VecTransposeImage.transpose_space(s, k) if k in channel_last else s
+            for k, s in observation_space.spaces.items()})
     replacements: dict[str, Any] = {
         "policy_class": policy,
         "observation_space": observation_space,

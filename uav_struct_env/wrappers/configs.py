@@ -15,6 +15,10 @@ on 2 CPU cores (docs/training.md):
   SB3's NatureCNN, several times slower per step to learn from), drawn by the batched renderer
   (``renderer="batch"``, :mod:`uav_struct_env.sim.batch`: the same body at 99+ % of pixels and the
   same landmark visibility as TinyRenderer, ``benchmarks/batch_render.py``).
+* ``"pixels"``: the ``image`` configuration's env and reward, but the policy sees only what a UAV
+  has before any localization: the 64 x 36 ``image``, ``gnss`` and ``attitude`` (no ``pose``,
+  ``pose_std``, ``localized`` or ``layout``: the projection detector that makes them reads the
+  simulator's landmark truth). A viewpoint policy from the camera (issue 41, item 4).
 """
 
 from __future__ import annotations
@@ -71,7 +75,7 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, data: Any) -> TrainConfig:
-        """The configuration :meth:`as_dict` wrote (lists of the env back to tuples).
+        """The configuration :meth:`as_dict` wrote (the env's and wrapper's lists back to tuples).
 
         Raises:
             ConfigError: if ``data`` is not such a mapping.
@@ -83,8 +87,9 @@ class TrainConfig:
                 f"a training configuration must be a mapping with keys {sorted(keys)} (env and "
                 f"wrapper mappings), got {data!r}"
             )
-        env = {k: tuple(v) if isinstance(v, list) else v for k, v in data["env"].items()}
-        return cls(str(data["name"]), env, dict(data["wrapper"]), str(data["preset"]))
+        env, wrapper = ({k: tuple(v) if isinstance(v, list) else v for k, v in data[part].items()}
+                        for part in ("env", "wrapper"))
+        return cls(str(data["name"]), env, wrapper, str(data["preset"]))
 
 
 _STATE_ENV = {
@@ -109,6 +114,11 @@ TRAIN_CONFIGS: dict[str, TrainConfig] = {
         "image",
         env={**_STATE_ENV, "image_size": (64, 36), "renderer": "batch"},
         wrapper={**_WRAPPER, "drop_image": False},
+    ),
+    "pixels": TrainConfig(
+        "pixels",
+        env={**_STATE_ENV, "image_size": (64, 36), "renderer": "batch"},
+        wrapper={**_WRAPPER, "drop_image": False, "drop_keys": ("pose", "pose_std", "localized", "layout")},
     ),
 }
 

@@ -7,7 +7,7 @@ A thin composition of the one-job wrappers, kept for its keyword arguments::
     -> FilterPoses(filter_noise)    with temporal=True: pose, pose_std, localized filtered over time
     -> LayoutObservation            layout (privileged=True: component 0 is the true visible fraction)
     -> RewardWrapper(reward)        reward = sum of the reward object's terms; info["reward_terms"]
-    -> DropKeys(("image",))         with drop_image=True (state-only training)
+    -> DropKeys(...)                ``image`` with drop_image=True (state-only training), and drop_keys
 
 Its ``env`` is the outermost of them (so :func:`~uav_struct_env.wrappers.base.find_wrapper` finds
 each one); the env it was given is the innermost one's. See
@@ -22,6 +22,7 @@ visible fraction in ``layout[0]``.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -87,6 +88,10 @@ class LocalizationWrapper(ParallelWrapper):
         false_positives: mean clutter detections per image.
         drop_image: remove ``image`` from the observation after localizing (nothing to drop
             when the env renders none, ``observe_image=False``).
+        drop_keys: more observation keys to remove after the reward is computed, e.g.
+            ``("pose", "pose_std", "localized", "layout")`` for a policy that sees only its camera,
+            GNSS and attitude (the ``pixels`` training configuration); the reward still scores
+            the localization.
         rotation_weight: metres of reward per degree of rotation error (``error`` reward).
         failure_penalty: reward term of a failed localization (>= 0, subtracted).
         error_cap: cap (m) on the translation, rotation and uncertainty terms; default
@@ -133,6 +138,7 @@ class LocalizationWrapper(ParallelWrapper):
         miss_rate: float = 0.0,
         false_positives: float = 0.0,
         drop_image: bool = False,
+        drop_keys: Sequence[str] = (),
         rotation_weight: float = 0.1,
         failure_penalty: float = 1.0,
         error_cap: float | None = None,
@@ -178,8 +184,13 @@ class LocalizationWrapper(ParallelWrapper):
             self.tracks = chain.tracks
         chain = RewardWrapper(LayoutObservation(chain, privileged=privileged), self.reward)
         self.drop_image = bool(drop_image)
-        if self.drop_image and "image" in env.observation_space(env.possible_agents[0]).spaces:
-            chain = DropKeys(chain, ("image",))
+        if isinstance(drop_keys, str):
+            raise ConfigError(f"drop_keys must be a sequence of observation keys, not {drop_keys!r}")
+        self.drop_keys = tuple(drop_keys)
+        rendered = "image" in env.observation_space(env.possible_agents[0]).spaces
+        dropped = (("image",) if self.drop_image and rendered else ()) + self.drop_keys
+        if dropped:
+            chain = DropKeys(chain, dropped)
         super().__init__(chain)
         self.detector_name = detector if isinstance(detector, str) else type(detector).__name__
         self.association = association
@@ -201,6 +212,7 @@ class LocalizationWrapper(ParallelWrapper):
         return (
             f"LocalizationWrapper({self.poses.env!r}, landmarks={self.poses.landmarks!r}, "
             f"detector={self.detector_name!r}, association={self.association!r}, "
-            f"reward={self.reward_name!r}, drop_image={self.drop_image}, temporal={self.temporal}, "
+            f"reward={self.reward_name!r}, drop_image={self.drop_image}, drop_keys={self.drop_keys}, "
+            f"temporal={self.temporal}, "
             f"warm_start={self.warm_start})"
         )
