@@ -33,6 +33,7 @@ templates were matched under are not passed on). Ground truth in the context fil
 from __future__ import annotations
 
 import copy
+import itertools
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -42,6 +43,7 @@ from numpy.typing import NDArray
 from localization import Detections, Localizer
 from localization.detect.guided import Matches, TemplateMatcher
 from localization.detect.learned import truth_ids
+from localization.detect.prior_align import PriorAligner, fit_matches
 from localization.geometry.distortion import distort_points
 from localization.geometry.transforms import project
 
@@ -93,8 +95,14 @@ class GuidedDetector:
 
     def __init__(self, seed: Any, types: Sequence[int], localizer: Localizer, matcher: TemplateMatcher,
                  landmarks: str, anchors: Localizer | None = None, merge_px: float = 8.0,
-                 match_px: float = 3.0, probe_search_px: int = 16) -> None:
+                 match_px: float = 3.0, probe_search_px: int = 16, aligner: PriorAligner | None = None,
+                 align_search_px: int = 32, min_gain: float = 1.03) -> None:
         self.seed = seed
+        self.aligner = PriorAligner(matcher.templates) if aligner is None else aligner
+        self.align_search_px = align_search_px
+        self.min_gain = float(min_gain)
+        every = matcher.xyz if anchors is None else anchors.landmarks_xyz
+        self.wide = TemplateMatcher(every, matcher.templates)
         self.probe_search_px = probe_search_px
         self._probes = tuple(_unverified(x) for x in (anchors, localizer) if x is not None)
         self.types = tuple(int(t) for t in types)
@@ -123,19 +131,67 @@ class GuidedDetector:
         first = Detections(uv[mine], scores[mine])
         prior = context["prior_cam_from_world"]
         pose, confirmed = self.first_pose(first, Detections(uv, scores), prior)
-        if pose is not None and not confirmed:
-            found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion,
-                                      search_px=self.probe_search_px)
-            uv, scores = merged(first, found, self.merge_px)
-            est = self.localizer.localize(Detections(uv, scores), prior)
-            pose = est.cam_from_world if est.success else None
-        else:
-            uv, scores = first.uv, first.scores
+        if not confirmed:
+            pose = self.confirmed_pose(image, first, prior, pose)
+        uv, scores = first.uv, first.scores
         if pose is not None:
             found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion)
             uv, scores = merged(self.near(first, pose), found, self.merge_px)
         truth = context.get("landmarks", {}).get(self.landmarks)
         return Detections(uv=uv, scores=scores, true_ids=truth_ids(uv, truth, self.match_px))
+
+    def confirmed_pose(self, image: Any, first: Detections, prior: NDArray[np.float64],
+                       unconfirmed: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
+        """A pose the set's localizer confirms from a wide template pass, or None.
+
+        The starts are the first pass's unconfirmed pose, then the poses where the building
+        model drawn at the prior aligns with the image (:meth:`starts`). At each, the set's
+        templates are matched within ``probe_search_px`` and localized with the set's candidates,
+        with the verification; a pose so confirmed must also draw the whole model on the image
+        at least ``min_gain`` times as well as its start did (:meth:`PriorAligner.score`): the
+        matches around a wrong start can be consistent with a wrong pose, which then places the
+        rest of the structure off its edges.
+        """
+        K, distortion = self.localizer.K, self.localizer.distortion
+        starts = [] if unconfirmed is None else [(unconfirmed, None)]
+        for k in itertools.count():
+            if k == len(starts):
+                if k > (unconfirmed is not None) or self.aligner is None:
+                    return None
+                starts += self.starts(image, prior)
+                if k == len(starts):
+                    return None
+            start, reference = starts[k]
+            found = self.matcher.find(image, start, K, distortion, search_px=self.probe_search_px)
+            uv, scores = merged(first, found, self.merge_px)
+            est = self.localizer.localize(Detections(uv, scores), prior)
+            if not est.success or self.aligner is None:
+                if est.success:
+                    return est.cam_from_world
+                continue
+            if reference is None:
+                reference = self.aligner.score(image, start, K)
+            if self.aligner.score(image, est.cam_from_world, K) >= self.min_gain * reference:
+                return est.cam_from_world
+        return None
+
+    def starts(self, image: Any, prior: NDArray[np.float64]) -> list[tuple[NDArray[np.float64], float]]:
+        """``(pose, score)`` of each alignment of the model drawn at the prior with the image, best first.
+
+        Each pose is corrected by a pose fitted to the template matches of every structural
+        landmark within ``align_search_px`` of it (:meth:`refined`): the alignment moves the
+        structure as one picture, so the building's depth leaves its landmarks ten to thirty
+        pixels off.
+        """
+        return [(self.refined(image, a.cam_from_world), a.score)
+                for a in self.aligner.align(image, prior, self.localizer.K)]
+
+    def refined(self, image: Any, pose: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``pose`` corrected by a fit to every structural landmark's matches within ``align_search_px``."""
+        found = self.wide.find(image, pose, self.localizer.K, self.localizer.distortion,
+                               search_px=self.align_search_px)
+        fitted = fit_matches(self.wide.xyz, found, self.localizer.K, self.localizer.distortion, pose)
+        return pose if fitted is None else fitted
 
     def near(self, first: Detections, pose: NDArray[np.float64]) -> Detections:
         """The first-pass detections within the search radius of a landmark's projection at ``pose``.
