@@ -106,6 +106,7 @@ class PriorAligner:
         self.min_separation_px = float(check_number("min_separation_px", min_separation_px, 0.0,
                                                     type_error=ValueError))
         self.min_score = float(check_number("min_score", min_score, -1.0, 1.0, type_error=ValueError))
+        self._last: tuple[NDArray[np.uint8], tuple[int, int], NDArray[np.float32]] | None = None
 
     def align(self, image: ArrayLike, prior_cam_from_world: ArrayLike, K: ArrayLike) -> list[Alignment]:
         """Hypotheses of the model's place in ``image`` ((H, W, 3) uint8 RGB), best first; [] without any.
@@ -174,10 +175,17 @@ class PriorAligner:
         x0, y0 = max(int(xs.min()) - 2, 0), max(int(ys.min()) - 2, 0)
         x1, y1 = min(int(xs.max()) + 3, size[0]), min(int(ys.max()) + 3, size[1])
         crop = orientation_field(structure_shading(views)[0], _MODEL_BLUR_PX)[y0:y1, x0:x1]
+        level = _Level(self._image_field(img, size), crop, np.array([x0, y0], dtype=np.float64), Kq[:2, 2])
+        return level, _surface_points(views.depth[0], model, Kq, cam_from_world)
+
+    def _image_field(self, img: NDArray[np.uint8], size: tuple[int, int]) -> NDArray[np.float32]:
+        """The orientation field of ``img`` at ``size``; the last one is kept (one frame's calls share it)."""
+        if self._last is not None and self._last[0] is img and self._last[1] == size:
+            return self._last[2]
         small = cv2.cvtColor(cv2.resize(img, size, interpolation=cv2.INTER_AREA), cv2.COLOR_RGB2GRAY)
         field = orientation_field(small.astype(np.float32))
-        level = _Level(field, crop, np.array([x0, y0], dtype=np.float64), Kq[:2, 2])
-        return level, _surface_points(views.depth[0], model, Kq, cam_from_world)
+        self._last = (img, size, field)
+        return field
 
     def _coarse(self, level: _Level, q: float) -> list[_Motion]:
         """The best motions at half the alignment's resolution, distinct in shift, best first."""
