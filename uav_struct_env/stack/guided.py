@@ -15,8 +15,18 @@ builds (:func:`uav_struct_env.stack.build_stack`). Per frame:
 2. **An unconfirmed pose: a wide pass.** The templates are matched within
    ``probe_search_px`` (16 px) of the landmarks' projections at it; the matches and every
    candidate of the set's type are localized by the set's own localizer, with verification.
-   Only a pose confirmed there goes on; otherwise these are the detections.
-3. **The narrow pass.** At a confirmed pose, the building model is rendered around every
+   Only a pose confirmed there goes on.
+3. **No pose at all: the model aligned at the prior.** Where neither gives a pose (or the
+   unconfirmed one leads nowhere), the whole structure drawn at the prior is aligned with the
+   image (:class:`localization.detect.prior_align.PriorAligner`: a zoom, a rotation and a shift
+   of the picture, coarse to fine); each of its (two) hypotheses is corrected by a pose fitted to
+   the template matches of every structural landmark within ``align_search_px`` (32 px) of it
+   (:func:`~localization.detect.prior_align.fit_matches`) and is then a start of the wide pass.
+   A pose the wide pass confirms from any start must also draw the whole model on the image at
+   least ``min_gain`` (1.03) times as well as its start did
+   (:meth:`~localization.detect.prior_align.PriorAligner.score`); else the next start is tried.
+   Without a confirmed pose, the set's candidates are the detections.
+4. **The narrow pass.** At a confirmed pose, the building model is rendered around every
    landmark it shows (:class:`uav_struct_env.sim.templates.SiteTemplates`) and matched in the
    image within a few pixels (:class:`localization.detect.guided.TemplateMatcher`). The
    detections are the set's candidates that lie where a landmark projects at that pose (within
@@ -33,8 +43,7 @@ templates were matched under are not passed on). Ground truth in the context fil
 from __future__ import annotations
 
 import copy
-import itertools
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -91,6 +100,10 @@ class GuidedDetector:
             kept), px.
         match_px: radius of the ground-truth matching that fills ``true_ids``, px.
         probe_search_px: half-size of the template search at an unconfirmed first pose, px.
+        aligner: the :class:`~localization.detect.prior_align.PriorAligner` where the first pass
+            gives no pose (None: one of the matcher's templates with its defaults).
+        align_search_px: half-size of the template search around an alignment's pose, px.
+        min_gain: least ratio of a confirmed pose's :meth:`PriorAligner.score` to its start's.
     """
 
     def __init__(self, seed: Any, types: Sequence[int], localizer: Localizer, matcher: TemplateMatcher,
@@ -153,27 +166,24 @@ class GuidedDetector:
         rest of the structure off its edges.
         """
         K, distortion = self.localizer.K, self.localizer.distortion
-        starts = [] if unconfirmed is None else [(unconfirmed, None)]
-        for k in itertools.count():
-            if k == len(starts):
-                if k > (unconfirmed is not None) or self.aligner is None:
-                    return None
-                starts += self.starts(image, prior)
-                if k == len(starts):
-                    return None
-            start, reference = starts[k]
+        for start, reference in self._each_start(image, prior, unconfirmed):
             found = self.matcher.find(image, start, K, distortion, search_px=self.probe_search_px)
             uv, scores = merged(first, found, self.merge_px)
             est = self.localizer.localize(Detections(uv, scores), prior)
-            if not est.success or self.aligner is None:
-                if est.success:
-                    return est.cam_from_world
+            if not est.success:
                 continue
             if reference is None:
                 reference = self.aligner.score(image, start, K)
             if self.aligner.score(image, est.cam_from_world, K) >= self.min_gain * reference:
                 return est.cam_from_world
         return None
+
+    def _each_start(self, image: Any, prior: NDArray[np.float64],
+                    unconfirmed: NDArray[np.float64] | None) -> Iterator[tuple[NDArray, float | None]]:
+        """The first pass's unconfirmed pose (its reference score unknown), then :meth:`starts`, lazily."""
+        if unconfirmed is not None:
+            yield unconfirmed, None
+        yield from self.starts(image, prior)
 
     def starts(self, image: Any, prior: NDArray[np.float64]) -> list[tuple[NDArray[np.float64], float]]:
         """``(pose, score)`` of each alignment of the model drawn at the prior with the image, best first.
