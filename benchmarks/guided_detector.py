@@ -86,7 +86,7 @@ def _frame(stacks: dict, image, info: dict, flip: bool, times: dict) -> None:
         if pose is not None:  # the narrow pass (an unconfirmed first pose adds a wide one and a localization)
             dt_find = _timed(g.matcher.find, image, pose, g.localizer.K, g.localizer.distortion)[0]
         else:  # no first pose: the model aligned at the prior and each alignment's fitted pose
-            dt_align = _timed(g.starts, image, prior)[0]
+            dt_align = _timed(list, g.starts(image, prior))[0]
         parts = (("learned, all types", dt_seed), ("first localization", dt_pose), ("templates", dt_find),
                  ("alignment from the prior", dt_align))
         for part, dt in parts:

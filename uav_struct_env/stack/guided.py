@@ -185,16 +185,16 @@ class GuidedDetector:
             yield unconfirmed, None
         yield from self.starts(image, prior)
 
-    def starts(self, image: Any, prior: NDArray[np.float64]) -> list[tuple[NDArray[np.float64], float]]:
+    def starts(self, image: Any, prior: NDArray[np.float64]) -> Iterator[tuple[NDArray[np.float64], float]]:
         """``(pose, score)`` of each alignment of the model drawn at the prior with the image, best first.
 
         Each pose is corrected by a pose fitted to the template matches of every structural
-        landmark within ``align_search_px`` of it (:meth:`refined`): the alignment moves the
-        structure as one picture, so the building's depth leaves its landmarks ten to thirty
-        pixels off.
+        landmark within ``align_search_px`` of it (:meth:`refined`), when it is reached: the
+        alignment moves the structure as one picture, so the building's depth leaves its
+        landmarks ten to thirty pixels off.
         """
-        return [(self.refined(image, a.cam_from_world), a.score)
-                for a in self.aligner.align(image, prior, self.localizer.K)]
+        for a in self.aligner.align(image, prior, self.localizer.K):
+            yield self.refined(image, a.cam_from_world), a.score
 
     def refined(self, image: Any, pose: NDArray[np.float64]) -> NDArray[np.float64]:
         """``pose`` corrected by a fit to every structural landmark's matches within ``align_search_px``."""
