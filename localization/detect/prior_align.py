@@ -11,19 +11,24 @@ wireframe, coarse to fine):
   label-shaded structure whose gradients lie on the model's edges
   (:func:`~localization.detect.guided.structure_shading`);
 * its orientation field (:func:`~localization.detect.guided.orientation_field`), cropped to the
-  structure and resized by each of a few ``zooms`` (the prior's error along the line of sight
-  changes the building's size in the frame by up to ~15 %), is correlated with the image's over
-  shifts up to ``search_px``;
+  structure, zoomed and turned about the principal point (the prior's error along the line of
+  sight changes the building's size in the frame by up to ~15 %, its attitude error turns it by
+  a few degrees, up to ~13 on the train buildings), is correlated with the image's over shifts up
+  to ``search_px``: first at half that resolution over a grid of ``zooms`` x ``angles_deg``, then
+  twice more finely around the best peaks (zoom 3.3 % and 4 deg steps, then 1.6 % and 2 deg),
+  and last for the shift alone at the alignment's resolution;
 * the best peaks, distinct in shift, are the hypotheses: each is an image motion
-  ``u' = c + d + s (u - c)`` (zoom ``s`` about the principal point ``c``, shift ``d``) of the
-  structure drawn at the prior, turned into a camera pose by PnP from points of the model's surface
-  (read from the render's depth) to where that motion moves them, starting at the prior.
+  ``u' = c + d + s R (u - c)`` (zoom ``s`` and rotation ``R`` about the principal point ``c``,
+  shift ``d``) of the structure drawn at the prior, turned into a camera pose by PnP from points
+  of the model's surface (read from the render's depth) to where that motion moves them,
+  starting at the prior.
 
-A hypothesis only says where to look: its pose is the prior's, corrected by a zoom and a shift,
-so the building's depth (parallax) still leaves its landmarks ten to thirty pixels off. The
-guided detector (``uav_struct_env.stack.guided``) searches the templates around them from it and
-fits a pose to their matches before the wide pass; what it reports still comes from the
-association, PnP and verification of the stack.
+A hypothesis only says where to look: its pose is the prior's moved as one picture, so the
+building's depth (parallax) still leaves its landmarks ten to thirty pixels off. The guided
+detector (``uav_struct_env.stack.guided``) searches the templates around them from it and fits a
+pose to their matches (:func:`fit_matches`) before its wide pass; what it reports still comes
+from the association, PnP and verification of the stack. :meth:`PriorAligner.score` measures how
+well the model drawn at any pose lies on the image, the same way.
 """
 
 from __future__ import annotations
@@ -86,8 +91,8 @@ class PriorAligner:
     """
 
     def __init__(self, templates: TemplateSource, *, scale: float = 0.25,
-                 zooms: tuple[float, ...] = (0.82, 0.88, 0.94, 1.0, 1.06, 1.12),
-                 angles_deg: tuple[float, ...] = (-10.0, -5.0, 0.0, 5.0, 10.0), search_px: int = 320,
+                 zooms: tuple[float, ...] = (0.84, 0.92, 1.0, 1.08, 1.16),
+                 angles_deg: tuple[float, ...] = (-8.0, 0.0, 8.0), search_px: int = 320,
                  n_hypotheses: int = 2, min_separation_px: float = 24.0, min_score: float = 0.05) -> None:
         if not isinstance(templates, TemplateSource):
             raise TypeError(
@@ -126,9 +131,12 @@ class PriorAligner:
         if level is None:  # the model is (almost) out of the frame at the prior
             return []
         q = level.field.shape[1] / img.shape[1]
+        half = level.halved()
         out: list[Alignment] = []
-        for motion in self._coarse(level, q):
-            score, motion = level.refine(motion, _FINE_STEPS, _FINE_RADIUS)
+        for motion in self._coarse(half, q / 2):
+            for steps in _FINE_STEPS:
+                _, motion = half.refine(motion, steps, _FINE_RADIUS)
+            score, motion = level.refine(motion.scaled(2.0), _SHIFT_ONLY, _FINE_RADIUS)
             full = _Motion(motion.zoom, motion.angle, motion.shift / q)
             if score < self.min_score or any(
                     np.hypot(*(full.shift - a.shift_px)) < self.min_separation_px for a in out):
@@ -188,15 +196,13 @@ class PriorAligner:
         return field
 
     def _coarse(self, level: _Level, q: float) -> list[_Motion]:
-        """The best motions at half the alignment's resolution, distinct in shift, best first."""
-        half = level.halved()
-        R = max(int(round(self.search_px * q / 2)), 1)
-        sep = self.min_separation_px * q / 2
+        """The best motions at ``level`` (``q`` of the frame's resolution), distinct in shift, best first."""
+        R = max(int(round(self.search_px * q)), 1)
+        sep = self.min_separation_px * q
         peaks = []
         for zoom in self.zooms:
             for angle in self.angles:
-                for score, m in half.peaks(_Motion(zoom, angle, np.zeros(2)), R, sep):
-                    peaks.append((score, _Motion(m.zoom, m.angle, 2.0 * m.shift)))
+                peaks += level.peaks(_Motion(zoom, angle, np.zeros(2)), R, sep)
         peaks.sort(key=lambda p: -p[0])
         out: list[_Motion] = []
         for _, m in peaks:
@@ -211,8 +217,10 @@ class PriorAligner:
 
 #: The fine level's steps around a coarse peak (zoom factor, rotation in rad), and its shift
 #: radius (alignment px).
-_FINE_STEPS = tuple((z, np.radians(a)) for z in (0.98, 1.0, 1.02) for a in (-2.0, 0.0, 2.0))
+_FINE_STEPS = tuple(tuple((1.0 + z, np.radians(a)) for z in (-dz, 0.0, dz) for a in (-da, 0.0, da))
+                    for dz, da in ((0.033, 4.0), (0.016, 2.0)))
 _FINE_RADIUS = 2
+_SHIFT_ONLY = ((1.0, 0.0),)
 
 
 @dataclass(frozen=True, eq=False)
@@ -222,6 +230,10 @@ class _Motion:
     zoom: float
     angle: float  # rad, image coordinates (x right, y down)
     shift: NDArray[np.float64]
+
+    def scaled(self, factor: float) -> _Motion:
+        """The same motion at ``factor`` times the resolution."""
+        return _Motion(self.zoom, self.angle, factor * self.shift)
 
     def matrix(self) -> NDArray[np.float64]:
         """(2, 2) ``zoom R(angle)``."""

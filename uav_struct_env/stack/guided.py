@@ -20,7 +20,7 @@ builds (:func:`uav_struct_env.stack.build_stack`). Per frame:
    unconfirmed one leads nowhere), the whole structure drawn at the prior is aligned with the
    image (:class:`localization.detect.prior_align.PriorAligner`: a zoom, a rotation and a shift
    of the picture, coarse to fine); each of its (two) hypotheses is corrected by a pose fitted to
-   the template matches of every structural landmark within ``align_search_px`` (32 px) of it
+   the template matches of every structural landmark within ``align_search_px`` (24 px) of it
    (:func:`~localization.detect.prior_align.fit_matches`) and is then a start of the wide pass.
    A pose the wide pass confirms from any start must also draw the whole model on the image at
    least ``min_gain`` (1.03) times as well as its start did
@@ -109,7 +109,7 @@ class GuidedDetector:
     def __init__(self, seed: Any, types: Sequence[int], localizer: Localizer, matcher: TemplateMatcher,
                  landmarks: str, anchors: Localizer | None = None, merge_px: float = 8.0,
                  match_px: float = 3.0, probe_search_px: int = 16, aligner: PriorAligner | None = None,
-                 align_search_px: int = 32, min_gain: float = 1.03) -> None:
+                 align_search_px: int = 24, min_gain: float = 1.03) -> None:
         self.seed = seed
         self.aligner = PriorAligner(matcher.templates) if aligner is None else aligner
         self.align_search_px = align_search_px
