@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-import uav_struct_env
 from localization.detect.guided import Matches
 from localization.detect.learned import LANDMARK_TYPES
 from localization.detect.prior_align import PriorAligner, fit_matches
@@ -13,23 +12,14 @@ from uav_struct_env.sim.templates import SiteTemplates
 from uav_struct_env.stack import StackSpec, build_stack
 
 
-@pytest.fixture(scope="module")
-def view():
-    """One 1280 x 720 frame of the paper site's slab stage: (site, image, info of uav_1)."""
-    env = uav_struct_env.parallel_env(image_size=(1280, 720), stage="slab", renderer="tiny")
-    obs, infos = env.reset(seed=0, options={"viewpoint": 0})
-    yield env.site, obs["uav_1"]["image"], infos["uav_1"]
-    env.close()
-
-
 def _pixel_error(K, cam_from_world, truth_cam_from_world, xyz):
     a, _ = project(K, cam_from_world, xyz)
     b, _ = project(K, truth_cam_from_world, xyz)
     return float(np.median(np.hypot(*(a - b).T)))
 
 
-def test_the_model_drawn_at_the_prior_is_aligned_with_the_image(view):
-    site, image, info = view
+def test_the_model_drawn_at_the_prior_is_aligned_with_the_image(slab_view):
+    site, image, info = slab_view
     K = info["intrinsics"]
     prior, truth = invert(info["prior_world_from_cam"]), invert(info["world_from_cam"])
     xyz = site.landmarks("all").xyz
@@ -44,16 +34,16 @@ def test_the_model_drawn_at_the_prior_is_aligned_with_the_image(view):
     assert aligner.score(image, truth, K) > max(h.score for h in hypotheses) > aligner.score(image, prior, K)
 
 
-def test_no_hypothesis_without_the_model_in_the_frame(view):
-    site, image, info = view
+def test_no_hypothesis_without_the_model_in_the_frame(slab_view):
+    site, image, info = slab_view
     away = np.diag([-1.0, 1.0, -1.0, 1.0]) @ invert(info["prior_world_from_cam"])  # turned round
     aligner = PriorAligner(SiteTemplates(site))
     assert aligner.align(image, away, info["intrinsics"]) == []
     assert aligner.score(image, away, info["intrinsics"]) == -1.0
 
 
-def test_aligner_refuses_bad_input(view):
-    site, image, info = view
+def test_aligner_refuses_bad_input(slab_view):
+    site, image, info = slab_view
     with pytest.raises(TypeError, match="templates must have render"):
         PriorAligner(object())
     with pytest.raises(ValueError, match="zooms and angles_deg"):
@@ -101,8 +91,8 @@ def _stack(site, info, **detector_kwargs):
     return stack
 
 
-def test_without_any_candidate_the_alignment_gives_the_pose_and_its_gate_can_refuse_it(view):
-    site, image, info = view
+def test_without_any_candidate_the_alignment_gives_the_pose_and_its_gate_can_refuse_it(slab_view):
+    site, image, info = slab_view
     prior, truth = invert(info["prior_world_from_cam"]), invert(info["world_from_cam"])
     stack = _stack(site, info)
     assert stack.detector.types == (LANDMARK_TYPES.index("slab_corners"),)
