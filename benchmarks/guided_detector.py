@@ -8,7 +8,10 @@ by about 10 % within minutes, so only figures of the same run compare). One thre
 runs one per network and ``cv2.setNumThreads(1)``; the template renderer is single-threaded.
 The guided figure is its whole detection: the learned detector, the first localization, the
 template matching (and, from a first pose the verification did not confirm, the wide template
-pass and its localization); its parts are printed too (the narrow pass as "templates").
+pass and its localization; without any first pose, the model aligned with the image at the
+prior, the wide passes from its hypotheses and their localizations); its parts are printed too
+(the narrow pass as "templates", where a first pose exists; the alignment and its hypotheses'
+fitted poses as "alignment from the prior", where none does).
 
     python benchmarks/guided_detector.py                                   # the paper site, both stages
     python benchmarks/guided_detector.py --site tests/data/ifc/duplex.ifc --stages "Roof/slab"
@@ -79,10 +82,13 @@ def _frame(stacks: dict, image, info: dict, flip: bool, times: dict) -> None:
         mine = np.isin(types, g.types)
         dt_pose, (pose, _) = _timed(g.first_pose, Detections(uv[mine], scores[mine]), Detections(uv, scores),
                                     prior)
-        dt_find = float("nan")
+        dt_find = dt_align = float("nan")
         if pose is not None:  # the narrow pass (an unconfirmed first pose adds a wide one and a localization)
             dt_find = _timed(g.matcher.find, image, pose, g.localizer.K, g.localizer.distortion)[0]
-        parts = (("learned, all types", dt_seed), ("first localization", dt_pose), ("templates", dt_find))
+        else:  # no first pose: the model aligned at the prior and each alignment's fitted pose
+            dt_align = _timed(list, g.starts(image, prior))[0]
+        parts = (("learned, all types", dt_seed), ("first localization", dt_pose), ("templates", dt_find),
+                 ("alignment from the prior", dt_align))
         for part, dt in parts:
             times.setdefault((name, "guided: " + part), []).append(dt)
 

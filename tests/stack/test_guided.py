@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-import uav_struct_env
 from localization import Detections
 from localization.detect.guided import (
     Matches,
@@ -18,15 +17,6 @@ from uav_struct_env.errors import ConfigError
 from uav_struct_env.sim.templates import SiteTemplates
 from uav_struct_env.stack import StackSpec, build_stack
 from uav_struct_env.stack.guided import GuidedDetector, merged
-
-
-@pytest.fixture(scope="module")
-def slab_view():
-    """One 1280 x 720 frame of the paper site's slab stage: (site, image, info of uav_0)."""
-    env = uav_struct_env.parallel_env(image_size=(1280, 720), stage="slab", renderer="tiny")
-    obs, infos = env.reset(seed=0, options={"viewpoint": 0})
-    yield env.site, obs["uav_1"]["image"], infos["uav_1"]
-    env.close()
 
 
 def test_templates_draw_the_model_where_it_projects(slab_view):

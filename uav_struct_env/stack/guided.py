@@ -15,8 +15,18 @@ builds (:func:`uav_struct_env.stack.build_stack`). Per frame:
 2. **An unconfirmed pose: a wide pass.** The templates are matched within
    ``probe_search_px`` (16 px) of the landmarks' projections at it; the matches and every
    candidate of the set's type are localized by the set's own localizer, with verification.
-   Only a pose confirmed there goes on; otherwise these are the detections.
-3. **The narrow pass.** At a confirmed pose, the building model is rendered around every
+   Only a pose confirmed there goes on.
+3. **No pose at all: the model aligned at the prior.** Where neither gives a pose (or the
+   unconfirmed one leads nowhere), the whole structure drawn at the prior is aligned with the
+   image (:class:`localization.detect.prior_align.PriorAligner`: a zoom, a rotation and a shift
+   of the picture, coarse to fine); each of its (two) hypotheses is corrected by a pose fitted to
+   the template matches of every structural landmark within ``align_search_px`` (24 px) of it
+   (:func:`~localization.detect.prior_align.fit_matches`) and is then a start of the wide pass.
+   A pose the wide pass confirms from any start must also draw the whole model on the image at
+   least ``min_gain`` (1.03) times as well as its start did
+   (:meth:`~localization.detect.prior_align.PriorAligner.score`); else the next start is tried.
+   Without a confirmed pose, the set's candidates are the detections.
+4. **The narrow pass.** At a confirmed pose, the building model is rendered around every
    landmark it shows (:class:`uav_struct_env.sim.templates.SiteTemplates`) and matched in the
    image within a few pixels (:class:`localization.detect.guided.TemplateMatcher`). The
    detections are the set's candidates that lie where a landmark projects at that pose (within
@@ -33,7 +43,7 @@ templates were matched under are not passed on). Ground truth in the context fil
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -42,6 +52,7 @@ from numpy.typing import NDArray
 from localization import Detections, Localizer
 from localization.detect.guided import Matches, TemplateMatcher
 from localization.detect.learned import truth_ids
+from localization.detect.prior_align import PriorAligner, fit_matches
 from localization.geometry.distortion import distort_points
 from localization.geometry.transforms import project
 
@@ -89,12 +100,22 @@ class GuidedDetector:
             kept), px.
         match_px: radius of the ground-truth matching that fills ``true_ids``, px.
         probe_search_px: half-size of the template search at an unconfirmed first pose, px.
+        aligner: the :class:`~localization.detect.prior_align.PriorAligner` where the first pass
+            gives no pose (None: one of the matcher's templates with its defaults).
+        align_search_px: half-size of the template search around an alignment's pose, px.
+        min_gain: least ratio of a confirmed pose's :meth:`PriorAligner.score` to its start's.
     """
 
     def __init__(self, seed: Any, types: Sequence[int], localizer: Localizer, matcher: TemplateMatcher,
                  landmarks: str, anchors: Localizer | None = None, merge_px: float = 8.0,
-                 match_px: float = 3.0, probe_search_px: int = 16) -> None:
+                 match_px: float = 3.0, probe_search_px: int = 16, aligner: PriorAligner | None = None,
+                 align_search_px: int = 24, min_gain: float = 1.03) -> None:
         self.seed = seed
+        self.aligner = PriorAligner(matcher.templates) if aligner is None else aligner
+        self.align_search_px = align_search_px
+        self.min_gain = float(min_gain)
+        every = matcher.xyz if anchors is None else anchors.landmarks_xyz
+        self.wide = TemplateMatcher(every, matcher.templates)
         self.probe_search_px = probe_search_px
         self._probes = tuple(_unverified(x) for x in (anchors, localizer) if x is not None)
         self.types = tuple(int(t) for t in types)
@@ -123,19 +144,64 @@ class GuidedDetector:
         first = Detections(uv[mine], scores[mine])
         prior = context["prior_cam_from_world"]
         pose, confirmed = self.first_pose(first, Detections(uv, scores), prior)
-        if pose is not None and not confirmed:
-            found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion,
-                                      search_px=self.probe_search_px)
-            uv, scores = merged(first, found, self.merge_px)
-            est = self.localizer.localize(Detections(uv, scores), prior)
-            pose = est.cam_from_world if est.success else None
-        else:
-            uv, scores = first.uv, first.scores
+        if not confirmed:
+            pose = self.confirmed_pose(image, first, prior, pose)
+        uv, scores = first.uv, first.scores
         if pose is not None:
             found = self.matcher.find(image, pose, self.localizer.K, self.localizer.distortion)
             uv, scores = merged(self.near(first, pose), found, self.merge_px)
         truth = context.get("landmarks", {}).get(self.landmarks)
         return Detections(uv=uv, scores=scores, true_ids=truth_ids(uv, truth, self.match_px))
+
+    def confirmed_pose(self, image: Any, first: Detections, prior: NDArray[np.float64],
+                       unconfirmed: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
+        """A pose the set's localizer confirms from a wide template pass, or None.
+
+        The starts are the first pass's unconfirmed pose, then the poses where the building
+        model drawn at the prior aligns with the image (:meth:`starts`). At each, the set's
+        templates are matched within ``probe_search_px`` and localized with the set's candidates,
+        with the verification; a pose so confirmed must also draw the whole model on the image
+        at least ``min_gain`` times as well as its start did (:meth:`PriorAligner.score`): the
+        matches around a wrong start can be consistent with a wrong pose, which then places the
+        rest of the structure off its edges.
+        """
+        K, distortion = self.localizer.K, self.localizer.distortion
+        for start, reference in self._each_start(image, prior, unconfirmed):
+            found = self.matcher.find(image, start, K, distortion, search_px=self.probe_search_px)
+            uv, scores = merged(first, found, self.merge_px)
+            est = self.localizer.localize(Detections(uv, scores), prior)
+            if not est.success:
+                continue
+            if reference is None:
+                reference = self.aligner.score(image, start, K)
+            if self.aligner.score(image, est.cam_from_world, K) >= self.min_gain * reference:
+                return est.cam_from_world
+        return None
+
+    def _each_start(self, image: Any, prior: NDArray[np.float64],
+                    unconfirmed: NDArray[np.float64] | None) -> Iterator[tuple[NDArray, float | None]]:
+        """The first pass's unconfirmed pose (its reference score unknown), then :meth:`starts`, lazily."""
+        if unconfirmed is not None:
+            yield unconfirmed, None
+        yield from self.starts(image, prior)
+
+    def starts(self, image: Any, prior: NDArray[np.float64]) -> Iterator[tuple[NDArray[np.float64], float]]:
+        """``(pose, score)`` of each alignment of the model drawn at the prior with the image, best first.
+
+        Each pose is corrected by a pose fitted to the template matches of every structural
+        landmark within ``align_search_px`` of it (:meth:`refined`), when it is reached: the
+        alignment moves the structure as one picture, so the building's depth leaves its
+        landmarks ten to thirty pixels off.
+        """
+        for a in self.aligner.align(image, prior, self.localizer.K):
+            yield self.refined(image, a.cam_from_world), a.score
+
+    def refined(self, image: Any, pose: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``pose`` corrected by a fit to every structural landmark's matches within ``align_search_px``."""
+        found = self.wide.find(image, pose, self.localizer.K, self.localizer.distortion,
+                               search_px=self.align_search_px)
+        fitted = fit_matches(self.wide.xyz, found, self.localizer.K, self.localizer.distortion, pose)
+        return pose if fitted is None else fitted
 
     def near(self, first: Detections, pose: NDArray[np.float64]) -> Detections:
         """The first-pass detections within the search radius of a landmark's projection at ``pose``.
