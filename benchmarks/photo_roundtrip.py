@@ -7,17 +7,20 @@ prior, robust association, landmarks ``all``). Each agent's frame is localized b
 (:mod:`uav_struct_env.photos.dji_jpeg`) at each ``--encodings`` entry (``QUALITY`` or
 ``QUALITY:CHROMA``, chroma ``420`` -- libjpeg's default -- ``422`` as DJI's Phantom 4 writes, or
 ``444``), then localized by :func:`uav_struct_env.photos.localize_photos` with the same prior
-sigmas (the photo path). Both paths run each ``--detectors`` entry (``learned`` or
-``learned:NAME``, :mod:`localization.detect.weights`); the frames and priors are the same for
-every detector (the same seeds). Prints each path's success count and median / P90 translation
-and rotation errors, the photo / env ratio per detector (and, for every detector after the first,
-against the first one's env path: ``--detectors learned learned:NAME`` compares weights NAME on
-JPEGs with the env's default weights on rendered pixels, as the photo refiners of
-localization/detect/models/MODEL_CARD.md were judged), and the georeferencing round trip
-(project -> WGS84 -> project) over the flight's camera positions.
+sigmas (the photo path). Both paths run each ``--detectors`` entry (``guided``, the BIM-guided
+detector of :mod:`uav_struct_env.stack.guided`; ``learned`` or ``learned:NAME``,
+:mod:`localization.detect.weights`); the frames and priors are the same for every detector (the
+same seeds). Prints each path's success count and median / P90 translation and rotation errors,
+the photo / env ratio per detector (and, for every detector after the first, against the first
+one's env path: ``--detectors learned learned:NAME`` compares weights NAME on JPEGs with the
+env's default weights on rendered pixels, as the photo refiners of
+localization/detect/models/MODEL_CARD.md were judged), the photo path's latency per photo
+(detection + localization, :attr:`~uav_struct_env.photos.PhotoPose.latency_s`) and the
+georeferencing round trip (project -> WGS84 -> project) over the flight's camera positions.
 
     python benchmarks/photo_roundtrip.py --episodes 10 --encodings 95 100
     python benchmarks/photo_roundtrip.py --detectors learned learned:active --encodings 95 100 95:422
+    python benchmarks/photo_roundtrip.py --detectors guided learned --encodings 95:422 95 100 --seed 10
     python benchmarks/photo_roundtrip.py --ifc tests/data/ifc/duplex.ifc --stage "Level 2/slab"
 
 ``--ifc``: another building (its IFC re-written with the same IfcMapConversion) at ``--stage``.
@@ -93,6 +96,10 @@ def _photo_path(folder: Path, ifc: Path, frames: list, camera: Path, detector: s
     poses = localize_photos(photos, ifc, stage=stage, camera=camera, detector=detector,
                             prior_sigmas=parse_prior_sigmas("3,3,2,5"))
     found = [(p, T) for p, (*_, T) in zip(poses, frames, strict=True) if p.success]
+    latency = np.array([p.latency_s for p in poses]) * 1000.0
+    h, w = frames[0][1].shape[:2]
+    print(f"    photo latency (detection + localization) median {np.median(latency):.1f} ms, "
+          f"P90 {np.percentile(latency, 90):.1f} ms per {w} x {h} photo")
     return ([float(np.linalg.norm(p.position - T[:3, 3])) for p, T in found],
             [rotation_angle_deg(p.world_from_cam[:3, :3], T[:3, :3]) for p, T in found])
 
@@ -149,7 +156,7 @@ if __name__ == "__main__":
     parser.add_argument("--encodings", nargs="+", default=["95"],
                         help="JPEG QUALITY or QUALITY:CHROMA (chroma 420, 422 or 444)")
     parser.add_argument("--detectors", nargs="+", default=["learned"],
-                        help="learned or learned:NAME (a weight set), each run through both paths")
+                        help="guided, learned or learned:NAME (a weight set), each run through both paths")
     parser.add_argument("--seed", type=int, default=0, help="first episode's seed")
     parser.add_argument("--ifc", default=None, help="another building's IFC (none: the paper site)")
     parser.add_argument("--stage", default=STAGE, help="the stage localized against")

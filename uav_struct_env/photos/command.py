@@ -107,12 +107,12 @@ def settings_line(plan: PhotoPlan, detector: str, camera: str | None, prior: str
 
 
 def check_detector(name: str) -> str:
-    """``--detector``: ``learned`` or ``learned:NAME`` with NAME a weight set; returned unchanged.
+    """``--detector``: ``guided``, ``learned`` or ``learned:NAME`` with NAME a weight set; returned unchanged.
 
     Raises:
         PhotoError: naming the value and the names accepted.
     """
-    names = ("learned", *(f"learned:{n}" for n in WEIGHT_NAMES))
+    names = ("guided", "learned", *(f"learned:{n}" for n in WEIGHT_NAMES))
     if name not in names:
         raise PhotoError(f"--detector must be one of {names}, got {name!r}")
     return name
