@@ -110,7 +110,7 @@ def test_refusals_are_one_line_before_any_work(flight, plain_ifc, tmp_path, caps
     cal = [flight["photos"][0], "--ifc", flight["ifc"], "--stage", STAGE, "--camera", str(bad)]
     assert "does not parse" in _refused(capsys, cal, tmp_path / "e")
     det = [flight["photos"][0], *base, "--detector", "learned:v9"]
-    assert "--detector must be one of ('learned', 'learned:landmarks_v1'" in _refused(capsys, det,
+    assert "--detector must be one of ('guided', 'learned', 'learned:landmarks_v1'" in _refused(capsys, det,
                                                                                       tmp_path / "f")
 
 
