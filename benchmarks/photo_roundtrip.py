@@ -91,7 +91,8 @@ def _pixel_summary(frames: list[_Frame], photo_uv: list[np.ndarray]) -> None:
     if env:
         e, p = np.median(env), np.median(photo)
         print(f"    detections within {MATCH_PX:g} px, paired over {len(env)} landmarks: median env "
-              f"{e:.3f} px, photo {p:.3f} px (x{p / e:.3f})")
+              f"{e:.3f} px, photo {p:.3f} px (x{p / e:.3f}); P90 env {np.percentile(env, 90):.3f} px, "
+              f"photo {np.percentile(photo, 90):.3f} px")
 
 
 def _summary(name: str, t: list[float], r: list[float], total: int) -> tuple[int, float, float]:
@@ -158,7 +159,8 @@ def _load_size(path: Path) -> tuple[int, int]:
 
 
 def _photo_path(folder: Path, ifc: Path, frames: list[_Frame], camera: Path, detector: str, encoding: str,
-                stage: str) -> tuple[list, list]:
+                stage: str) -> tuple[list, list, list]:
+    """The photo path at ``encoding``: translation and rotation errors, each photo's detections."""
     g = read_ifc_georeference(ifc)
     quality, _, chroma = encoding.partition(":")
     photos = []
@@ -171,9 +173,9 @@ def _photo_path(folder: Path, ifc: Path, frames: list[_Frame], camera: Path, det
     poses = localize_photos(photos, ifc, stage=stage, camera=camera, detector=detector,
                             prior_sigmas=parse_prior_sigmas("3,3,2,5"))
     found = [(p, f.truth) for p, f in zip(poses, frames, strict=True) if p.success]
-    _pixel_summary(frames, [p.detections_uv for p in poses])
     return ([float(np.linalg.norm(p.position - T[:3, 3])) for p, T in found],
-            [rotation_angle_deg(p.world_from_cam[:3, :3], T[:3, :3]) for p, T in found])
+            [rotation_angle_deg(p.world_from_cam[:3, :3], T[:3, :3]) for p, T in found],
+            [p.detections_uv for p in poses])
 
 
 def main(episodes: int = 10, encodings: tuple[str, ...] = ("95",), detectors: tuple[str, ...] = ("learned",),
@@ -195,12 +197,13 @@ def main(episodes: int = 10, encodings: tuple[str, ...] = ("95",), detectors: tu
             out[(detector, "env")] = env = _summary(f"env   {detector}", env_t, env_r, total)
             base = base or (detector, env)
             for encoding in encodings:
-                t, r = _photo_path(folder, ifc, frames, camera, detector, encoding, stage)
+                t, r, uv = _photo_path(folder, ifc, frames, camera, detector, encoding, stage)
                 out[(detector, encoding)] = ph = _summary(f"photo {detector} q{encoding}", t, r, total)
                 print(f"    photo / env translation median x{ph[1] / env[1]:.3f}, P90 x{ph[2] / env[2]:.3f}")
                 if base[0] != detector:
                     print(f"    photo / env of {base[0]}: translation median x{ph[1] / base[1][1]:.3f}, "
                           f"P90 x{ph[2] / base[1][2]:.3f}")
+                _pixel_summary(frames, uv)
         if latency:
             _latency([_jpeg_path(folder, f.name, encodings[0]) for f in first], ifc, stage, camera, detectors)
         g = read_ifc_georeference(ifc)
