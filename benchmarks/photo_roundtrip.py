@@ -18,8 +18,11 @@ localization/detect/models/MODEL_CARD.md were judged), the photo path's latency 
 (``--latency``: JPEG decode + detection + localization,
 :attr:`~uav_struct_env.photos.PhotoPose.latency_s`, the detectors alternating photo by photo), the
 detections' pixel error on both paths (within 3 px of a visible landmark's true projection,
-paired over the landmarks both found: the JPEG's cost at the detector) and the
-georeferencing round trip (project -> WGS84 -> project) over the flight's camera positions.
+paired over the landmarks both found: the JPEG's cost at the detector), the translation errors
+compared frame by frame (each photo path with its env path, and every detector after the first
+with the first on each path: the share of frames closer, Wilcoxon's p, a bootstrap interval of
+the ratio of medians -- medians of 40 poses move by 10-20 % between encodings of one flight) and
+the georeferencing round trip (project -> WGS84 -> project) over the flight's camera positions.
 
     python benchmarks/photo_roundtrip.py --episodes 10 --encodings 95 100
     python benchmarks/photo_roundtrip.py --detectors learned learned:active --encodings 95 100 95:422
@@ -71,6 +74,28 @@ class _Frame(NamedTuple):
     env_uv: np.ndarray
 
 
+def _paired(name: str, a: list[float], b: list[float]) -> None:
+    """Print two runs' translation errors (per frame, NaN if failed) compared over the frames both localized.
+
+    The share of frames where ``a`` is the closer, Wilcoxon's signed-rank p, the ratio of the
+    medians with its bootstrap interval (2,000 draws of the frames) and the means.
+    """
+    from scipy.stats import wilcoxon
+
+    x, y = np.asarray(a), np.asarray(b)
+    both = np.isfinite(x) & np.isfinite(y)
+    x, y = x[both], y[both]
+    if len(x) < 5 or not np.any(x != y):
+        print(f"    paired {name}: {len(x)} frames both localized, {np.count_nonzero(x != y)} differ")
+        return
+    draws = np.random.default_rng(0).integers(0, len(x), (2000, len(x)))
+    ratio = np.median(x[draws], axis=1) / np.median(y[draws], axis=1)
+    low, high = np.percentile(ratio, [2.5, 97.5])
+    print(f"    paired {name}, {len(x)} frames: closer in {np.mean(x < y):.0%}, Wilcoxon p "
+          f"{wilcoxon(x, y).pvalue:.2g}, median ratio x{np.median(x) / np.median(y):.3f} (bootstrap 95 % "
+          f"{low:.3f}-{high:.3f}), mean {x.mean():.3f} against {y.mean():.3f} m")
+
+
 def _pixel_errors(uv: np.ndarray, truth: dict) -> dict[int, float]:
     """``{landmark id: px}`` of the detections within :data:`MATCH_PX` of a visible true projection."""
     visible = np.asarray(truth["visible"], dtype=bool).reshape(-1)
@@ -96,6 +121,8 @@ def _pixel_summary(frames: list[_Frame], photo_uv: list[np.ndarray]) -> None:
 
 
 def _summary(name: str, t: list[float], r: list[float], total: int) -> tuple[int, float, float]:
+    """Print and return ``(localized, translation median, P90)``; ``t``, ``r`` per frame, NaN if failed."""
+    t, r = [v for v in t if math.isfinite(v)], [v for v in r if math.isfinite(v)]
     t_med, t_p90 = np.median(t), np.percentile(t, 90)
     print(f"{name:34s} localized {len(t)}/{total}  translation median {t_med:.3f} m, P90 {t_p90:.3f} m  "
           f"rotation median {np.median(r):.3f} deg, P90 {np.percentile(r, 90):.3f} deg")
@@ -114,9 +141,8 @@ def _env_path(ifc: Path, stage: str, detector: str, episodes: int,
             obs, infos = env.reset(seed=seed + episode)
             for agent in sorted(obs):
                 loc = infos[agent]["localization"]
-                if loc["success"]:
-                    t.append(loc["translation_error_m"])
-                    r.append(loc["rotation_error_deg"])
+                t.append(loc["translation_error_m"] if loc["success"] else math.nan)
+                r.append(loc["rotation_error_deg"] if loc["success"] else math.nan)
                 info = infos[agent]
                 frames.append(_Frame(f"{episode:03d}_{agent}", obs[agent]["image"],
                                      info["prior_world_from_cam"], info["world_from_cam"],
@@ -172,15 +198,17 @@ def _photo_path(folder: Path, ifc: Path, frames: list[_Frame], camera: Path, det
         photos.append(path)
     poses = localize_photos(photos, ifc, stage=stage, camera=camera, detector=detector,
                             prior_sigmas=parse_prior_sigmas("3,3,2,5"))
-    found = [(p, f.truth) for p, f in zip(poses, frames, strict=True) if p.success]
-    return ([float(np.linalg.norm(p.position - T[:3, 3])) for p, T in found],
-            [rotation_angle_deg(p.world_from_cam[:3, :3], T[:3, :3]) for p, T in found],
+    pairs = [(p, f.truth) for p, f in zip(poses, frames, strict=True)]
+    return ([float(np.linalg.norm(p.position - T[:3, 3])) if p.success else math.nan for p, T in pairs],
+            [rotation_angle_deg(p.world_from_cam[:3, :3], T[:3, :3]) if p.success else math.nan
+             for p, T in pairs],
             [p.detections_uv for p in poses])
 
 
 def main(episodes: int = 10, encodings: tuple[str, ...] = ("95",), detectors: tuple[str, ...] = ("learned",),
          seed: int = 0, source: str | None = None, stage: str = STAGE, latency: bool = False) -> dict:
     out: dict = {}
+    errors: dict[tuple[str, str], list[float]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         site = paper_site("slab") if source is None else load_ifc(source)
@@ -195,15 +223,22 @@ def main(episodes: int = 10, encodings: tuple[str, ...] = ("95",), detectors: tu
                 raise RuntimeError("the env rendered other frames for another detector")
             total = len(frames)
             out[(detector, "env")] = env = _summary(f"env   {detector}", env_t, env_r, total)
+            errors[(detector, "env")] = env_t
             base = base or (detector, env)
             for encoding in encodings:
                 t, r, uv = _photo_path(folder, ifc, frames, camera, detector, encoding, stage)
                 out[(detector, encoding)] = ph = _summary(f"photo {detector} q{encoding}", t, r, total)
+                errors[(detector, encoding)] = t
                 print(f"    photo / env translation median x{ph[1] / env[1]:.3f}, P90 x{ph[2] / env[2]:.3f}")
+                _paired(f"photo {detector} q{encoding} against its env path", t, env_t)
                 if base[0] != detector:
                     print(f"    photo / env of {base[0]}: translation median x{ph[1] / base[1][1]:.3f}, "
                           f"P90 x{ph[2] / base[1][2]:.3f}")
                 _pixel_summary(frames, uv)
+        for detector in detectors[1:]:
+            for path in ("env", *encodings):
+                _paired(f"{path}: {detector} against {detectors[0]}", errors[(detector, path)],
+                        errors[(detectors[0], path)])
         if latency:
             _latency([_jpeg_path(folder, f.name, encodings[0]) for f in first], ifc, stage, camera, detectors)
         g = read_ifc_georeference(ifc)
