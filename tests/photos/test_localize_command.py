@@ -110,7 +110,7 @@ def test_refusals_are_one_line_before_any_work(flight, plain_ifc, tmp_path, caps
     cal = [flight["photos"][0], "--ifc", flight["ifc"], "--stage", STAGE, "--camera", str(bad)]
     assert "does not parse" in _refused(capsys, cal, tmp_path / "e")
     det = [flight["photos"][0], *base, "--detector", "learned:v9"]
-    assert "--detector must be one of ('learned', 'learned:landmarks_v1'" in _refused(capsys, det,
+    assert "--detector must be one of ('guided', 'learned', 'learned:landmarks_v1'" in _refused(capsys, det,
                                                                                       tmp_path / "f")
 
 
@@ -206,3 +206,26 @@ def test_a_photo_stored_turned_localizes_its_sensor_camera(flight, tmp_path, tag
     assert (w, h) == ((640, 360) if turns == 2 else (360, 640))
     uv = pose.detections_uv
     assert len(uv) >= 4 and np.all((uv > -0.5) & (uv < np.array([w, h]) - 0.5))
+
+
+def test_the_guided_detector_matches_the_building_model_in_the_photos(flight, tmp_path):
+    # --detector guided: the stack renders the IFC stage's model for its templates (it needs the site)
+    from uav_struct_env.photos import localize_photos
+
+    options = {"stage": STAGE, "camera": flight["camera"]}
+    guided = localize_photos(flight["photos"], flight["ifc"], detector="guided", **options)
+    learned = localize_photos(flight["photos"], flight["ifc"], **options)
+    assert sum(p.success for p in guided) >= 3, [p.failure_reason for p in guided]
+    for pose, truth, prior in zip(guided, flight["truth"], flight["priors"], strict=True):
+        if pose.success:
+            error = np.linalg.norm(pose.position - truth[:3, 3])
+            assert error < 5 * np.linalg.norm(pose.std[:3]) + 0.02
+            assert error < np.linalg.norm(prior[:3, 3] - truth[:3, 3])
+    # the template matches replace the learned detector's corners where both found one
+    same = [g.detections_uv.shape == n.detections_uv.shape and np.allclose(g.detections_uv, n.detections_uv)
+            for g, n in zip(guided, learned, strict=True)]
+    assert not all(same)
+    out = tmp_path / "out"
+    assert cli_main(["localize", flight["photos"][0], "--ifc", flight["ifc"], "--stage", STAGE, "--camera",
+                     flight["camera"], "--detector", "guided", "--no-figures", "--out", str(out)]) == 0
+    assert "guided detector" in json.loads((out / "poses.json").read_text())["settings"]

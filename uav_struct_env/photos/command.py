@@ -107,12 +107,12 @@ def settings_line(plan: PhotoPlan, detector: str, camera: str | None, prior: str
 
 
 def check_detector(name: str) -> str:
-    """``--detector``: ``learned`` or ``learned:NAME`` with NAME a weight set; returned unchanged.
+    """``--detector``: ``guided``, ``learned`` or ``learned:NAME`` with NAME a weight set; returned unchanged.
 
     Raises:
         PhotoError: naming the value and the names accepted.
     """
-    names = ("learned", *(f"learned:{n}" for n in WEIGHT_NAMES))
+    names = ("guided", "learned", *(f"learned:{n}" for n in WEIGHT_NAMES))
     if name not in names:
         raise PhotoError(f"--detector must be one of {names}, got {name!r}")
     return name
@@ -207,8 +207,10 @@ def _parser() -> CommandParser:
     p.add_argument("--max-distance", type=float, default=MAX_DISTANCE_M,
                    help="refuse a photo whose prior lies farther than this from the building's plan, m")
     p.add_argument("--detector", default="learned",
-                   help="learned (the default weights) or learned:NAME, a weight set of "
-                   f"localization.detect.weights ({', '.join(WEIGHT_NAMES)})")
+                   help="learned (the default weights), learned:NAME, a weight set of "
+                   f"localization.detect.weights ({', '.join(WEIGHT_NAMES)}), or guided: the learned "
+                   "detector's first pose, then the IFC model's templates matched in the photo "
+                   "(docs/photos.md)")
     p.add_argument("--out", default="localized", help="output folder")
     p.add_argument("--no-figures", action="store_true", help="write poses.csv and poses.json only")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier run in --out")

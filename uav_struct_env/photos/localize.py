@@ -3,8 +3,9 @@
 Per photo: read its metadata (:mod:`~uav_struct_env.photos.metadata`), its camera (a calibration
 file or EXIF, :mod:`~uav_struct_env.photos.calibration`) and its prior in the IFC's project frame
 (:mod:`~uav_struct_env.photos.prior` through :mod:`~uav_struct_env.photos.georef`); then the
-project's localization stack (:func:`uav_struct_env.stack.build_stack`: the learned detector,
-robust association, PnP, covariance) against the IFC stage's landmarks.
+project's localization stack (:func:`uav_struct_env.stack.build_stack`: the learned detector, or
+the BIM-guided one with the IFC stage as its building model, robust association, PnP, covariance)
+against the IFC stage's landmarks.
 
 Every input is checked for every photo before any photo is localized (:func:`prepare_photos`):
 not an image, no prior and none given, no georeferencing and none given, a prior farther than
@@ -183,6 +184,7 @@ class _Stacks:
     def __init__(self, site: Any, landmarks: str, detector: Any) -> None:
         from uav_struct_env.stack import StackSpec
 
+        self.site = site
         self.model = site.landmarks(landmarks)
         self.spec = StackSpec(landmarks=landmarks, detector=detector, association="robust")
         self._built: dict[bytes, Any] = {}
@@ -193,7 +195,8 @@ class _Stacks:
         key = camera.K.tobytes() + camera.distortion.tobytes() + bytes(str(camera.image_size), "ascii")
         if key not in self._built:
             self._built[key] = build_stack(self.spec, camera.K, camera.image_size, model_xyz=self.model.xyz,
-                                           model_ids=self.model.ids, distortion=camera.distortion)
+                                           model_ids=self.model.ids, distortion=camera.distortion,
+                                           site=self.site)
         return self._built[key]
 
 
@@ -268,7 +271,10 @@ def plan_photos(
 
 def run_plan(plan: PhotoPlan, detector: Any = "learned",
              progress: Callable[[int], None] | None = None) -> list[PhotoPose]:
-    """Localize every photo of a :class:`PhotoPlan`; ``progress`` is called with 1 after each."""
+    """Localize every photo of a :class:`PhotoPlan` (``detector`` as :func:`localize_photos`'s).
+
+    ``progress`` is called with 1 after each photo.
+    """
     stacks = _Stacks(plan.site, plan.landmarks, detector)
     out = []
     for job in plan.jobs:
@@ -287,7 +293,10 @@ def localize_photos(
     Args:
         photos: JPEG (or any Pillow-readable) files.
         ifc: the building's IFC file.
-        detector: ``"learned"`` (default) or a :class:`localization.Detector` object.
+        detector: ``"learned"`` (default), ``"learned:NAME"`` (a weight set of
+            :mod:`localization.detect.weights`), ``"guided"`` (the BIM-guided detector,
+            :mod:`uav_struct_env.stack.guided`: its templates are rendered from the IFC stage) or a
+            :class:`localization.Detector` object.
         progress: called with 1 after each photo.
         **options: :func:`plan_photos`'s: ``stage`` (an :func:`~uav_struct_env.site.ifc_stages`
             name; None: the last), ``landmarks`` (default ``all``), ``camera`` (a calibration file
