@@ -12,14 +12,18 @@ error, then each wrong row (uav, viewpoint, error, limit, pairs, RMS).
 
 ``record`` runs a command (``uav-struct study ...`` or ``benchmarks/site_conditions_study.py``)
 with ``benchmarks/recording`` on ``PYTHONPATH``, which pickles every structural localization
-(the localizer, the detections, the prior, the truth) into ``--into``, in the spawned workers too.
+(the localizer, the detections, the prior, the truth, the frame's image and the site the stack was
+built with) into ``--into``, in the spawned workers too.
 
     .venv/bin/python benchmarks/wrong_poses.py record --into rec/paper -- \\
         .venv/bin/uav-struct study --workers 2 --out results/paper --overwrite --no-figures
 
 ``replay`` localizes every recorded frame again with the code as it is now, the detections fixed,
 and prints per method the successes and wrong poses of the recording and of the replay, the wrong
-ones of the replay, and the poses that changed. The bound comes from the study's ``per_image.csv``
+ones of the replay, and the poses that changed. Where the recording holds the image and the site
+and the detector reads the image, the replayed pose is held to the building's structure as the
+stack holds it (:mod:`uav_struct_env.stack.confirm`); ``--no-confirm`` leaves that out. The bound
+comes from the study's ``per_image.csv``
 (the row with the same method and true camera centre), so ``--study`` names the run's output.
 A replay of the guided detector's runs holds its detections fixed: a change to the localizer
 that moves its first pass moves its detections in a real run, not here.
@@ -124,20 +128,52 @@ def _bounds(study: Path) -> dict[tuple, float]:
     return out
 
 
-def _replay_one(rec: dict) -> tuple[bool, float, object]:
-    """Localize a recorded frame again: (success, error m, estimate)."""
+class _Confirmations:
+    """The stack's pose confirmation for recorded frames: one set of templates per recorded site."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+        self._templates: dict[str, tuple] = {}
+
+    def __call__(self, rec: dict) -> tuple[object, object] | None:
+        """``(confirmation, image)`` for a recording, or None where the stack would hold none."""
+        import cv2
+
+        from localization.verify import CONFIRM_TOLERANCE_M
+        from uav_struct_env.sim.templates import SiteTemplates
+        from uav_struct_env.stack.confirm import confirmation_for
+
+        if rec.get("site") is None or rec.get("image") is None or rec.get("detector") == "projection":
+            return None
+        if rec["site"] not in self._templates:
+            site = pickle.loads((self.folder / rec["site"]).read_bytes())
+            self._templates[rec["site"]] = (site.landmarks("all").xyz, SiteTemplates(site))
+        stage_xyz, templates = self._templates[rec["site"]]
+        image = cv2.imread(str(self.folder / rec["image"]), cv2.IMREAD_COLOR)[..., ::-1]
+        return confirmation_for(templates, stage_xyz, rec["localizer"], CONFIRM_TOLERANCE_M), image
+
+
+def _replay_one(rec: dict, held: tuple | None = None) -> tuple[bool, float, object]:
+    """Localize a recorded frame again: (success, error m, estimate).
+
+    ``held``: ``(confirmation, image)`` the pose is held to (:class:`_Confirmations`), or None.
+    """
     from localization import Detections
     from localization.metrics import pose_errors
 
     det = Detections(rec["uv"], rec["scores"])
     est = rec["localizer"].localize(det, rec["prior"], prior_sigmas=rec["prior_sigmas"],
                                     warm_start=rec["warm_start"])
+    if held is not None:
+        est = held[0].confirmed(held[1], est, rec["prior"])
     err = pose_errors(est.cam_from_world, rec["gt"])[0] if est.success else float("nan")
     return bool(est.success), float(err), est
 
 
-def replay(records: Path, study: Path, show: int = 40) -> dict[str, list[int]]:
+def replay(records: Path, study: Path, show: int = 40, confirm: bool = True) -> dict[str, list[int]]:
     """Replay every recording in ``records`` against the bounds of ``study``; print and return counts.
+
+    ``confirm``: hold the replayed poses to the building's structure where the recording allows.
 
     Returns per method ``[poses recorded, wrong recorded, poses replayed, wrong replayed]``.
     """
@@ -147,13 +183,15 @@ def replay(records: Path, study: Path, show: int = 40) -> dict[str, list[int]]:
     counts: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0])
     changed, wrong_now = [], []
     times, verify_times = [], []
-    for path in sorted(records.glob("*.pkl")):
+    confirmations = _Confirmations(records) if confirm else None
+    for path in sorted(records.glob("[0-9]*.pkl")):
         rec = pickle.loads(path.read_bytes())
         c = camera_center(rec["gt"])
         bound = bounds.get((rec["landmarks"], *(round(float(x), 3) for x in c)), float("nan"))
         lim = limit_m(bound)
+        held = None if confirmations is None else confirmations(rec)
         t0 = time.perf_counter()
-        ok, err, est = _replay_one(rec)
+        ok, err, est = _replay_one(rec, held)
         times.append(time.perf_counter() - t0)
         verify_times.append(est.timings.get("verify", 0.0))
         was_ok, was_err = rec["success"], rec["translation_error_m"]
@@ -202,6 +240,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("records", type=Path, help="a folder of recordings")
     p.add_argument("--study", type=Path, required=True, help="the recorded run's output (its per_image.csv)")
     p.add_argument("--show", type=int, default=40, help="changed poses printed")
+    p.add_argument("--no-confirm", action="store_true",
+                   help="do not hold the replayed poses to the building's structure (stack/confirm.py)")
     args = ap.parse_args(argv)
     if args.command == "count":
         count(args.folders)
@@ -209,7 +249,7 @@ def main(argv: list[str] | None = None) -> None:
         cmd = args.cmd[1:] if args.cmd[:1] == ["--"] else args.cmd
         sys.exit(record(args.into, cmd))
     else:
-        replay(args.records, args.study, args.show)
+        replay(args.records, args.study, args.show, confirm=not args.no_confirm)
 
 
 if __name__ == "__main__":
