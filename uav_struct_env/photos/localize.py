@@ -183,6 +183,7 @@ class _Stacks:
     def __init__(self, site: Any, landmarks: str, detector: Any) -> None:
         from uav_struct_env.stack import StackSpec
 
+        self.site = site
         self.model = site.landmarks(landmarks)
         self.spec = StackSpec(landmarks=landmarks, detector=detector, association="robust")
         self._built: dict[bytes, Any] = {}
@@ -193,7 +194,8 @@ class _Stacks:
         key = camera.K.tobytes() + camera.distortion.tobytes() + bytes(str(camera.image_size), "ascii")
         if key not in self._built:
             self._built[key] = build_stack(self.spec, camera.K, camera.image_size, model_xyz=self.model.xyz,
-                                           model_ids=self.model.ids, distortion=camera.distortion)
+                                           model_ids=self.model.ids, distortion=camera.distortion,
+                                           site=self.site)
         return self._built[key]
 
 

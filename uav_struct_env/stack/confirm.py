@@ -13,14 +13,19 @@ carries its landmark's identity, so the matches give a pose of their own, the *s
 :class:`PoseConfirmation` refuses the localizer's pose as
 :attr:`~localization.failure.FailureCode.UNCONFIRMED` when
 
-* **the image does not show its structure**: fewer than :attr:`~PoseConfirmation.min_seen` of the
-  matches lie within ``gate_px`` of where the pose predicts them (a pose that rests on false
-  detections predicts structure where the image has none); or
 * **a nearby pose explains the image better**: the structure's pose, on at least
   :attr:`~PoseConfirmation.min_agree` matches and more of them than the pose itself explains,
   lies farther from it than its tolerance, ``max(tolerance_m, 3 x the Cramer-Rao bound of the
   set's landmarks it predicts in the image)`` at the detector's noise (issue 44's line between
-  a right pose and a confident wrong one).
+  a right pose and a confident wrong one); or
+* **the image does not show its structure**: the matches give no structure's pose, and fewer
+  than :attr:`~PoseConfirmation.min_seen` of them lie within ``gate_px`` of where the pose
+  predicts them (a pose that rests on false detections predicts structure where the image has
+  none).
+
+A structure's pose within the tolerance confirms the pose, however few matches lie within
+``gate_px`` of its own predictions (a detector that places its corners a pixel or two off the
+model's, as on buildings unlike its training data, leaves a right pose a few decimetres off).
 
 Fits on more pairs than :attr:`~PoseConfirmation.max_pairs` are reported as the localizer gives
 them (their spare pairs carry the evidence, which the verification weighs). Nothing here moves a
@@ -188,14 +193,14 @@ class PoseConfirmation:
         tol = self.tolerance(cam_from_world, (img.shape[1], img.shape[0]))
         matched = self._matched(img, cam_from_world)
         n, here = len(matched.uv), matched.here
-        if here < self.min_seen:
+        T, agree = self.structure_pose(matched, cam_from_world)
+        if T is None:
+            if here >= self.min_seen:
+                return Confirmation(n, 0, here, float("nan"), tol, True)
             reason = (f"unconfirmed pose: {here} of the {n} structural landmarks matched within "
                       f"{self.search_px} px of its predictions lie within {self.gate_px:g} px of them "
                       f"(at least {self.min_seen} needed): the image does not show the structure it predicts")
             return Confirmation(n, 0, here, float("nan"), tol, False, reason)
-        T, agree = self.structure_pose(matched, cam_from_world)
-        if T is None:
-            return Confirmation(n, 0, here, float("nan"), tol, True)
         shift = float(np.linalg.norm(camera_center(T) - camera_center(cam_from_world)))
         if shift <= tol or agree <= here:
             return Confirmation(n, agree, here, shift, tol, True)
