@@ -197,14 +197,14 @@ class PoseConfirmation:
         if T is None:
             if here >= self.min_seen:
                 return Confirmation(n, 0, here, float("nan"), tol, True)
-            reason = (f"unconfirmed pose: {here} of the {n} structural landmarks matched within "
+            reason = (f"{here} of the {n} structural landmarks matched within "
                       f"{self.search_px} px of its predictions lie within {self.gate_px:g} px of them "
                       f"(at least {self.min_seen} needed): the image does not show the structure it predicts")
             return Confirmation(n, 0, here, float("nan"), tol, False, reason)
         shift = float(np.linalg.norm(camera_center(T) - camera_center(cam_from_world)))
         if shift <= tol or agree <= here:
             return Confirmation(n, agree, here, shift, tol, True)
-        reason = (f"unconfirmed pose: {agree} of the {n} structural landmarks matched around its "
+        reason = (f"{agree} of the {n} structural landmarks matched around its "
                   f"predictions fit a pose {shift:.2f} m away, which it explains only {here} of, beyond "
                   f"its tolerance {tol:.2f} m: a nearby pose explains the image better")
         return Confirmation(n, agree, here, shift, tol, False, reason)
