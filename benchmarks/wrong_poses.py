@@ -165,7 +165,11 @@ def _replay_one(rec: dict, held: tuple | None = None) -> tuple[bool, float, obje
     est = rec["localizer"].localize(det, rec["prior"], prior_sigmas=rec["prior_sigmas"],
                                     warm_start=rec["warm_start"])
     if held is not None:
+        assessed = est.success and est.n_inliers <= held[0].max_pairs
+        t0 = time.perf_counter()
         est = held[0].confirmed(held[1], est, rec["prior"])
+        if assessed:
+            est.timings["confirm"] = time.perf_counter() - t0
     err = pose_errors(est.cam_from_world, rec["gt"])[0] if est.success else float("nan")
     return bool(est.success), float(err), est
 
@@ -182,7 +186,7 @@ def replay(records: Path, study: Path, show: int = 40, confirm: bool = True) -> 
     bounds = _bounds(study)
     counts: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0])
     changed, wrong_now = [], []
-    times, verify_times = [], []
+    times, verify_times, confirm_times = [], [], []
     confirmations = _Confirmations(records) if confirm else None
     for path in sorted(records.glob("[0-9]*.pkl")):
         rec = pickle.loads(path.read_bytes())
@@ -194,6 +198,8 @@ def replay(records: Path, study: Path, show: int = 40, confirm: bool = True) -> 
         ok, err, est = _replay_one(rec, held)
         times.append(time.perf_counter() - t0)
         verify_times.append(est.timings.get("verify", 0.0))
+        if "confirm" in est.timings:
+            confirm_times.append(est.timings["confirm"])
         was_ok, was_err = rec["success"], rec["translation_error_m"]
         n = counts[rec["landmarks"]]
         n[0] += was_ok
@@ -220,6 +226,10 @@ def replay(records: Path, study: Path, show: int = 40, confirm: bool = True) -> 
         ms, vms = 1e3 * np.asarray(times), 1e3 * np.asarray(verify_times)
         print(f"  replay time per frame: median {np.median(ms):.1f} ms, P99 {np.percentile(ms, 99):.0f} ms; "
               f"of it the verification: median {np.median(vms):.1f} ms, P99 {np.percentile(vms, 99):.0f} ms")
+    if confirm_times:
+        cms = 1e3 * np.asarray(confirm_times)
+        print(f"  the confirmation, on the {cms.size} poses it assessed: median {np.median(cms):.1f} ms, "
+              f"P99 {np.percentile(cms, 99):.0f} ms")
     return dict(counts)
 
 
