@@ -29,6 +29,13 @@ A replay of the guided detector's runs holds its detections fixed: a change to t
 that moves its first pass moves its detections in a real run, not here.
 
     .venv/bin/python benchmarks/wrong_poses.py replay rec/paper --study results/paper
+
+``cost`` times, on the recorded frames whose pose the confirmation assesses (successes on four
+pairs, detector reading the image), the learned detector (default weights, the set's landmarks,
+on one thread) and the confirmation, alternating frame by frame, and prints both medians and
+their ratio: the confirmation's share of a frame's latency under the machine's load of the moment.
+
+    .venv/bin/python benchmarks/wrong_poses.py cost rec/paper --frames 60
 """
 
 from __future__ import annotations
@@ -233,6 +240,45 @@ def replay(records: Path, study: Path, show: int = 40, confirm: bool = True) -> 
     return dict(counts)
 
 
+def cost(records: Path, frames: int = 60) -> tuple[float, float]:
+    """Median ms of the learned detector and of the confirmation over up to ``frames`` assessed frames."""
+    from localization.detect.learned import LearnedDetector  # its networks run on one thread
+
+    confirmations = _Confirmations(records)
+    detectors: dict[str, object] = {}
+    t_det, t_conf = [], []
+    for path in sorted(records.glob("[0-9]*.pkl")):
+        rec = pickle.loads(path.read_bytes())
+        if not rec["success"] or rec["n_inliers"] > 4:
+            continue
+        held = confirmations(rec)
+        if held is None:
+            continue
+        conf, image = held
+        if rec["landmarks"] not in detectors:
+            detectors[rec["landmarks"]] = LearnedDetector.for_localizer(rec["landmarks"], image.shape[1],
+                                                                        "robust")
+            detectors[rec["landmarks"]].detect(image, {})  # the first call sets the sessions up
+        _, _, est = _replay_one(rec)
+        t0 = time.perf_counter()
+        detectors[rec["landmarks"]].detect(image, {})
+        t1 = time.perf_counter()
+        conf.confirmed(image, est, rec["prior"])
+        t_det.append(t1 - t0)
+        t_conf.append(time.perf_counter() - t1)
+        if len(t_det) >= frames:
+            break
+    if not t_det:
+        print(f"{records}: no frame the confirmation assesses")
+        return float("nan"), float("nan")
+    det, conf_ms = 1e3 * float(np.median(t_det)), 1e3 * float(np.median(t_conf))
+    load = " ".join(Path("/proc/loadavg").read_text().split()[:3]) if Path("/proc/loadavg").exists() else "?"
+    print(f"{records}: {len(t_det)} frames, learned detector median {det:.1f} ms, confirmation median "
+          f"{conf_ms:.1f} ms (P90 {1e3 * float(np.percentile(t_conf, 90)):.1f}), ratio {conf_ms / det:.2f}; "
+          f"load average {load}")
+    return det, conf_ms
+
+
 def main(argv: list[str] | None = None) -> None:
     """The command line (see the module docstring)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
@@ -252,12 +298,18 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--show", type=int, default=40, help="changed poses printed")
     p.add_argument("--no-confirm", action="store_true",
                    help="do not hold the replayed poses to the building's structure (stack/confirm.py)")
+    t = sub.add_parser("cost", help="time the confirmation against the learned detector on recorded frames",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    t.add_argument("records", type=Path, help="a folder of recordings (with images and sites)")
+    t.add_argument("--frames", type=int, default=60, help="frames timed")
     args = ap.parse_args(argv)
     if args.command == "count":
         count(args.folders)
     elif args.command == "record":
         cmd = args.cmd[1:] if args.cmd[:1] == ["--"] else args.cmd
         sys.exit(record(args.into, cmd))
+    elif args.command == "cost":
+        cost(args.records, args.frames)
     else:
         replay(args.records, args.study, args.show, confirm=not args.no_confirm)
 
