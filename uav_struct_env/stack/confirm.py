@@ -14,7 +14,8 @@ carries its landmark's identity, so the matches give a pose of their own, the *s
 :attr:`~localization.failure.FailureCode.UNCONFIRMED` when
 
 * **a nearby pose explains the image better**: the structure's pose, on at least
-  :attr:`~PoseConfirmation.min_agree` matches and more of them than the pose itself explains,
+  :attr:`~PoseConfirmation.min_agree` matches and on :attr:`~PoseConfirmation.min_gain` more of
+  them than the pose itself explains (a RANSAC pose that explains one more match is no evidence),
   lies farther from it than its tolerance, ``max(tolerance_m, 3 x the Cramer-Rao bound of the
   set's landmarks it predicts in the image)`` at the detector's noise (issue 44's line between
   a right pose and a confident wrong one); or
@@ -104,11 +105,13 @@ class PoseConfirmation:
         gate_px: a match agrees with a pose within this distance, px.
         min_agree: the fewest agreeing matches that give the structure's pose.
         min_seen: the fewest matches within ``gate_px`` of the pose's predictions that let it stand.
+        min_gain: how many more matches the structure's pose must explain than the pose itself.
     """
 
     def __init__(self, matcher: TemplateMatcher, set_xyz: Any, K: Any, distortion: Any = None, *,
                  pixel_sigma_px: float = 1.0, tolerance_m: float = 1.0, max_pairs: int = 4,
-                 search_px: int = 12, gate_px: float = 2.5, min_agree: int = 6, min_seen: int = 2) -> None:
+                 search_px: int = 12, gate_px: float = 2.5, min_agree: int = 6, min_seen: int = 2,
+                 min_gain: int = 2) -> None:
         self.matcher = matcher
         self.set_xyz = np.asarray(set_xyz, dtype=np.float64).reshape(-1, 3)
         self.K = np.asarray(K, dtype=np.float64)
@@ -120,6 +123,7 @@ class PoseConfirmation:
         self.gate_px = float(gate_px)
         self.min_agree = int(min_agree)
         self.min_seen = int(min_seen)
+        self.min_gain = int(min_gain)
 
     def confirmed(self, image: Any, est: PoseEstimate, prior_cam_from_world: NDArray[np.float64]
                   ) -> PoseEstimate:
@@ -202,7 +206,7 @@ class PoseConfirmation:
                       f"(at least {self.min_seen} needed): the image does not show the structure it predicts")
             return Confirmation(n, 0, here, float("nan"), tol, False, reason)
         shift = float(np.linalg.norm(camera_center(T) - camera_center(cam_from_world)))
-        if shift <= tol or agree <= here:
+        if shift <= tol or agree < here + self.min_gain:
             return Confirmation(n, agree, here, shift, tol, True)
         reason = (f"{agree} of the {n} structural landmarks matched around its "
                   f"predictions fit a pose {shift:.2f} m away, which it explains only {here} of, beyond "
