@@ -12,19 +12,30 @@ error, then each wrong row (uav, viewpoint, error, limit, pairs, RMS).
 
 ``record`` runs a command (``uav-struct study ...`` or ``benchmarks/site_conditions_study.py``)
 with ``benchmarks/recording`` on ``PYTHONPATH``, which pickles every structural localization
-(the localizer, the detections, the prior, the truth) into ``--into``, in the spawned workers too.
+(the localizer, the detections, the prior, the truth, the frame's image and the site the stack was
+built with) into ``--into``, in the spawned workers too.
 
     .venv/bin/python benchmarks/wrong_poses.py record --into rec/paper -- \\
         .venv/bin/uav-struct study --workers 2 --out results/paper --overwrite --no-figures
 
 ``replay`` localizes every recorded frame again with the code as it is now, the detections fixed,
 and prints per method the successes and wrong poses of the recording and of the replay, the wrong
-ones of the replay, and the poses that changed. The bound comes from the study's ``per_image.csv``
+ones of the replay, and the poses that changed. Where the recording holds the image and the site
+and the detector reads the image, the replayed pose is held to the building's structure as the
+stack holds it (:mod:`uav_struct_env.stack.confirm`); ``--no-confirm`` leaves that out. The bound
+comes from the study's ``per_image.csv``
 (the row with the same method and true camera centre), so ``--study`` names the run's output.
 A replay of the guided detector's runs holds its detections fixed: a change to the localizer
 that moves its first pass moves its detections in a real run, not here.
 
     .venv/bin/python benchmarks/wrong_poses.py replay rec/paper --study results/paper
+
+``cost`` times, on the recorded frames whose pose the confirmation assesses (successes on four
+pairs, detector reading the image), the learned detector (default weights, the set's landmarks,
+on one thread) and the confirmation, alternating frame by frame, and prints both medians and
+their ratio: the confirmation's share of a frame's latency under the machine's load of the moment.
+
+    .venv/bin/python benchmarks/wrong_poses.py cost rec/paper --frames 60
 """
 
 from __future__ import annotations
@@ -124,20 +135,56 @@ def _bounds(study: Path) -> dict[tuple, float]:
     return out
 
 
-def _replay_one(rec: dict) -> tuple[bool, float, object]:
-    """Localize a recorded frame again: (success, error m, estimate)."""
+class _Confirmations:
+    """The stack's pose confirmation for recorded frames: one set of templates per recorded site."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+        self._templates: dict[str, tuple] = {}
+
+    def __call__(self, rec: dict) -> tuple[object, object] | None:
+        """``(confirmation, image)`` for a recording, or None where the stack would hold none."""
+        import cv2
+
+        from localization.verify import CONFIRM_TOLERANCE_M
+        from uav_struct_env.sim.templates import SiteTemplates
+        from uav_struct_env.stack.confirm import confirmation_for
+
+        if rec.get("site") is None or rec.get("image") is None or rec.get("detector") == "projection":
+            return None
+        if rec["site"] not in self._templates:
+            site = pickle.loads((self.folder / rec["site"]).read_bytes())
+            self._templates[rec["site"]] = (site.landmarks("all").xyz, SiteTemplates(site))
+        stage_xyz, templates = self._templates[rec["site"]]
+        image = cv2.imread(str(self.folder / rec["image"]), cv2.IMREAD_COLOR)[..., ::-1]
+        return confirmation_for(templates, stage_xyz, rec["localizer"], CONFIRM_TOLERANCE_M), image
+
+
+def _replay_one(rec: dict, held: tuple | None = None) -> tuple[bool, float, object]:
+    """Localize a recorded frame again: (success, error m, estimate).
+
+    ``held``: ``(confirmation, image)`` the pose is held to (:class:`_Confirmations`), or None.
+    """
     from localization import Detections
     from localization.metrics import pose_errors
 
     det = Detections(rec["uv"], rec["scores"])
     est = rec["localizer"].localize(det, rec["prior"], prior_sigmas=rec["prior_sigmas"],
                                     warm_start=rec["warm_start"])
+    if held is not None:
+        assessed = est.success and est.n_inliers <= held[0].max_pairs
+        t0 = time.perf_counter()
+        est = held[0].confirmed(held[1], est, rec["prior"])
+        if assessed:
+            est.timings["confirm"] = time.perf_counter() - t0
     err = pose_errors(est.cam_from_world, rec["gt"])[0] if est.success else float("nan")
     return bool(est.success), float(err), est
 
 
-def replay(records: Path, study: Path, show: int = 40) -> dict[str, list[int]]:
+def replay(records: Path, study: Path, show: int = 40, confirm: bool = True) -> dict[str, list[int]]:
     """Replay every recording in ``records`` against the bounds of ``study``; print and return counts.
+
+    ``confirm``: hold the replayed poses to the building's structure where the recording allows.
 
     Returns per method ``[poses recorded, wrong recorded, poses replayed, wrong replayed]``.
     """
@@ -146,16 +193,20 @@ def replay(records: Path, study: Path, show: int = 40) -> dict[str, list[int]]:
     bounds = _bounds(study)
     counts: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0])
     changed, wrong_now = [], []
-    times, verify_times = [], []
-    for path in sorted(records.glob("*.pkl")):
+    times, verify_times, confirm_times = [], [], []
+    confirmations = _Confirmations(records) if confirm else None
+    for path in sorted(records.glob("[0-9]*.pkl")):
         rec = pickle.loads(path.read_bytes())
         c = camera_center(rec["gt"])
         bound = bounds.get((rec["landmarks"], *(round(float(x), 3) for x in c)), float("nan"))
         lim = limit_m(bound)
+        held = None if confirmations is None else confirmations(rec)
         t0 = time.perf_counter()
-        ok, err, est = _replay_one(rec)
+        ok, err, est = _replay_one(rec, held)
         times.append(time.perf_counter() - t0)
         verify_times.append(est.timings.get("verify", 0.0))
+        if "confirm" in est.timings:
+            confirm_times.append(est.timings["confirm"])
         was_ok, was_err = rec["success"], rec["translation_error_m"]
         n = counts[rec["landmarks"]]
         n[0] += was_ok
@@ -182,7 +233,50 @@ def replay(records: Path, study: Path, show: int = 40) -> dict[str, list[int]]:
         ms, vms = 1e3 * np.asarray(times), 1e3 * np.asarray(verify_times)
         print(f"  replay time per frame: median {np.median(ms):.1f} ms, P99 {np.percentile(ms, 99):.0f} ms; "
               f"of it the verification: median {np.median(vms):.1f} ms, P99 {np.percentile(vms, 99):.0f} ms")
+    if confirm_times:
+        cms = 1e3 * np.asarray(confirm_times)
+        print(f"  the confirmation, on the {cms.size} poses it assessed: median {np.median(cms):.1f} ms, "
+              f"P99 {np.percentile(cms, 99):.0f} ms")
     return dict(counts)
+
+
+def cost(records: Path, frames: int = 60) -> tuple[float, float]:
+    """Median ms of the learned detector and of the confirmation over up to ``frames`` assessed frames."""
+    from localization.detect.learned import LearnedDetector  # its networks run on one thread
+
+    confirmations = _Confirmations(records)
+    detectors: dict[str, object] = {}
+    t_det, t_conf = [], []
+    for path in sorted(records.glob("[0-9]*.pkl")):
+        rec = pickle.loads(path.read_bytes())
+        if not rec["success"] or rec["n_inliers"] > 4:
+            continue
+        held = confirmations(rec)
+        if held is None:
+            continue
+        conf, image = held
+        if rec["landmarks"] not in detectors:
+            detectors[rec["landmarks"]] = LearnedDetector.for_localizer(rec["landmarks"], image.shape[1],
+                                                                        "robust")
+            detectors[rec["landmarks"]].detect(image, {})  # the first call sets the sessions up
+        _, _, est = _replay_one(rec)
+        t0 = time.perf_counter()
+        detectors[rec["landmarks"]].detect(image, {})
+        t1 = time.perf_counter()
+        conf.confirmed(image, est, rec["prior"])
+        t_det.append(t1 - t0)
+        t_conf.append(time.perf_counter() - t1)
+        if len(t_det) >= frames:
+            break
+    if not t_det:
+        print(f"{records}: no frame the confirmation assesses")
+        return float("nan"), float("nan")
+    det, conf_ms = 1e3 * float(np.median(t_det)), 1e3 * float(np.median(t_conf))
+    load = " ".join(Path("/proc/loadavg").read_text().split()[:3]) if Path("/proc/loadavg").exists() else "?"
+    print(f"{records}: {len(t_det)} frames, learned detector median {det:.1f} ms, confirmation median "
+          f"{conf_ms:.1f} ms (P90 {1e3 * float(np.percentile(t_conf, 90)):.1f}), ratio {conf_ms / det:.2f}; "
+          f"load average {load}")
+    return det, conf_ms
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -202,14 +296,22 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("records", type=Path, help="a folder of recordings")
     p.add_argument("--study", type=Path, required=True, help="the recorded run's output (its per_image.csv)")
     p.add_argument("--show", type=int, default=40, help="changed poses printed")
+    p.add_argument("--no-confirm", action="store_true",
+                   help="do not hold the replayed poses to the building's structure (stack/confirm.py)")
+    t = sub.add_parser("cost", help="time the confirmation against the learned detector on recorded frames",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    t.add_argument("records", type=Path, help="a folder of recordings (with images and sites)")
+    t.add_argument("--frames", type=int, default=60, help="frames timed")
     args = ap.parse_args(argv)
     if args.command == "count":
         count(args.folders)
     elif args.command == "record":
         cmd = args.cmd[1:] if args.cmd[:1] == ["--"] else args.cmd
         sys.exit(record(args.into, cmd))
+    elif args.command == "cost":
+        cost(args.records, args.frames)
     else:
-        replay(args.records, args.study, args.show)
+        replay(args.records, args.study, args.show, confirm=not args.no_confirm)
 
 
 if __name__ == "__main__":

@@ -51,3 +51,7 @@ class FailureCode(str, Enum):
     #: with a distinct camera centre: a detector's ghost copy that only the prior could tell from
     #: the structure (:mod:`localization.verify`).
     DUPLICATED_DETECTIONS = "duplicated_detections"
+    #: A pose on few pairs that the building's structure, matched in the image around what the
+    #: pose predicts, places elsewhere: a nearby pose explains the image clearly better
+    #: (:mod:`uav_struct_env.stack.confirm`).
+    UNCONFIRMED = "unconfirmed"

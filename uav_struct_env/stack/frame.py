@@ -69,6 +69,7 @@ def localize_frame(
     *,
     prior_sigmas: Any = None,
     warm_start: NDArray[np.float64] | None = None,
+    confirmation: Any = None,
 ) -> FrameLocalization:
     """Detect, localize and score one frame.
 
@@ -84,12 +85,19 @@ def localize_frame(
         prior_sigmas: this frame's :class:`~localization.PriorSigmas` (None: the localizer's).
         warm_start: a (4, 4) ``cam_from_world`` predicted for this frame
             (:meth:`localization.Localizer.localize`), or None.
+        confirmation: a :class:`~uav_struct_env.stack.confirm.PoseConfirmation` the pose is
+            held to in ``image`` (its time is the estimate's ``confirm`` timing and part of the
+            latency), or None.
     """
     t0 = time.perf_counter()
     det = detector.detect(image, context)
     t_detect = time.perf_counter() - t0
     est = localizer.localize(det, prior_cam_from_world, prior_sigmas=prior_sigmas, warm_start=warm_start)
-    latency = t_detect + float(est.timings.get("total", 0.0))
+    if confirmation is not None:
+        t1 = time.perf_counter()
+        est = confirmation.confirmed(image, est, prior_cam_from_world)
+        est.timings["confirm"] = time.perf_counter() - t1
+    latency = t_detect + float(est.timings.get("total", 0.0)) + float(est.timings.get("confirm", 0.0))
     scores = (
         association_scores(est.assignment, det.true_ids, model_ids)
         if det.true_ids is not None

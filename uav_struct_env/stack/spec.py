@@ -161,6 +161,10 @@ class StackSpec:
         aruco_pixel_sigma: ArUco corner noise, px (floored by ``min_localizer_sigma_px``).
         localizer_kwargs: further :class:`localization.Localizer` arguments (override the
             gates derived here).
+        confirm: hold a final pose on few pairs to the building's structure matched in the image
+            (:mod:`uav_struct_env.stack.confirm`) when the stack is built with a site and a
+            detector that reads the image (every structural one but ``"projection"``); False:
+            report the localizer's pose as it is.
 
     Raises:
         ConfigError: for an unknown name, a bad number or an option that does not apply.
@@ -181,6 +185,7 @@ class StackSpec:
     aruco_prior: bool = True
     aruco_pixel_sigma: float = 1.0
     localizer_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    confirm: bool = True
 
     def __post_init__(self) -> None:
         check_choice("landmarks", self.landmarks, LANDMARK_SETS, error=ConfigError)
@@ -212,6 +217,8 @@ class StackSpec:
         ):
             check_number(name, getattr(self, name), 0.0, hi, error=ConfigError, type_error=ConfigError)
         object.__setattr__(self, "localizer_kwargs", dict(self.localizer_kwargs))
+        if not isinstance(self.confirm, (bool, np.bool_)):
+            raise ConfigError(f"confirm must be True or False, got {self.confirm!r}")
 
     @property
     def structural(self) -> bool:
@@ -247,6 +254,8 @@ class LocalizationStack:
         detector: the structural detector (None for ArUco).
         localizer: the :class:`localization.Localizer` (None for ArUco).
         aruco: the :class:`localization.aruco.ArucoLocalizer` (None for structural sets).
+        confirmation: the :class:`~uav_struct_env.stack.confirm.PoseConfirmation` its final
+            poses are held to (None: none).
     """
 
     spec: StackSpec
@@ -255,6 +264,7 @@ class LocalizationStack:
     detector: Any = None
     localizer: Localizer | None = None
     aruco: Any = None
+    confirmation: Any = None
 
     @property
     def prior_std(self) -> NDArray[np.float64]:
@@ -311,6 +321,7 @@ class LocalizationStack:
             self.model_ids,
             prior_sigmas=prior_sigmas,
             warm_start=warm_start,
+            confirmation=self.confirmation,
         )
 
 
@@ -336,6 +347,15 @@ def _learned(spec: StackSpec, width: int) -> Any:
 _TEMPLATES: list[tuple[Any, Any]] = []  # (site, its SiteTemplates): the last site's only
 
 
+def _templates(site: Any) -> Any:
+    """The :class:`~uav_struct_env.sim.templates.SiteTemplates` of ``site`` (the last site's are kept)."""
+    from uav_struct_env.sim.templates import SiteTemplates
+
+    if not _TEMPLATES or _TEMPLATES[0][0] is not site:
+        _TEMPLATES[:] = [(site, SiteTemplates(site))]
+    return _TEMPLATES[0][1]
+
+
 def _guided(spec: StackSpec, size: tuple[int, int], localizer: Localizer, xyz: NDArray[np.float64],
             site: Any) -> Any:
     """The guided detector of ``spec``'s set: the learned one (all types) as its seed, templates of ``site``.
@@ -345,7 +365,6 @@ def _guided(spec: StackSpec, size: tuple[int, int], localizer: Localizer, xyz: N
     """
     from localization.detect.guided import TemplateMatcher
     from localization.detect.learned import LANDMARK_TYPES
-    from uav_struct_env.sim.templates import SiteTemplates
     from uav_struct_env.site import Site
     from uav_struct_env.stack.guided import GuidedDetector
 
@@ -353,9 +372,7 @@ def _guided(spec: StackSpec, size: tuple[int, int], localizer: Localizer, xyz: N
         raise ConfigError(
             f"detector='guided' renders the building model: build_stack needs site=, got {site!r}"
         )
-    if not _TEMPLATES or _TEMPLATES[0][0] is not site:
-        _TEMPLATES[:] = [(site, SiteTemplates(site))]
-    matcher = TemplateMatcher(xyz, _TEMPLATES[0][1])
+    matcher = TemplateMatcher(xyz, _templates(site))
     seed = _learned(replace(spec, landmarks="all"), size[0])
     types = range(len(LANDMARK_TYPES)) if spec.landmarks == "all" else [LANDMARK_TYPES.index(spec.landmarks)]
     every = site.landmarks("all").xyz
@@ -392,7 +409,9 @@ def build_stack(
             None for a pinhole; the localizer (or the ArUco localizer) undistorts detections
             with them at its entry.
         site: the site as designed (a :class:`~uav_struct_env.site.Site`): the building model
-            that ``detector="guided"`` renders its templates from.
+            that ``detector="guided"`` renders its templates from, and that the final poses of
+            every detector reading the image are confirmed against (``spec.confirm``); None: no
+            confirmation.
 
     Raises:
         ConfigError: with fewer than 4 landmarks, no markers for ArUco, or no site for
@@ -434,4 +453,21 @@ def build_stack(
         detector = ProjectionDetector(
             spec.landmarks, spec.detector_sigma(w), spec.miss_rate, spec.false_positives, rng=rng
         )
-    return LocalizationStack(spec, (w, h), ids.astype(np.int64), detector, localizer)
+    return LocalizationStack(spec, (w, h), ids.astype(np.int64), detector, localizer,
+                             confirmation=_confirmation(spec, localizer, site))
+
+
+def _confirmation(spec: StackSpec, localizer: Localizer, site: Any) -> Any:
+    """The stack's :class:`~uav_struct_env.stack.confirm.PoseConfirmation`, or None.
+
+    None without a site, with ``spec.confirm`` off, or for the projection detector (simulated
+    detections, not the image's).
+    """
+    from uav_struct_env.site import Site
+
+    if not spec.confirm or spec.detector == "projection" or not isinstance(site, Site):
+        return None
+    from localization.verify import CONFIRM_TOLERANCE_M
+    from uav_struct_env.stack.confirm import confirmation_for
+
+    return confirmation_for(_templates(site), site.landmarks("all").xyz, localizer, CONFIRM_TOLERANCE_M)
