@@ -9,13 +9,14 @@ parse (``ifc_stages``: CPU seconds, ``time.process_time``, the "one core" figure
 clock); run it under ``taskset -c 0`` for one core. It then writes ``DIR/<name>.pickle``: the
 times, the file's size, the import report (kept, dropped, skipped, repaired rows), every element's
 kind, name, storey, heights, outline, openings and mesh size, and every stage's landmarks of every
-structural set (label and position). A refusal is recorded with its message.
+structural set (label, its occurrence and position). A refusal is recorded with its message.
 
 ``compare`` reads two such folders (the importer before and after a change) and prints, per
 file: the parse CPU before -> after, whether the report's rows are the same (else the rows that
-differ), and the largest displacement of a landmark (matched by stage, set and label), of an
-element's outline and of an opening's outline (symmetric Hausdorff distance, metres), and how
-many meshes changed. A benchmark, not a test: times depend on the machine and its load.
+differ), and the largest displacement of a landmark (matched by stage, set, label and the
+label's occurrence), of an element's outline and of an opening's outline (symmetric Hausdorff
+distance, metres), and how many meshes changed. A benchmark, not a test: times depend on the
+machine and its load.
 """
 
 from __future__ import annotations
@@ -75,8 +76,10 @@ def snapshot(path: str) -> dict:
         at = load_ifc(path, stage)
         for name in SETS:
             lm = at.landmarks(name)
-            for label, xyz in zip(lm.labels, lm.xyz, strict=True):
-                out["landmarks"][(stage, name, label)] = np.asarray(xyz, dtype=np.float64)
+            seen: dict[str, int] = {}
+            for label, xyz in zip(lm.labels, lm.xyz, strict=True):  # a label may repeat: count it
+                seen[label] = seen.get(label, -1) + 1
+                out["landmarks"][(stage, name, label, seen[label])] = np.asarray(xyz, dtype=np.float64)
     return out
 
 
@@ -97,7 +100,8 @@ def dump(folder: str | Path, files: str | None = None, names: list[str] | None =
             target = folder / f"{entry['name']}.pickle"
             cmd = [sys.executable, str(Path(__file__).resolve()), "one", str(path), str(target)]
             done = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True,
-                                  env={**os.environ, IFC_CACHE_ENV: cache})
+                                  env={**os.environ, IFC_CACHE_ENV: cache, "PYTHONPATH": os.pathsep.join(
+                                      [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])})
         if done.returncode != 0:
             print(f"{entry['name']:<22} exit {done.returncode}: {done.stderr.strip()[-300:]}")
             continue
@@ -152,11 +156,12 @@ def compare(before: str | Path, after: str | Path) -> dict[str, dict]:
             continue
         a, b = pickle.loads(pa.read_bytes()), pickle.loads(pb.read_bytes())
         name = pa.stem
-        head = (f"{name:<22} {a['mb']:5.2f} MB  parse CPU {a['parse_cpu_s']:6.2f} -> {b['parse_cpu_s']:6.2f} s "
-                f"(wall {a['parse_s']:6.2f} -> {b['parse_s']:6.2f} s)")
+        head = (f"{name:<22} {a['mb']:5.2f} MB  parse CPU {a['parse_cpu_s']:6.2f} -> "
+                f"{b['parse_cpu_s']:6.2f} s (wall {a['parse_s']:6.2f} -> {b['parse_s']:6.2f} s)")
         if "error" in a or "error" in b:
             same = a.get("error") == b.get("error")
-            print(f"{head}  refused {'the same' if same else 'DIFFERENTLY'}: {b.get('error', 'imports')[:80]}")
+            verdict = "the same" if same else "DIFFERENTLY"
+            print(f"{head}  refused {verdict}: {b.get('error', 'imports')[:80]}")
             rows[name] = {"same_refusal": same}
             continue
         d = _differences(a, b)

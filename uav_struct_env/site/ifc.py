@@ -193,6 +193,11 @@ _DUPLICATE_CELL = 1.0
 #: A stage needs at least this many landmarks of a set for a camera to get a pose from it.
 _MIN_LANDMARKS = 4
 _NEIGHBOURS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+# The kinds whose plan footprints are unioned in floating point (:func:`_plan_union`): they bear no
+# landmark, and a beam's outline moves a column top's cover test only within OUTLINE_TOL of its edge.
+_FAST_UNION_KINDS = frozenset({"beam", "wall"})
+# A union thinner on average than this (2 area / perimeter, m) is a sliver: made on the 1 um grid.
+_FAST_MIN_WIDTH = 0.01
 # A closing (:func:`_clean`) that loses more than this area (m2: OUTLINE_TOL squared, below the
 # outline's resolution) has failed; the union is used unclosed.
 _CLOSING_LOSS = OUTLINE_TOL**2
@@ -284,20 +289,29 @@ def _clean(geom: Any, close: float = 1e-4) -> Any:
     return shapely.make_valid(geom) if not geom.is_valid else geom
 
 
-def _plan_union(tri2d: NDArray[np.float64], close: float = 1e-4) -> Any:
+def _plan_union(tri2d: NDArray[np.float64], close: float = 1e-4, fast: bool = False) -> Any:
     """The cleaned union of plan triangles (T, 3, 2) (Polygon or MultiPolygon, maybe empty).
 
-    GEOS's floating-point union; where it fails (a robustness error on nearly coincident edges)
-    the union snapped to a 1 um grid, four times slower, which cannot fail that way.
+    Snapped to a 1 um grid (GEOS's snap-rounding overlay). ``fast``: GEOS's floating-point
+    overlay, four times faster, whose outline after the simplification at OUTLINE_TOL can differ
+    by up to OUTLINE_TOL; used for beams and walls, which bear no landmarks (:func:`_footprint`),
+    and not where that overlay fails or its union is thinner on average than
+    :data:`_FAST_MIN_WIDTH` (a sliver, whose outline the grid decides as it always has).
     """
     import shapely
 
     polys = _tri_polygons(tri2d)
     if len(polys) == 0:
         return shapely.Polygon()
-    try:
-        union = shapely.union_all(polys)
-    except shapely.errors.GEOSException:
+    union = None
+    if fast:
+        try:
+            union = shapely.union_all(polys)
+        except shapely.errors.GEOSException:
+            union = None
+        if union is not None and 2.0 * union.area < _FAST_MIN_WIDTH * union.length:
+            union = None
+    if union is None:
         union = shapely.union_all(polys, grid_size=1e-6)
     return _clean(union, close)
 
@@ -308,9 +322,12 @@ def _parts(geom: Any, min_area: float = 1e-4) -> list[Any]:
     return [p for p in shapely.get_parts(geom) if p.geom_type == "Polygon" and p.area >= min_area]
 
 
-def _footprint(tri: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    """Plan outline of triangles (T, 3, 3): the union's largest part, or its convex hull."""
-    union = _plan_union(tri[:, :, :2])
+def _footprint(tri: NDArray[np.float64], fast: bool = False) -> NDArray[np.float64] | None:
+    """Plan outline of triangles (T, 3, 3): the union's largest part, or its convex hull.
+
+    ``fast``: the union in floating point (:func:`_plan_union`).
+    """
+    union = _plan_union(tri[:, :, :2], fast=fast)
     parts = sorted(_parts(union, 1e-6), key=lambda p: -p.area)
     if not parts:
         return None
@@ -319,10 +336,10 @@ def _footprint(tri: NDArray[np.float64]) -> NDArray[np.float64] | None:
     return np.asarray(union.convex_hull.exterior.coords)[:-1]
 
 
-def _safe_footprint(tri: NDArray[np.float64]) -> NDArray[np.float64] | None:
+def _safe_footprint(tri: NDArray[np.float64], fast: bool = False) -> NDArray[np.float64] | None:
     """:func:`_footprint`, None where the plan geometry is degenerate (the element is then dropped)."""
     try:
-        return _footprint(tri)
+        return _footprint(tri, fast)
     except ValueError:  # SiteGeometryError included
         return None
 
@@ -1109,7 +1126,7 @@ def _parse(path: Path, transform: NDArray[np.float64]) -> _Parsed:
     shapes = _tessellate(ios.geom, settings, f, include)
     tessellated, no_body = _no_body_geometry(include, shapes)
     raws = [_raw(ios.geom, settings, k, e, shapes[e.id()], transform, storeys) for k, e in tessellated]
-    footprints = {r.guid: _safe_footprint(r.tri) for r in raws}
+    footprints = {r.guid: _safe_footprint(r.tri, fast=r.kind in _FAST_UNION_KINDS) for r in raws}
     unique, duplicates = _coincident_duplicates(raws, footprints)
     slabs = [r for r in unique if r.kind == "slab"]
     tops = {r.guid: _slab_top(r) for r in slabs}
