@@ -22,6 +22,7 @@ machine and its load.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import pickle
@@ -67,7 +68,7 @@ def snapshot(path: str) -> dict:
     out["elements"] = {
         e.guid: {"kind": e.kind, "name": e.name, "storey": e.storey, "z": (e.z_bottom, e.z_top),
                  "outline": np.asarray(e.outline), "mesh": (len(e.mesh.vertices), len(e.mesh.faces)),
-                 "mesh_bytes": hash(np.asarray(e.mesh.vertices).tobytes()),
+                 "mesh_bytes": hashlib.sha256(np.asarray(e.mesh.vertices).tobytes()).hexdigest(),
                  "holes": {h.guid: np.asarray(h.outline) for h in getattr(e, "holes", ())}}
         for e in site.elements}
     out["stages"] = stages

@@ -1,12 +1,14 @@
-"""The import's speed tool: the parse's breakdown.
+"""The import's speed: the parse's breakdown, the faster plan union, and the before/after diff.
 
 ``benchmarks/ifc_import.py --breakdown`` splits a cold parse into the geometry kernel, the plan
 footprints and the other rules, and the kernel's time by body representation; these tests check
 what it counts on the shipped duplex (the times themselves are the benchmark's, never asserted).
+``benchmarks/ifc_import_diff.py`` says what a change to the importer moves, file by file.
 """
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +21,7 @@ from ifc_sites import DUPLEX  # noqa: E402
 from uav_struct_env.site import ifc as ifc_module  # noqa: E402
 
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "ifc_import.py"
+DIFF = SCRIPT.with_name("ifc_import_diff.py")
 
 
 @pytest.fixture(scope="module")
@@ -93,3 +96,20 @@ def test_a_sliver_is_unioned_on_the_grid_even_when_fast(grid_unions):
     assert grid_unions == [None, 1e-6]
     np.testing.assert_array_equal(fast, ifc_module._footprint(tri))
 
+
+
+def test_the_diff_sees_a_landmark_moved_and_a_row_changed(load_script):
+    diff = load_script(DIFF)
+    snap = diff.snapshot(str(DUPLEX))
+    assert len(snap["landmarks"]) == 28 and len(snap["elements"]) == 72
+    same = diff._differences(snap, copy.deepcopy(snap))
+    assert same["landmark_max_m"] == 0.0 and same["outline_max_m"] == 0.0 and same["meshes_changed"] == 0
+    assert not {"kept", "dropped"} & same.keys()
+    moved = copy.deepcopy(snap)
+    key = sorted(moved["landmarks"])[0]
+    moved["landmarks"][key] = moved["landmarks"][key] + [0.0, 0.002, 0.0]
+    row = ("guid", "IfcBeam", "a beam", "no plan footprint or no height")
+    moved["report"]["dropped"] = (*moved["report"]["dropped"], row)
+    d = diff._differences(snap, moved)
+    assert d["landmark_max_m"] == pytest.approx(0.002)
+    assert d["dropped"] == ([], [row])

@@ -193,9 +193,10 @@ _DUPLICATE_CELL = 1.0
 #: A stage needs at least this many landmarks of a set for a camera to get a pose from it.
 _MIN_LANDMARKS = 4
 _NEIGHBOURS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
-# The kinds whose plan footprints are unioned in floating point (:func:`_plan_union`): they bear no
-# landmark, and a beam's outline moves a column top's cover test only within OUTLINE_TOL of its edge.
-_FAST_UNION_KINDS = frozenset({"beam", "wall"})
+# The kinds whose plan footprints are unioned in floating point (:func:`_plan_union`): no landmark
+# comes from them (a column's top is its top face's centroid, on the grid; a beam's outline moves a
+# column top's cover test only within OUTLINE_TOL of its edge).
+_FAST_UNION_KINDS = frozenset({"column", "beam", "wall"})
 # A union thinner on average than this (2 area / perimeter, m) is a sliver: made on the 1 um grid.
 _FAST_MIN_WIDTH = 0.01
 # A closing (:func:`_clean`) that loses more than this area (m2: OUTLINE_TOL squared, below the
@@ -294,7 +295,7 @@ def _plan_union(tri2d: NDArray[np.float64], close: float = 1e-4, fast: bool = Fa
 
     Snapped to a 1 um grid (GEOS's snap-rounding overlay). ``fast``: GEOS's floating-point
     overlay, four times faster, whose outline after the simplification at OUTLINE_TOL can differ
-    by up to OUTLINE_TOL; used for beams and walls, which bear no landmarks (:func:`_footprint`),
+    by up to OUTLINE_TOL; used for the footprints of columns, beams and walls (:func:`_parse`),
     and not where that overlay fails or its union is thinner on average than
     :data:`_FAST_MIN_WIDTH` (a sliver, whose outline the grid decides as it always has).
     """
