@@ -33,17 +33,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+from ifc_corpus import local_path  # this folder's sibling: where a corpus file lives
 
 ROOT = Path(__file__).resolve().parents[1]
 MANIFEST = ROOT / "data" / "ifc_corpus" / "manifest.json"
 SETS = ("slab_corners", "opening_corners", "column_tops")
-
-
-def _local(entry: dict, files: str | None) -> Path:
-    if files is not None and (Path(files) / f"{entry['name']}.ifc").exists():
-        return Path(files) / f"{entry['name']}.ifc"
-    p = Path(entry["local_path"])
-    return p if p.is_absolute() else ROOT / p
 
 
 def snapshot(path: str) -> dict:
@@ -93,7 +87,7 @@ def dump(folder: str | Path, files: str | None = None, names: list[str] | None =
     for entry in json.loads(MANIFEST.read_text())["files"]:
         if names and entry["name"] not in names:
             continue
-        path = _local(entry, files)
+        path = local_path(entry, files)
         if not path.exists():
             print(f"{entry['name']:<22} absent ({path})")
             continue
