@@ -93,17 +93,18 @@ instead of parsing it again (``UAV_STRUCT_IFC_CACHE`` moves the cache or, ``off`
 A refused file is not cached. What was kept and dropped is an :class:`ImportReport` in
 ``site.source["report"]``, logged at INFO.
 
-**Speed.** A first parse takes 0.4-5 s CPU for the corpus's files but the two Tekla exports
-(29 and 64 s for 3.4 and 3.6 MB; ``benchmarks/ifc_import.py --breakdown`` splits a parse): 16 and
-46 s of it is ifcopenshell's OpenCASCADE kernel tessellating thousands of steel members (boolean
-cuts and faceted breps cost the most per element), 12 and 16 s the plan union of each element's
-triangles (:func:`_footprint`). The iterator runs on one thread: two threads gave the same
-tessellation of the carwash for 27 s CPU against 17 s on one (a machine under load). Its other
-options change either nothing or the output; a faster kernel (``cgal-simple``) drops elements; a
-faster union (without the 1 um grid) moves outlines by up to 1 mm, since the outline simplified at
-:data:`OUTLINE_TOL` depends on the triangles' order; and skipping the members that bear no
-landmark would change what the env renders: so none of these is done (docs/study.md has the
-figures).
+**Speed.** A first parse takes 0.1-5 s CPU for the corpus's files but the two Tekla exports
+(25 and 57 s for 3.4 and 3.6 MB, one core; ``benchmarks/ifc_import.py --breakdown`` splits a
+parse): 16 and 43 s of it is ifcopenshell's OpenCASCADE kernel, most of it the boolean cuts of
+steel members (the steel frame's 644 cut beams take 34 s). The plan footprints of beams and
+walls are unioned in GEOS's floating-point overlay, four times faster than on the 1 um grid
+(:func:`_plan_union`; their outlines move by less than :data:`OUTLINE_TOL`, and no landmark and
+no kept or dropped element changes on the corpus); slabs, columns and slivers stay on the grid.
+The iterator runs on one thread: two threads gave the same tessellation of the carwash for 27 s
+CPU against 17 s on one (a machine under load). Its other options change either nothing or the
+output; a faster kernel (``cgal-simple``) drops elements; tessellating the beams without their
+cuts (9 s for the steel frame's whole kernel) would render other beams: so none of these is done
+(docs/benchmarks.md has the figures).
 """
 
 from __future__ import annotations
@@ -193,6 +194,12 @@ _DUPLICATE_CELL = 1.0
 #: A stage needs at least this many landmarks of a set for a camera to get a pose from it.
 _MIN_LANDMARKS = 4
 _NEIGHBOURS = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+# The kinds whose plan footprints are unioned in floating point (:func:`_plan_union`): they bear no
+# landmark, and a beam's outline moves a column top's cover test only within OUTLINE_TOL of its edge.
+# Not columns: a plate's width, which the report quotes to the cm, could round the other way.
+_FAST_UNION_KINDS = frozenset({"beam", "wall"})
+# A union thinner on average than this (2 area / perimeter, m) is a sliver: made on the 1 um grid.
+_FAST_MIN_WIDTH = 0.01
 # A closing (:func:`_clean`) that loses more than this area (m2: OUTLINE_TOL squared, below the
 # outline's resolution) has failed; the union is used unclosed.
 _CLOSING_LOSS = OUTLINE_TOL**2
@@ -284,14 +291,31 @@ def _clean(geom: Any, close: float = 1e-4) -> Any:
     return shapely.make_valid(geom) if not geom.is_valid else geom
 
 
-def _plan_union(tri2d: NDArray[np.float64], close: float = 1e-4) -> Any:
-    """The cleaned union of plan triangles (T, 3, 2) (Polygon or MultiPolygon, maybe empty)."""
+def _plan_union(tri2d: NDArray[np.float64], close: float = 1e-4, fast: bool = False) -> Any:
+    """The cleaned union of plan triangles (T, 3, 2) (Polygon or MultiPolygon, maybe empty).
+
+    Snapped to a 1 um grid (GEOS's snap-rounding overlay). ``fast``: GEOS's floating-point
+    overlay, four times faster, whose outline after the simplification at OUTLINE_TOL can differ
+    by up to OUTLINE_TOL; used for the footprints of beams and walls (:func:`_parse`),
+    and not where that overlay fails or its union is thinner on average than
+    :data:`_FAST_MIN_WIDTH` (a sliver, whose outline the grid decides as it always has).
+    """
     import shapely
 
     polys = _tri_polygons(tri2d)
     if len(polys) == 0:
         return shapely.Polygon()
-    return _clean(shapely.union_all(polys, grid_size=1e-6), close)
+    union = None
+    if fast:
+        try:
+            union = shapely.union_all(polys)
+        except shapely.errors.GEOSException:
+            union = None
+        if union is not None and 2.0 * union.area < _FAST_MIN_WIDTH * union.length:
+            union = None
+    if union is None:
+        union = shapely.union_all(polys, grid_size=1e-6)
+    return _clean(union, close)
 
 
 def _parts(geom: Any, min_area: float = 1e-4) -> list[Any]:
@@ -300,9 +324,12 @@ def _parts(geom: Any, min_area: float = 1e-4) -> list[Any]:
     return [p for p in shapely.get_parts(geom) if p.geom_type == "Polygon" and p.area >= min_area]
 
 
-def _footprint(tri: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    """Plan outline of triangles (T, 3, 3): the union's largest part, or its convex hull."""
-    union = _plan_union(tri[:, :, :2])
+def _footprint(tri: NDArray[np.float64], fast: bool = False) -> NDArray[np.float64] | None:
+    """Plan outline of triangles (T, 3, 3): the union's largest part, or its convex hull.
+
+    ``fast``: the union in floating point (:func:`_plan_union`).
+    """
+    union = _plan_union(tri[:, :, :2], fast=fast)
     parts = sorted(_parts(union, 1e-6), key=lambda p: -p.area)
     if not parts:
         return None
@@ -311,10 +338,10 @@ def _footprint(tri: NDArray[np.float64]) -> NDArray[np.float64] | None:
     return np.asarray(union.convex_hull.exterior.coords)[:-1]
 
 
-def _safe_footprint(tri: NDArray[np.float64]) -> NDArray[np.float64] | None:
+def _safe_footprint(tri: NDArray[np.float64], fast: bool = False) -> NDArray[np.float64] | None:
     """:func:`_footprint`, None where the plan geometry is degenerate (the element is then dropped)."""
     try:
-        return _footprint(tri)
+        return _footprint(tri, fast)
     except ValueError:  # SiteGeometryError included
         return None
 
@@ -1101,7 +1128,7 @@ def _parse(path: Path, transform: NDArray[np.float64]) -> _Parsed:
     shapes = _tessellate(ios.geom, settings, f, include)
     tessellated, no_body = _no_body_geometry(include, shapes)
     raws = [_raw(ios.geom, settings, k, e, shapes[e.id()], transform, storeys) for k, e in tessellated]
-    footprints = {r.guid: _safe_footprint(r.tri) for r in raws}
+    footprints = {r.guid: _safe_footprint(r.tri, fast=r.kind in _FAST_UNION_KINDS) for r in raws}
     unique, duplicates = _coincident_duplicates(raws, footprints)
     slabs = [r for r in unique if r.kind == "slab"]
     tops = {r.guid: _slab_top(r) for r in slabs}
