@@ -181,18 +181,18 @@ def compare(before: str | Path, after: str | Path) -> dict[str, dict]:
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
     p_dump = sub.add_parser("dump", help="parse every present corpus file into DIR")
-    p_dump.add_argument("folder")
+    p_dump.add_argument("folder", help="where the snapshots and parse times go")
     p_dump.add_argument("--files", default=None, help="a folder holding <name>.ifc (none: the manifest's)")
     p_dump.add_argument("--names", nargs="*", default=None, help="only these corpus names")
     p_cmp = sub.add_parser("compare", help="what moved from BEFORE to AFTER")
-    p_cmp.add_argument("before")
-    p_cmp.add_argument("after")
-    p_one = sub.add_parser("one")
-    p_one.add_argument("path")
-    p_one.add_argument("target")
+    p_cmp.add_argument("before", help="a dump's folder")
+    p_cmp.add_argument("after", help="another dump's folder")
+    p_one = sub.add_parser("one", help="one file's snapshot (a dump's worker)")
+    p_one.add_argument("path", help="the IFC file")
+    p_one.add_argument("target", help="the snapshot file to write")
     args = parser.parse_args()
     if args.command == "dump":
         dump(args.folder, args.files, args.names)
