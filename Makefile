@@ -23,9 +23,10 @@ demo: $(STAMP)
 	@if [ -e results ]; then echo "make demo: replacing the earlier results in results/"; fi
 	$(BIN)/uav-struct study --out results --workers 2 --overwrite
 
-# The default suite in parallel, one pytest-xdist worker per core (-n auto); test-slow: the long runs.
+# The default suite in parallel, one pytest-xdist worker per core (-n auto; an idle worker takes
+# tests queued on the other, --dist worksteal); test-slow: the long runs.
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n auto
+	$(BIN)/python -m pytest -q -n auto --dist worksteal
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow

@@ -34,6 +34,7 @@ def _weights(path: Path) -> dict:
         return torch.load(io.BytesIO(z.read("policy.pth")), weights_only=True)
 
 
+@pytest.mark.slow  # three SB3 training processes: a long library run (`make test-slow`)
 def test_sigterm_saves_the_run_and_resume_reaches_the_uninterrupted_weights(tmp_path):
     """Tolerance: none -- the resumed run's weights equal the uninterrupted run's bit for bit
     (one process, one torch thread; the same seeded resets, RNG states and statistics)."""
