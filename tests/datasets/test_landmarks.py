@@ -130,6 +130,7 @@ def test_site_activity_hides_labels_and_changes_nothing_else(tmp_path, tiny_data
         DatasetConfig(activity="crowded")
 
 
+@pytest.mark.slow  # seven busy-site layouts rendered (`make test-slow`)
 def test_mixed_activity_cycles_the_presets_over_the_layouts(tmp_path):
     """--activity mixed: layout i is rendered exactly as the (i % 3)-th preset's dataset renders it."""
     common = ["--views", "1", "--seed", "7", "--scale", "0.25"]

@@ -94,7 +94,8 @@ def _previous_run(out: Path) -> dict[str, bytes]:
     return files
 
 
-@pytest.mark.parametrize("workers", [1, 2])
+# one worker (a second study with a progress bar): `make test-slow`
+@pytest.mark.parametrize("workers", [pytest.param(1, marks=pytest.mark.slow), 2])
 def test_ctrl_c_stops_the_study_quickly_with_one_line_and_status_130(workers, tmp_path):
     out = tmp_path / "out"
     before = _previous_run(out)
