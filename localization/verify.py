@@ -133,6 +133,7 @@ __all__ = [
     "leave_one_out_chi2",
     "leave_one_out_shifts",
     "minimal_fit_chi2_limit",
+    "position_tolerance",
     "predicted_in_image",
     "reassociated",
     "rival_search",
@@ -406,32 +407,44 @@ def leave_one_out_shifts(
     return out
 
 
-def _position_bound(inputs: VerifyInputs, T: NDArray[np.float64], X: NDArray[np.float64]) -> float:
-    """RMS position std, m, of a pose on landmarks ``X`` at the detector's noise (Cramer-Rao)."""
-    cov = pose_covariance(inputs.K, T, X, inputs.fit_sigma_px)
-    return float(np.sqrt(np.trace(cov[:3, :3]))) if np.all(np.isfinite(cov)) else float("inf")
+def position_tolerance(
+    K: NDArray[np.float64], cam_from_world: NDArray[np.float64], landmarks_xyz: NDArray[np.float64],
+    image_size: tuple[int, int], pixel_sigma: float, tolerance_m: float,
+) -> tuple[float, float, int]:
+    """``(tolerance, bound, seen)``: how far a pose may be from the truth and still be right, m.
+
+    ``tolerance`` is ``max(tolerance_m, 3 x bound)`` (issue 44's line between a right pose and a
+    confident wrong one), ``bound`` the RMS position std (Cramer-Rao, m; inf below three points or
+    for a degenerate layout) at ``pixel_sigma`` of the ``seen`` landmarks the pose predicts in the
+    image (:func:`predicted_in_image`).
+    """
+    seen = predicted_in_image(K, cam_from_world, landmarks_xyz, image_size)
+    cov = pose_covariance(K, cam_from_world, landmarks_xyz[seen], pixel_sigma)
+    bound = float(np.sqrt(np.trace(cov[:3, :3]))) if np.all(np.isfinite(cov)) else float("inf")
+    return max(float(tolerance_m), 3.0 * bound), bound, int(seen.sum())
 
 
 def _leverage(inputs: VerifyInputs) -> tuple[float, float, float, int]:
     """``(worst, tolerance, bound, seen)``: the farthest one pair moves the camera centre, m.
 
-    ``worst`` from :func:`leave_one_out_shifts`; ``tolerance`` is ``max(tolerance_m, 3 x
-    bound)``, ``bound`` the position bound (:func:`_position_bound`, at the detector's noise) of
-    the ``seen`` landmarks the pose predicts in the image.
+    ``worst`` from :func:`leave_one_out_shifts`; ``tolerance``, ``bound`` and ``seen`` from
+    :func:`position_tolerance` at the detector's noise.
     """
     rows = np.flatnonzero(inputs.assignment >= 0)
     X = inputs.landmarks_xyz[inputs.assignment[rows]]
     shift = leave_one_out_shifts(inputs.K, inputs.cam_from_world, X, inputs.detections_uv[rows])
-    seen = predicted_in_image(inputs.K, inputs.cam_from_world, inputs.landmarks_xyz, inputs.image_size)
-    bound = _position_bound(inputs, inputs.cam_from_world, inputs.landmarks_xyz[seen])
-    return float(shift.max()), max(float(inputs.tolerance_m or 0.0), 3.0 * bound), bound, int(seen.sum())
+    tolerance, bound, seen = position_tolerance(
+        inputs.K, inputs.cam_from_world, inputs.landmarks_xyz, inputs.image_size, inputs.fit_sigma_px,
+        inputs.tolerance_m or 0.0,
+    )
+    return float(shift.max()), tolerance, bound, seen
 
 
 def _influence_refusal(inputs: VerifyInputs) -> Refusal | None:
     """The refusal when one pair alone moves the pose beyond the tolerance, else None.
 
     The tolerance is ``max(tolerance_m, 3 x the bound of the landmarks the pose predicts in the
-    image)`` (:func:`_position_bound` at the detector's noise). A pose on few pairs with one
+    image)`` (:func:`position_tolerance` at the detector's noise). A pose on few pairs with one
     detection a few px off its corner (on a slab's far edge, beside a hidden corner) fits within
     every residual test -- a minimal fit has two degrees of freedom to hide it in -- yet is
     metres off; the pose without that pair moves by about its error. A pose that one pair moves

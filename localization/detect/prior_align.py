@@ -42,6 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 from localization.checks import check_number
 from localization.detect.guided import Matches, TemplateSource, orientation_field, structure_shading
 from localization.geometry.transforms import as_points, check_intrinsics, check_transform, project
+from localization.pose.pnp import pose_from_rt
 
 __all__ = ["Alignment", "PriorAligner", "fit_matches"]
 
@@ -384,10 +385,7 @@ def _moved_pose(prior: NDArray[np.float64], K: NDArray[np.float64], xyz: NDArray
                                   flags=cv2.SOLVEPNP_ITERATIVE)
     if not ok or not np.all(np.isfinite(tvec)):
         return None
-    out = np.eye(4)
-    out[:3, :3] = cv2.Rodrigues(rvec)[0]
-    out[:3, 3] = tvec.ravel()
-    return out
+    return pose_from_rt(rvec, tvec)
 
 
 def fit_matches(landmarks_xyz: ArrayLike, found: Matches, K: ArrayLike, distortion: ArrayLike | None,
@@ -417,7 +415,4 @@ def fit_matches(landmarks_xyz: ArrayLike, found: Matches, K: ArrayLike, distorti
     )
     if not ok or inliers is None or len(inliers) < min_inliers or not np.all(np.isfinite(tvec)):
         return None
-    out = np.eye(4)
-    out[:3, :3] = cv2.Rodrigues(rvec)[0]
-    out[:3, 3] = tvec.ravel()
-    return out
+    return pose_from_rt(rvec, tvec)

@@ -46,6 +46,7 @@ __all__ = [
     "is_coplanar",
     "plane_from_world",
     "pnp_candidates",
+    "pose_from_rt",
     "refine_pose",
     "reprojection_residuals",
     "select_candidate",
@@ -132,7 +133,8 @@ def _as_cv(points: NDArray) -> NDArray:
     return np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 1, points.shape[1])
 
 
-def _pose_from_rt(rvec: NDArray, tvec: NDArray) -> NDArray:
+def pose_from_rt(rvec: NDArray, tvec: NDArray) -> NDArray:
+    """(4, 4) ``cam_from_world`` of OpenCV's rotation vector and translation (``solvePnP``'s output)."""
     R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
     return make_transform(R, np.asarray(tvec, dtype=np.float64).reshape(3))
 
@@ -161,7 +163,7 @@ def pnp_candidates(
                 _as_cv(Xp), _as_cv(u), K, None, flags=cv2.SOLVEPNP_IPPE
             )
             for r, t in zip(rvecs[:n], tvecs[:n], strict=True):
-                out.append(_pose_from_rt(r, t) @ p_from_w)
+                out.append(pose_from_rt(r, t) @ p_from_w)
         else:
             if X.shape[0] < 3:
                 return []
@@ -169,7 +171,7 @@ def pnp_candidates(
                 _as_cv(X), _as_cv(u), K, None, flags=cv2.SOLVEPNP_SQPNP
             )
             for r, t in zip(rvecs[:n], tvecs[:n], strict=True):
-                out.append(_pose_from_rt(r, t))
+                out.append(pose_from_rt(r, t))
     except cv2.error:
         return []
     return [T for T in out if np.all(np.isfinite(T))]

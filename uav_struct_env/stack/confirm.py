@@ -48,8 +48,8 @@ from localization.detect.guided import TemplateMatcher
 from localization.failure import FailureCode
 from localization.geometry.distortion import is_pinhole, undistort_points
 from localization.geometry.transforms import camera_center, project
-from localization.pose.covariance import pose_covariance
 from localization.pose.pnp import refine_pose, solve_pnp
+from localization.verify import position_tolerance
 
 __all__ = ["Confirmation", "PoseConfirmation", "confirmation_for"]
 
@@ -144,17 +144,11 @@ class PoseConfirmation:
     def tolerance(self, cam_from_world: NDArray[np.float64], image_size: tuple[int, int]) -> float:
         """``max(tolerance_m, 3 x bound)``, m, with the bound of the set's landmarks the pose shows.
 
-        Infinite (nothing refused for its shift) with fewer than three of them.
+        The verification's tolerance (:func:`localization.verify.position_tolerance`): infinite
+        (nothing refused for its shift) with fewer than three of them.
         """
-        uv, z = project(self.K, cam_from_world, self.set_xyz)
-        w, h = image_size
-        seen = (z > 0.1) & (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
-        bound = float("inf")
-        if seen.sum() >= 3:
-            cov = pose_covariance(self.K, cam_from_world, self.set_xyz[seen], self.pixel_sigma_px)
-            if np.all(np.isfinite(cov)):
-                bound = float(np.sqrt(np.trace(cov[:3, :3])))
-        return max(self.tolerance_m, 3.0 * bound)
+        return position_tolerance(self.K, cam_from_world, self.set_xyz, image_size, self.pixel_sigma_px,
+                                  self.tolerance_m)[0]
 
     def _matched(self, image: NDArray[np.uint8], cam_from_world: NDArray[np.float64]) -> _Matched:
         """The stage's landmarks matched around their projections at ``cam_from_world``."""
@@ -163,10 +157,13 @@ class PoseConfirmation:
         if self.distortion is not None and len(uv):
             uv = undistort_points(uv, self.K, self.distortion)
         X = self.matcher.xyz[found.index]
-        here = 0
-        if len(uv):
-            here = int((np.hypot(*(project(self.K, cam_from_world, X)[0] - uv).T) <= self.gate_px).sum())
+        here = int(self._agree(cam_from_world, X, uv).sum()) if len(uv) else 0
         return _Matched(X, uv, here)
+
+    def _agree(self, cam_from_world: NDArray[np.float64], X: NDArray[np.float64],
+               uv: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """(N,) the matches ``uv`` of ``X`` within ``gate_px`` of where ``cam_from_world`` projects them."""
+        return np.hypot(*(project(self.K, cam_from_world, X)[0] - uv).T) <= self.gate_px
 
     def structure_pose(self, matched: _Matched, cam_from_world: NDArray[np.float64]
                        ) -> tuple[NDArray[np.float64] | None, int]:
@@ -184,11 +181,11 @@ class PoseConfirmation:
             return None, 0
         T = fit.cam_from_world
         for _ in range(3):
-            agree = np.hypot(*(project(self.K, T, X)[0] - uv).T) <= self.gate_px
+            agree = self._agree(T, X, uv)
             if agree.sum() < self.min_agree:
                 return None, 0
             T, _ = refine_pose(X[agree], uv[agree], self.K, T)
-        n = int((np.hypot(*(project(self.K, T, X)[0] - uv).T) <= self.gate_px).sum())
+        n = int(self._agree(T, X, uv).sum())
         return (T, n) if n >= self.min_agree else (None, 0)
 
     def assess(self, image: Any, cam_from_world: NDArray[np.float64]) -> Confirmation:
