@@ -93,17 +93,17 @@ instead of parsing it again (``UAV_STRUCT_IFC_CACHE`` moves the cache or, ``off`
 A refused file is not cached. What was kept and dropped is an :class:`ImportReport` in
 ``site.source["report"]``, logged at INFO.
 
-**Speed.** A first parse takes 0.1-5 s CPU for the corpus's files but the two Tekla exports
-(25 and 57 s for 3.4 and 3.6 MB, one core; ``benchmarks/ifc_import.py --breakdown`` splits a
-parse): 16 and 43 s of it is ifcopenshell's OpenCASCADE kernel, most of it the boolean cuts of
-steel members (the steel frame's 644 cut beams take 34 s). The plan footprints of beams and
-walls are unioned in GEOS's floating-point overlay, four times faster than on the 1 um grid
-(:func:`_plan_union`; their outlines move by less than :data:`OUTLINE_TOL`, and no landmark and
-no kept or dropped element changes on the corpus); slabs, columns and slivers stay on the grid.
-The iterator runs on one thread: two threads gave the same tessellation of the carwash for 27 s
-CPU against 17 s on one (a machine under load). Its other options change either nothing or the
-output; a faster kernel (``cgal-simple``) drops elements; tessellating the beams without their
-cuts (9 s for the steel frame's whole kernel) would render other beams: so none of these is done
+**Speed.** A first parse takes 0.1-5 s CPU for the corpus's files but the two Tekla exports (21 and
+49 s for 3.4 and 3.6 MB, one core of a quiet machine, 2026-11-28; ``benchmarks/ifc_import.py
+--breakdown`` splits a parse): 16 and 43 s of it is ifcopenshell's OpenCASCADE kernel, most of it
+the boolean cuts of steel members (the steel frame's 644 cut beams take 34 s). The plan footprints
+of beams and walls are unioned in GEOS's floating-point overlay, four times faster than on the 1 um
+grid (:func:`_plan_union`; their outlines move by less than :data:`OUTLINE_TOL`, and no landmark and
+no kept or dropped element changes on the corpus); slabs, columns and slivers stay on the grid. The
+iterator runs on one thread: two threads gave the same tessellation of the carwash for 27 s CPU
+against 17 s on one (a machine under load). Its other options change either nothing or the output; a
+faster kernel (``cgal-simple``) drops elements; tessellating the beams without their cuts (9 s for
+the steel frame's whole kernel) would render other beams: so none of these is done
 (docs/benchmarks.md has the figures).
 """
 
