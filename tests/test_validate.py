@@ -129,6 +129,15 @@ def test_a_malformed_site_file_is_refused_before_the_output_folder_exists(tmp_pa
     assert not out.exists()
 
 
+def test_an_unknown_study_method_is_one_line_naming_it_and_the_choices(tmp_path, capsys):
+    out = tmp_path / "results"
+    assert study_main(["--methods", "column_tops,doors", "--out", str(out), "--detector", "projection"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "uav-struct study: error: methods must be" in err
+    assert "'doors'" in err and "'slab_corners'" in err
+    assert not out.exists()
+
+
 def test_check_site_names_the_option_and_the_file(tmp_path):
     with pytest.raises(UsageError, match=r"--site 'nope.json': site file 'nope.json' does not exist"):
         check_site("nope.json")

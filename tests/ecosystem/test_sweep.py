@@ -109,13 +109,14 @@ def _rows(runs):
 def test_the_command_writes_one_table_and_refuses_study_only_options(tmp_path, capsys):
     out = tmp_path / "sw"
     code = main(["--sites", "random:2", "--seeds", "3", "--detector", "projection", "--quick",
-                 "--no-progress", "--out", str(out), "--association", "paper"])
+                 "--no-progress", "--out", str(out), "--association", "paper", "--methods", "column_tops"])
     assert code == 0
     results = json.loads((out / "results.json").read_text())
     assert results["config"]["sites"] == ["random:2"] and results["config"]["seeds"] == [3]
     assert results["config"]["association"] == "paper" and results["config"]["backend"] == "process pool"
     table = (out / "table.md").read_text()
     assert "| Column tops | 1 |" in table and table in capsys.readouterr().out
+    assert list(results["methods"]) == ["column_tops"] and "Slab corners" not in table  # --methods
     # each file says how it was made: the study's settings line over the sweep's sites and seeds
     made, header, first = (out / "per_image.csv").read_text().splitlines()[:3]
     line = results["settings"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -158,13 +159,14 @@ def test_overwrite_replaces_the_earlier_study_and_removes_its_stale_files(tmp_pa
     out = tmp_path / "out"
     _previous_run(out)
     (out / "fig2_associations.png").write_bytes(b"an earlier figure")
-    proc = _study(out, 1, "--quick", "--overwrite")
+    proc = _study(out, 1, "--quick", "--overwrite", "--methods", "column_tops")  # one scene: the quickest study
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 0, err[-2000:]
     names = sorted(p.name for p in out.iterdir())
     # --no-figures: the earlier figure is not left beside the new results; the user's file stays
     assert names == ["detections.csv", "notes.txt", "per_image.csv", "results.json", "table1.md", "table2.md"]
     assert b"earlier" not in (out / "results.json").read_bytes()
+    assert list(json.loads((out / "results.json").read_text())["methods"]) == ["column_tops"]
 
 
 def test_sigterm_ends_the_study_like_ctrl_c_with_status_143(tmp_path):
@@ -186,7 +188,7 @@ def test_sigterm_ends_the_study_like_ctrl_c_with_status_143(tmp_path):
 
 def test_two_studies_into_one_new_folder_one_writes_the_other_is_refused(tmp_path):
     out = tmp_path / "new"
-    procs = [_study(out, 1, "--quick") for _ in range(2)]
+    procs = [_study(out, 1, "--quick", "--methods", "column_tops") for _ in range(2)]
     done = [p.communicate(timeout=600) for p in procs]
     codes = sorted(p.returncode for p in procs)
     assert codes == [0, 2], [err[-2000:] for _, err in done]

@@ -27,7 +27,7 @@ from uav_struct_env.study.figures import (
     plot_viewpoint_map,
     plot_worker_tracking,
 )
-from uav_struct_env.study.protocol import ASSOCIATIONS, DETECTORS, NOISES, StudyConfig
+from uav_struct_env.study.protocol import ASSOCIATIONS, DETECTORS, METHODS, NOISES, StudyConfig
 from uav_struct_env.study.report import (
     results_dict,
     settings_line,
@@ -150,6 +150,13 @@ def _parser() -> CommandParser:
         "--quick",
         action="store_true",
         help=f"{QUICK_VIEWPOINTS} viewpoints per UAV instead of 10 (for tests)",
+    )
+    p.add_argument(
+        "--methods",
+        default=None,
+        help="comma-separated rows to evaluate, of: " + ", ".join(m.key for m in METHODS)
+        + " (default: every row; the slab-stage rows share one scene per viewpoint, column tops and "
+        "'all' another, so one row of each costs about what the whole stage does)",
     )
     p.add_argument(
         "--site",
@@ -275,6 +282,8 @@ def study_config(args, **overrides) -> StudyConfig:
         worker_pixel_sigma=args.worker_pixel_sigma,
         upright_workers=args.upright_workers,
     )
+    if args.methods is not None:
+        fields["methods"] = tuple(k.strip() for k in args.methods.split(","))
     fields.update(overrides)
     if fields["detector"] is None:
         fields["detector"] = default_detector(fields["site"])
