@@ -243,7 +243,10 @@ class Localizer:
             raise ValueError("landmarks_xyz must hold at least one landmark, got shape (0, 3)")
         if not np.all(np.isfinite(X)):
             raise ValueError("landmarks_xyz must be finite")
-        self.landmarks_xyz = np.ascontiguousarray(X)  # the compiled steps read it as it is
+        # The localizer's own writable copy: the compiled steps read it as it is, and numba compiles
+        # a kernel once per argument type, read-only arrays (a site's landmarks) being another type
+        # than the writable ones every step derives from them and the warm-up passes.
+        self.landmarks_xyz = np.array(X, dtype=np.float64, order="C")
         self.K = np.ascontiguousarray(check_intrinsics("K", K))
         self.association = check_choice(
             "association", association, ASSOCIATION_METHODS, type_error=TypeError

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import localization.warmup as warmup
 
 
@@ -29,3 +32,35 @@ def test_a_first_compile_is_announced_once(monkeypatch):
     monkeypatch.setattr(warmup, "kernels_cached", lambda: True)
     warmup.warm_up(announce=lines.append)
     assert len(lines) == 1
+
+
+_READ_ONLY_RUN = """
+import numpy as np
+from localization.geometry.camera import PAPER_IMAGE_SIZE, PAPER_K
+from localization.geometry.transforms import look_at, project
+from localization.pipeline import Localizer
+from localization.testing.synthetic import paper_prior
+from localization.warmup import _scene, compiled_kernels, warm_up
+
+warm_up(announce=None)
+name = lambda k: k.py_func.__module__ + "." + k.__name__
+before = {name(k): len(k.signatures) for k in compiled_kernels()}
+tops, _ = _scene(np.random.default_rng(1))
+tops.flags.writeable = False  # as a site's landmarks are
+truth = look_at([2.0, -18.0, 14.0], [4.0, 5.5, 4.0])
+uv, _ = project(PAPER_K, truth, tops)
+for association in ("robust", "paper"):
+    loc = Localizer(tops, PAPER_K, association=association, image_size=PAPER_IMAGE_SIZE)
+    assert loc.localize(uv, paper_prior(truth, 0)).success
+    assert loc.localize(uv, paper_prior(truth, 1), warm_start=truth).success
+print(sorted(name(k) for k in compiled_kernels() if len(k.signatures) > before[name(k)]))
+"""
+
+
+def test_a_read_only_landmark_set_compiles_nothing_the_warm_up_did_not():
+    """numba compiles a kernel once per argument type, and a read-only array is another type: the
+    localizer keeps its own writable copy of the landmarks, so a site's (read-only) set runs the
+    kernels the warm-up compiled instead of compiling others in its first, timed frames."""
+    proc = subprocess.run([sys.executable, "-c", _READ_ONLY_RUN], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "[]"

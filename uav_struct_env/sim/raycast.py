@@ -245,12 +245,13 @@ def raycast_visibility(
     R, t = np.ascontiguousarray(T[:3, :3]), T[:3, 3]
     K = camera.K
     # The depth is exact (no buffer quantization): the tolerance of a 24-bit buffer.
+    xyz = np.array(xyz, dtype=np.float64, order="C")  # writable, returned too: one kernel type (visibility.py)
     uv, in_frame, visible = _raycast_windows(
-        np.ascontiguousarray(xyz), R, np.ascontiguousarray(t), K, inverse_intrinsics(K), -R.T @ t,
+        xyz, R, np.ascontiguousarray(t), K, inverse_intrinsics(K), -R.T @ t,
         int(camera.width), int(camera.height), float(camera.near), float(camera.far), int(radius),
         float(abs_tol), float(rel_tol), 24, int(skip_box), *scene._arrays(),
     )
-    return {"ids": ids_arr.copy(), "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}
+    return {"ids": ids_arr.copy(), "xyz": xyz, "uv": uv, "in_frame": in_frame, "visible": visible}
 
 
 @njit(cache=True, nogil=True)

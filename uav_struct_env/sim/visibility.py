@@ -100,7 +100,7 @@ def landmark_visibility(
         TypeError, ValueError: for malformed inputs, naming the bad argument.
     """
     if isinstance(landmarks, LandmarkSet):
-        xyz = np.asarray(landmarks.xyz, dtype=np.float64).reshape(-1, 3)
+        xyz = landmarks.xyz.reshape(-1, 3)
         ids_arr = np.asarray(landmarks.ids, dtype=np.int64)
     else:
         xyz = as_points("landmarks", landmarks, 3)
@@ -123,12 +123,15 @@ def landmark_visibility(
         )
     check_number("radius (pixels)", radius, 0, integer=True, type_error=ValueError)
 
+    # A writable copy, returned too: numba compiles the kernel once per argument type, and a site's
+    # read-only landmarks would be another type than an array's.
+    xyz = np.array(xyz, dtype=np.float64, order="C")
     uv, in_frame, visible = _image_windows(
-        np.ascontiguousarray(xyz), np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
+        xyz, np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
         camera.K, int(camera.width), int(camera.height), float(camera.near), float(camera.far),
         int(radius), float(abs_tol), float(rel_tol), int(depth_bits), np.ascontiguousarray(D),
     )
-    return {"ids": ids_arr.copy(), "xyz": xyz.copy(), "uv": uv, "in_frame": in_frame, "visible": visible}
+    return {"ids": ids_arr.copy(), "xyz": xyz, "uv": uv, "in_frame": in_frame, "visible": visible}
 
 
 @njit(cache=True, nogil=True)
