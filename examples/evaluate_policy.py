@@ -264,6 +264,9 @@ def plot(results: dict[str, dict], path: str | Path, settings: str | None = None
         axes[0].errorbar([i], [rates[i]], yerr=[[rates[i] - s["min"]], [s["max"] - rates[i]]],
                          color="k", capsize=4)
     axes[0].tick_params(axis="x", labelrotation=30, labelsize=8)
+    for label in axes[0].get_xticklabels():  # each label ends under its bar: long run names do not overlap
+        label.set_horizontalalignment("right")
+        label.set_rotation_mode("anchor")
     axes[0].set_ylim(0, 1)
     axes[0].set_ylabel("localized at final step")
     _error_cdfs(axes[1], results)

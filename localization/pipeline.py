@@ -243,9 +243,8 @@ class Localizer:
             raise ValueError("landmarks_xyz must hold at least one landmark, got shape (0, 3)")
         if not np.all(np.isfinite(X)):
             raise ValueError("landmarks_xyz must be finite")
-        # The localizer's own writable copy: the compiled steps read it as it is, and numba compiles
-        # a kernel once per argument type, read-only arrays (a site's landmarks) being another type
-        # than the writable ones every step derives from them and the warm-up passes.
+        # Its own writable copy: numba compiles a kernel once per argument type, and a read-only array
+        # (a site's landmarks) is another type than the warm-up's and every array derived from it.
         self.landmarks_xyz = np.array(X, dtype=np.float64, order="C")
         self.K = np.ascontiguousarray(check_intrinsics("K", K))
         self.association = check_choice(
