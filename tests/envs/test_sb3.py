@@ -24,6 +24,7 @@ def make_vec_env(num_vec_envs=1, num_cpus=0):
 
 
 @pytest.mark.filterwarnings("ignore:The `render_mode` attribute is not defined")
+@pytest.mark.slow  # SB3's own run (7 s); the trainer's image policy runs by default (test_examples: pixels)
 def test_ppo_multi_input_policy_trains_a_few_hundred_steps(tmp_path):
     vec = make_vec_env()
     assert vec.num_envs == 4  # one per UAV
