@@ -83,6 +83,7 @@ DEFAULTS: dict[str, Any] = {
     "log_std_init": -1.0,
     "checkpoint_every": 50_000,
     "seed": 0,
+    "torch_threads": 1,
     "progress_bar": True,
     "bootstrap_time_limit": True,
     "resume": None,
@@ -430,6 +431,7 @@ def check_options(opt: dict[str, Any]) -> None:
     check_option("gamma", opt["gamma"], 0, 1)
     check_option("ent_coef", opt["ent_coef"], 0)
     check_option("log_std_init", opt["log_std_init"])
+    check_option("torch_threads", opt["torch_threads"], 1, integer=True)
     if not isinstance(opt["bootstrap_time_limit"], bool):
         raise ConfigError(f"bootstrap_time_limit must be True or False, got {opt['bootstrap_time_limit']!r}")
     for k, width in enumerate(opt["net_arch"]):
@@ -539,7 +541,7 @@ def _train(opt: dict[str, Any], out: Path, stop: _StopRequest) -> dict[str, Any]
 
     set_random_seed(opt["seed"])
     warnings.filterwarnings("ignore", "The `render_mode` attribute is not defined")
-    torch.set_num_threads(1)
+    torch.set_num_threads(opt["torch_threads"])
     made_by = software()  # the code as training starts (the checkout may change while it runs)
     vec, model = _build(opt, out, stop)
     start = int(model.num_timesteps) if opt["resume"] is not None else 0
@@ -663,6 +665,9 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--checkpoint-every", type=int, default=DEFAULTS["checkpoint_every"])
     p.add_argument("--max-cycles", type=int, default=None, help="override the episode length")
     p.add_argument("--seed", type=int, default=DEFAULTS["seed"])
+    p.add_argument("--torch-threads", type=int, default=DEFAULTS["torch_threads"],
+                   help="threads of the policy's updates (1 suits the state MLP; the env copies' "
+                   "processes idle while an image policy's CNN updates, so 2 cores can both work there)")
     p.add_argument("--no-progress-bar", dest="progress_bar", action="store_false")
     p.add_argument("--bootstrap-time-limit", action=argparse.BooleanOptionalAction,
                    default=DEFAULTS["bootstrap_time_limit"],

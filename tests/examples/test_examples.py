@@ -198,6 +198,8 @@ def test_bad_options_are_named(example):
         example("train_viewpoint_ppo").main(lr=1e-3)
     with pytest.raises(ConfigError, match="bootstrap_time_limit must be True or False, got 1"):
         example("train_viewpoint_ppo").main(bootstrap_time_limit=1)
+    with pytest.raises(UsageError, match="torch_threads must be"):
+        example("train_viewpoint_ppo").main(torch_threads=0)
 
 
 def test_the_trainer_marks_time_limits_for_bootstrapping_unless_told_not_to(example):
