@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_number
+from localization.detect.interface import check_rgb_image
 from localization.geometry.distortion import distort_points, is_pinhole
 from localization.geometry.transforms import as_points, check_intrinsics, check_transform, project
 
@@ -225,11 +226,7 @@ class TemplateMatcher:
         Raises:
             ValueError: for a malformed image, pose or intrinsics, or a ``search_px`` below 1.
         """
-        img = np.asarray(image)
-        if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
-            raise ValueError(
-                f"image must be an (H, W, 3) uint8 RGB array, got shape {img.shape}, dtype {img.dtype}"
-            )
+        img = check_rgb_image(image)
         T = check_transform("cam_from_world", cam_from_world)
         K = check_intrinsics("K", K)
         r = self.search_px if search_px is None else check_number("search_px", search_px, 1, integer=True,

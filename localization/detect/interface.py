@@ -12,11 +12,11 @@ from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from localization.geometry.transforms import as_points
 
-__all__ = ["Detections", "Detector", "check_image_size"]
+__all__ = ["Detections", "Detector", "check_image_size", "check_rgb_image"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,3 +95,13 @@ def check_image_size(name: str, image_size: Any) -> tuple[int, int]:
     if not (w > 0 and h > 0) or int(w) != w or int(h) != h:
         raise ValueError(f"{name} must be positive integers (W, H), got {image_size!r}")
     return int(w), int(h)
+
+
+def check_rgb_image(image: ArrayLike) -> NDArray[np.uint8]:
+    """``image`` as an (H, W, 3) uint8 RGB array; ValueError naming its shape and dtype otherwise."""
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
+        raise ValueError(
+            f"image must be an (H, W, 3) uint8 RGB array, got shape {img.shape}, dtype {img.dtype}"
+        )
+    return img

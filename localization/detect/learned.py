@@ -49,7 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
 
 from localization.checks import check_number
-from localization.detect.interface import Detections
+from localization.detect.interface import Detections, check_rgb_image
 from localization.detect.onnx_net import OnnxNet
 from localization.detect.refiner import PatchRefiner
 from localization.detect.weights import WEIGHT_SETS, weight_set
@@ -459,12 +459,7 @@ class LearnedDetector:
     # --------------------------------------------------------------------------------- core
     def infer(self, image: ArrayLike) -> tuple[NDArray[np.float32], tuple[float, float]]:
         """Network output ``(C, h, w)`` for an RGB image, and the (sx, sy) it was scaled by."""
-        img = np.asarray(image)
-        if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
-            raise ValueError(
-                f"image must be an (H, W, 3) uint8 RGB array, got shape {img.shape}, "
-                f"dtype {img.dtype}"
-            )
+        img = check_rgb_image(image)
         h, w = img.shape[:2]
         sw, sh = max(1, round(w * self.scale)), max(1, round(h * self.scale))
         small = (img if (sw, sh) == (w, h)

@@ -41,6 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from localization.checks import check_number
 from localization.detect.guided import Matches, TemplateSource, orientation_field, structure_shading
+from localization.detect.interface import check_rgb_image
 from localization.geometry.transforms import as_points, check_intrinsics, check_transform, project
 from localization.pose.pnp import pose_from_rt
 
@@ -125,7 +126,7 @@ class PriorAligner:
         Raises:
             ValueError: for a malformed image, pose or intrinsics.
         """
-        img = _rgb(image)
+        img = check_rgb_image(image)
         prior = check_transform("prior_cam_from_world", prior_cam_from_world)
         K = check_intrinsics("K", K)
         level, surface = self._level(img, prior, K)
@@ -157,7 +158,7 @@ class PriorAligner:
         its pixels; the same measure as a hypothesis's ``score``, so a pose that places the model
         better than a hypothesis did scores higher.
         """
-        img = _rgb(image)
+        img = check_rgb_image(image)
         T = check_transform("cam_from_world", cam_from_world)
         K = check_intrinsics("K", K)
         level, _ = self._level(img, T, K)
@@ -318,15 +319,6 @@ class _Level:
                 if score > best[0]:
                     best = (score, m)
         return best
-
-
-def _rgb(image: ArrayLike) -> NDArray[np.uint8]:
-    """``image`` as an (H, W, 3) uint8 array; ValueError naming its shape and dtype otherwise."""
-    img = np.asarray(image)
-    if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
-        raise ValueError(f"image must be an (H, W, 3) uint8 RGB array, got shape {img.shape}, "
-                         f"dtype {img.dtype}")
-    return img
 
 
 def _padded(field: NDArray[np.float32], x0: int, y0: int, x1: int, y1: int) -> NDArray[np.float32]:
