@@ -42,7 +42,13 @@ from numpy.typing import ArrayLike, NDArray
 from localization.checks import check_number
 from localization.detect.guided import Matches, TemplateSource, orientation_field, structure_shading
 from localization.detect.interface import check_rgb_image
-from localization.geometry.transforms import as_points, check_intrinsics, check_transform, project
+from localization.geometry.transforms import (
+    as_points,
+    check_intrinsics,
+    check_transform,
+    project,
+    scaled_intrinsics,
+)
 from localization.pose.pnp import pose_from_rt
 
 __all__ = ["Alignment", "PriorAligner", "fit_matches"]
@@ -176,7 +182,7 @@ class PriorAligner:
         """
         h, w = img.shape[:2]
         size = (max(int(round(w * self.scale)), 16), max(int(round(h * self.scale)), 16))
-        Kq = _scaled_intrinsics(K, (size[0] / w, size[1] / h))
+        Kq = scaled_intrinsics(K, size[0] / w, size[1] / h)
         views = self.templates.render(cam_from_world, Kq[None], size)
         model = views.label[0] >= 0
         if model.sum() < 16:
@@ -342,16 +348,6 @@ def _two_peaks(scores: NDArray[np.float32], sep: float) -> list[tuple[int, int, 
     away[max(0, by - r): by + r + 1, max(0, bx - r): bx + r + 1] = -1.0
     _, second, _, (sx, sy) = cv2.minMaxLoc(away)
     return [(bx, by, float(best)), (sx, sy, float(second))]
-
-
-def _scaled_intrinsics(K: NDArray[np.float64], q: tuple[float, float]) -> NDArray[np.float64]:
-    """K of the frame resized by ``q`` (x, y); pixel centres at integers in both."""
-    Kq = K.copy()
-    Kq[0, :] *= q[0]
-    Kq[1, :] *= q[1]
-    Kq[0, 2] = (K[0, 2] + 0.5) * q[0] - 0.5
-    Kq[1, 2] = (K[1, 2] + 0.5) * q[1] - 0.5
-    return Kq
 
 
 def _surface_points(depth: NDArray[np.float32], model: NDArray[np.bool_], Kq: NDArray[np.float64],

@@ -41,6 +41,7 @@ __all__ = [
     "project",
     "quat_wxyz_from_matrix",
     "rotation_angle_deg",
+    "scaled_intrinsics",
     "skew",
     "so3_exp",
     "so3_log",
@@ -105,6 +106,20 @@ def inverse_intrinsics(K: ArrayLike) -> NDArray[np.float64]:
     if arr.shape != (3, 3):
         raise ValueError(f"K must have shape (3, 3), got {arr.shape}")
     return _inverse_of(arr.tobytes())
+
+
+def scaled_intrinsics(K: ArrayLike, sx: float, sy: float) -> NDArray[np.float64]:
+    """``K`` of the image resized by ``sx`` (x) and ``sy`` (y), pixel centres at integers in both.
+
+    Focal lengths scale by the factors and the principal point as pixel edges do:
+    ``cx' = (cx + 0.5) sx - 0.5`` (this module's integer pixel centres).
+    """
+    Kq = np.array(K, dtype=np.float64)
+    Kq[0, :] *= sx
+    Kq[1, :] *= sy
+    Kq[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
+    Kq[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
+    return Kq
 
 
 @functools.lru_cache(maxsize=64)

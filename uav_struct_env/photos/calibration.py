@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from localization.geometry.distortion import check_distortion
-from localization.geometry.transforms import check_intrinsics
+from localization.geometry.transforms import check_intrinsics, scaled_intrinsics
 from uav_struct_env.photos.errors import PhotoError
 from uav_struct_env.photos.metadata import PhotoMetadata
 from uav_struct_env.photos.orientation import turn_camera, upright_turns
@@ -231,10 +231,7 @@ def _scaled(name: str, K: NDArray, dist: NDArray, size: tuple[int, int] | None,
         raise PhotoError(f"{name} is for {size[0]} x {size[1]} images, the photo is {photo_size[0]} x "
                          f"{photo_size[1]}: another aspect ratio (crop or rotation); calibrate at the "
                          "photo's size")
-    S = np.array([[sx, 0, 0], [0, sy, 0], [0, 0, 1.0]])
-    K2 = S @ K
-    K2[0, 2], K2[1, 2] = (K[0, 2] + 0.5) * sx - 0.5, (K[1, 2] + 0.5) * sy - 0.5
-    return CameraModel(K2, dist, tuple(photo_size), f"{source} (scaled x{sx:g})")
+    return CameraModel(scaled_intrinsics(K, sx, sy), dist, tuple(photo_size), f"{source} (scaled x{sx:g})")
 
 
 def camera_from_exif(meta: PhotoMetadata) -> CameraModel:

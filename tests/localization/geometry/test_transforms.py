@@ -28,3 +28,16 @@ def test_look_at_equals_its_numpy_definition_bit_for_bit():
         target = eye + rng.normal(size=3)
         rotation = invert(look_at(eye, target))[:3, :3]  # transposes: exact
         np.testing.assert_array_equal(rotation, _look_at_numpy(eye, target)[:3, :3])
+
+
+def test_scaled_intrinsics_moves_projections_as_the_pixel_edges_scale():
+    """A point projects at ``(u + 0.5) s - 0.5`` in the resized image: integer pixel centres in both."""
+    from localization.geometry import project, scaled_intrinsics
+    from localization.geometry.camera import PAPER_K
+
+    points = np.random.default_rng(3).uniform([-5, -5, 10], [5, 5, 40], (20, 3))
+    uv, _ = project(PAPER_K, np.eye(4), points)
+    for sx, sy in ((0.25, 0.25), (0.5, 1.5)):
+        small, _ = project(scaled_intrinsics(PAPER_K, sx, sy), np.eye(4), points)
+        np.testing.assert_allclose(small, (uv + 0.5) * [sx, sy] - 0.5, atol=1e-9)
+    assert scaled_intrinsics(PAPER_K, 0.5, 0.5)[2].tolist() == [0.0, 0.0, 1.0]
