@@ -159,7 +159,7 @@ def test_overwrite_replaces_the_earlier_study_and_removes_its_stale_files(tmp_pa
     out = tmp_path / "out"
     _previous_run(out)
     (out / "fig2_associations.png").write_bytes(b"an earlier figure")
-    proc = _study(out, 1, "--quick", "--overwrite", "--methods", "column_tops")  # one scene: the quickest study
+    proc = _study(out, 1, "--quick", "--overwrite", "--methods", "column_tops")  # one scene: quickest
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 0, err[-2000:]
     names = sorted(p.name for p in out.iterdir())

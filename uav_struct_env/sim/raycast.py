@@ -245,7 +245,7 @@ def raycast_visibility(
     R, t = np.ascontiguousarray(T[:3, :3]), T[:3, 3]
     K = camera.K
     # The depth is exact (no buffer quantization): the tolerance of a 24-bit buffer.
-    xyz = np.array(xyz, dtype=np.float64, order="C")  # writable, returned too: one kernel type (visibility.py)
+    xyz = np.array(xyz, dtype=np.float64, order="C")  # writable, returned: one kernel type (visibility.py)
     uv, in_frame, visible = _raycast_windows(
         xyz, R, np.ascontiguousarray(t), K, inverse_intrinsics(K), -R.T @ t,
         int(camera.width), int(camera.height), float(camera.near), float(camera.far), int(radius),
