@@ -106,19 +106,18 @@ _WRAPPER = {
     "warm_start": True,
 }
 
+_IMAGE_ENV = {**_STATE_ENV, "image_size": (64, 36), "renderer": "batch"}
+_IMAGE_WRAPPER = {**_WRAPPER, "drop_image": False}
+
 TRAIN_CONFIGS: dict[str, TrainConfig] = {
     "state": TrainConfig(
         "state", env={**_STATE_ENV, "observe_image": False}, wrapper={**_WRAPPER, "drop_image": True}
     ),
-    "image": TrainConfig(
-        "image",
-        env={**_STATE_ENV, "image_size": (64, 36), "renderer": "batch"},
-        wrapper={**_WRAPPER, "drop_image": False},
-    ),
+    "image": TrainConfig("image", env=dict(_IMAGE_ENV), wrapper=dict(_IMAGE_WRAPPER)),
+    # image's env and reward; the observation without what the localization makes
     "pixels": TrainConfig(
-        "pixels",
-        env={**_STATE_ENV, "image_size": (64, 36), "renderer": "batch"},
-        wrapper={**_WRAPPER, "drop_image": False, "drop_keys": ("pose", "pose_std", "localized", "layout")},
+        "pixels", env=dict(_IMAGE_ENV),
+        wrapper={**_IMAGE_WRAPPER, "drop_keys": ("pose", "pose_std", "localized", "layout")},
     ),
 }
 
