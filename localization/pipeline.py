@@ -12,6 +12,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -33,7 +34,7 @@ from localization.geometry.transforms import (
 from localization.pose.covariance import PriorSigmas, pose_covariance, prior_mahalanobis_sq
 from localization.pose.finish import FinishInputs, finish_pose
 from localization.pose.pnp import is_coplanar, solve_pnp
-from localization.verify import VerifyInputs, verify_pose
+from localization.verify import VerifyInputs, landmark_spacing_m, verify_pose
 
 __all__ = ["ASSOCIATION_METHODS", "Localizer", "PoseEstimate", "image_size_from_K"]
 
@@ -621,6 +622,11 @@ class Localizer:
                 )
         return None
 
+    @cached_property
+    def _landmark_spacing_m(self) -> float:
+        """:func:`localization.verify.landmark_spacing_m` of the landmarks, computed once."""
+        return landmark_spacing_m(self.landmarks_xyz)
+
     def _verify(
         self, frame: _Frame, pose: _Pose, n_hypotheses: int, timings: dict[str, float]
     ) -> _Failure | None:
@@ -649,6 +655,7 @@ class Localizer:
                 fit_sigma=self.fit_sigma_px,
                 tolerance_m=self.tolerance_m,
                 search=lambda keep: self._search(frame, keep),
+                landmark_spacing_m=self._landmark_spacing_m,
             )
         )
         timings["verify"] = time.perf_counter() - t

@@ -95,6 +95,7 @@ import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -103,16 +104,17 @@ from scipy.spatial import cKDTree
 from localization.associate.ambiguity import AMBIGUITY_MARGIN
 from localization.associate.assign_kernels import assign_rounds, refine_reassign
 from localization.failure import FailureCode
+from localization.geometry.kernels import center
 from localization.geometry.transforms import project
 from localization.pose.batch import refine_many, to_transforms
 from localization.pose.covariance import (
     PriorSigmas,
     pose_covariance,
     pose_difference,
-    pose_jacobian,
     prior_mahalanobis_sq,
 )
 from localization.stats import binomial_log_sf, chi2_quantile
+from localization.verify_kernels import hypothesis_terms, lattice_hits, leave_one_out, offset_votes
 
 __all__ = [
     "CONFIRM_TOLERANCE_M",
@@ -128,11 +130,12 @@ __all__ = [
     "Refusal",
     "VerifyInputs",
     "chance_support",
+    "landmark_spacing_m",
     "lattice_rivals",
-    "offset_starts",
     "leave_one_out_chi2",
     "leave_one_out_shifts",
     "minimal_fit_chi2_limit",
+    "offset_starts",
     "position_tolerance",
     "predicted_in_image",
     "reassociated",
@@ -248,6 +251,8 @@ class VerifyInputs:
             mask of the detections it may use, it returns ``(assignment (N,), cam_from_world)``
             of its best hypothesis, or None when it finds none (:func:`rival_search`); None:
             no second search.
+        landmark_spacing_m: :func:`landmark_spacing_m` of ``landmarks_xyz``, when the caller
+            keeps it (the :class:`~localization.Localizer` does); None: computed here.
     """
 
     detections_uv: NDArray[np.float64]
@@ -266,11 +271,73 @@ class VerifyInputs:
     fit_sigma: float | None = None
     tolerance_m: float | None = None
     search: Callable[[NDArray[np.bool_]], tuple[NDArray[np.int64], NDArray[np.float64]] | None] | None = None
+    landmark_spacing_m: float | None = None
 
     @property
     def fit_sigma_px(self) -> float:
         """The noise the fit tests assume, px: ``fit_sigma``, else ``pixel_sigma``."""
         return self.pixel_sigma if self.fit_sigma is None else self.fit_sigma
+
+    @property
+    def spacing_m(self) -> float:
+        """``landmark_spacing_m``, else :func:`landmark_spacing_m` of the landmarks."""
+        if self.landmark_spacing_m is not None:
+            return self.landmark_spacing_m
+        return landmark_spacing_m(self.landmarks_xyz)
+
+    @cached_property
+    def winner_score(self) -> float:
+        """The pose's own score, as its rivals are scored (:func:`_scores`)."""
+        return float(_scores(self, [(self.assignment, self.cam_from_world)])[0])
+
+    @cached_property
+    def arrays(self) -> _FrameArrays:
+        """The frame's arrays as the compiled kernels take them, made once per pose."""
+        det = np.ascontiguousarray(self.detections_uv, dtype=np.float64)
+        P = np.asarray(self.prior_cam_from_world, dtype=np.float64)
+        uv, depth = project(self.K, self.cam_from_world, self.landmarks_xyz)
+        w, h = self.image_size
+        with np.errstate(invalid="ignore"):
+            predicted = (depth > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5) & (uv[:, 1] >= -0.5) & (
+                uv[:, 1] <= h - 0.5)
+        cov = np.asarray(self.covariance, dtype=np.float64)[:3, :3]
+        return _FrameArrays(
+            K=np.ascontiguousarray(self.K, dtype=np.float64),
+            landmarks_xyz=np.ascontiguousarray(self.landmarks_xyz, dtype=np.float64),
+            detections_uv=det,
+            good=np.flatnonzero(np.isfinite(det).all(axis=1)).astype(np.int64),
+            prior_R=np.ascontiguousarray(P[:3, :3]),
+            prior_C=center(P),
+            prior_sigmas=self.prior_sigmas.as_array(),
+            centre=center(np.asarray(self.cam_from_world, dtype=np.float64)),
+            position_information=np.linalg.pinv(cov) if np.all(np.isfinite(cov)) else None,
+            winner_uv=uv,
+            predicted=predicted,
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class _FrameArrays:
+    """:attr:`VerifyInputs.arrays`, made once per pose.
+
+    Contiguous float64 copies for the kernels; ``good`` the finite detections; the prior's
+    rotation, camera centre and sigmas (6,); the winner's camera centre, its position
+    information (the pseudo-inverse of its 3 x 3 position covariance; None when that is not
+    finite), its projections of every landmark and which it predicts in the image
+    (:func:`predicted_in_image`).
+    """
+
+    K: NDArray[np.float64]
+    landmarks_xyz: NDArray[np.float64]
+    detections_uv: NDArray[np.float64]
+    good: NDArray[np.int64]
+    prior_R: NDArray[np.float64]
+    prior_C: NDArray[np.float64]
+    prior_sigmas: NDArray[np.float64]
+    centre: NDArray[np.float64]
+    position_information: NDArray[np.float64] | None
+    winner_uv: NDArray[np.float64]
+    predicted: NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
@@ -369,18 +436,7 @@ def leave_one_out_chi2(
     residual of regression diagnostics, Cook and Weisberg 1982). A wrong pair among a few right
     ones hides in the fit's RMS but not here. Inf for a pair the others cannot predict.
     """
-    J, uv = pose_jacobian(K, cam_from_world, landmarks_xyz)
-    e = detections_uv - uv
-    H = J @ np.linalg.pinv(J.T @ J) @ J.T
-    n = len(e)
-    idx = np.arange(n)
-    b00, b01 = 1.0 - H[2 * idx, 2 * idx], -H[2 * idx, 2 * idx + 1]
-    b10, b11 = -H[2 * idx + 1, 2 * idx], 1.0 - H[2 * idx + 1, 2 * idx + 1]
-    det = b00 * b11 - b01 * b10  # each 2 x 2 block I - H_ii, inverted in closed form
-    u, v = e[:, 0], e[:, 1]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        q = (u * (b11 * u - b01 * v) + v * (b00 * v - b10 * u)) / det / pixel_sigma**2
-    return np.where(det > 1e-12, q, np.inf)
+    return _leave_one_out(K, cam_from_world, landmarks_xyz, detections_uv)[0] / pixel_sigma**2
 
 
 def leave_one_out_shifts(
@@ -394,17 +450,21 @@ def leave_one_out_shifts(
     behind Cook's distance); its first three entries are the centre's move. Inf for a pair the
     others cannot predict.
     """
-    J, uv = pose_jacobian(K, cam_from_world, landmarks_xyz)
-    e = detections_uv - uv
-    N_inv = np.linalg.pinv(J.T @ J)
-    n = len(e)
-    out = np.full(n, np.inf)
-    for i in range(n):
-        Ji = J[2 * i:2 * i + 2]
-        B = np.eye(2) - Ji @ N_inv @ Ji.T
-        if np.linalg.det(B) > 1e-12:
-            out[i] = float(np.linalg.norm((N_inv @ Ji.T @ np.linalg.solve(B, e[i]))[:3]))
-    return out
+    return _leave_one_out(K, cam_from_world, landmarks_xyz, detections_uv)[1]
+
+
+def _leave_one_out(
+    K: NDArray[np.float64], cam_from_world: NDArray[np.float64], landmarks_xyz: NDArray[np.float64],
+    detections_uv: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(q px^2, shift m)`` of :func:`localization.verify_kernels.leave_one_out` (compiled)."""
+    T = np.asarray(cam_from_world, dtype=np.float64)
+    q, shift, _ = leave_one_out(
+        np.ascontiguousarray(K, dtype=np.float64), np.ascontiguousarray(T[:3, :3]), center(T),
+        np.ascontiguousarray(landmarks_xyz, dtype=np.float64).reshape(-1, 3),
+        np.ascontiguousarray(detections_uv, dtype=np.float64).reshape(-1, 2),
+    )
+    return q, shift
 
 
 def position_tolerance(
@@ -535,29 +595,11 @@ def _offset_votes(
     agree with are returned, as (C, 3): offset (2), agreeing pairs. (A neighbourhood sums its
     cells, so on a regular layout one whose cells hold the offsets to a copy's neighbours
     outvotes the copy's own offset: the cells are ranked again by the pairs that agree.)
+    Compiled: :func:`localization.verify_kernels.offset_votes`.
     """
-    off = free_uv[None, :, :] - pair_uv[:, None, :]
-    d = np.hypot(off[..., 0], off[..., 1])
-    pi, fi = np.nonzero((d <= radius) & (d > tol))
-    if pi.size == 0:
-        return np.zeros((0, 3))
-    vec = off[pi, fi]
-    span = int(2 * radius / tol) + 4  # cells per axis, with room for the neighbourhood
-    cell = np.floor(vec / tol).astype(np.int64) + span // 2
-    key = cell[:, 0] * span + cell[:, 1]
-    cells, per_cell = np.unique(np.unique(key * len(pair_uv) + pi) // len(pair_uv), return_counts=True)
-    votes = np.zeros(cells.size, dtype=np.int64)
-    for shift in (di * span + dj for di in (-1, 0, 1) for dj in (-1, 0, 1)):
-        at = np.clip(np.searchsorted(cells, cells + shift), 0, cells.size - 1)
-        votes += np.where(cells[at] == cells + shift, per_cell[at], 0)
-    out = []
-    for c in cells[np.argsort(-votes, kind="stable")[:_VOTE_CELLS]]:
-        first = vec[np.argmax(key == c)]
-        centre = vec[np.hypot(*(vec - first).T) <= tol].mean(axis=0)
-        agree = np.hypot(*(vec - centre).T) <= tol
-        out.append([*centre, np.unique(pi[agree]).size])
-    out.sort(key=lambda r: -r[2])
-    return np.array(out[:3])
+    return offset_votes(np.ascontiguousarray(pair_uv, dtype=np.float64),
+                        np.ascontiguousarray(free_uv, dtype=np.float64), float(tol), float(radius),
+                        _VOTE_CELLS, 3)
 
 
 def _swap_sets(
@@ -655,21 +697,38 @@ def twin_hypotheses(inputs: VerifyInputs) -> list[tuple[NDArray[np.int64], NDArr
     return out
 
 
-def _score(inputs: VerifyInputs, a: NDArray[np.int64], T: NDArray[np.float64]) -> float:
-    """The negative log-likelihood of a hypothesis as the association scores it."""
-    m = a >= 0
-    uv, _ = project(inputs.K, T, inputs.landmarks_xyz[a[m]])
-    chi = float(np.sum((uv - inputs.detections_uv[m]) ** 2)) / inputs.pixel_sigma**2
-    seen = predicted_in_image(inputs.K, T, inputs.landmarks_xyz, inputs.image_size)
-    seen[a[m]] = False
-    n_free = int(np.count_nonzero(~m & np.isfinite(inputs.detections_uv).all(axis=1)))
-    score = (
-        chi
-        + n_free * (inputs.gate_px / inputs.pixel_sigma) ** 2
-        + int(seen.sum()) * inputs.miss_cost
-        + prior_mahalanobis_sq(T, inputs.prior_cam_from_world, inputs.prior_sigmas)
+def _scores(
+    inputs: VerifyInputs, hypotheses: list[tuple[NDArray[np.int64], NDArray[np.float64]]]
+) -> NDArray[np.float64]:
+    """(H,) the negative log-likelihoods of hypotheses ``(assignment, cam_from_world)``.
+
+    As the association scores them: squared residuals, a clutter cost per unassigned detection, a miss
+    cost per predicted landmark left unmatched, the prior's Mahalanobis distance (one compiled
+    call, :func:`localization.verify_kernels.hypothesis_terms`).
+    """
+    if not hypotheses:
+        return np.zeros(0)
+    a = np.ascontiguousarray(np.stack([b for b, _ in hypotheses]), dtype=np.int64)
+    T = np.stack([T for _, T in hypotheses])
+    chi, missed, prior_sq, far = _terms(inputs, a, T)
+    finite = np.isfinite(inputs.detections_uv).all(axis=1)
+    n_free = np.count_nonzero((a < 0) & finite[None, :], axis=1)
+    for h in np.flatnonzero(far):  # near pi from the prior's rotation: the exact logarithm
+        prior_sq[h] = prior_mahalanobis_sq(T[h], inputs.prior_cam_from_world, inputs.prior_sigmas)
+    return (chi / inputs.pixel_sigma**2 + n_free * (inputs.gate_px / inputs.pixel_sigma) ** 2
+            + missed * inputs.miss_cost + prior_sq)
+
+
+def _terms(
+    inputs: VerifyInputs, a: NDArray[np.int64], T: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], NDArray[np.bool_]]:
+    """:func:`localization.verify_kernels.hypothesis_terms` of ``a`` (H, N) at ``T`` (H, 4, 4)."""
+    f = inputs.arrays
+    w, h = inputs.image_size
+    return hypothesis_terms(
+        f.K, f.landmarks_xyz, f.detections_uv, a, np.ascontiguousarray(T[:, :3, :3]),
+        np.ascontiguousarray(T[:, :3, 3]), int(w), int(h), f.prior_R, f.prior_C, f.prior_sigmas,
     )
-    return float(score)
 
 
 def reassociated(
@@ -689,25 +748,22 @@ def reassociated(
     """
     if not hypotheses:
         return []
-    det = np.ascontiguousarray(inputs.detections_uv, dtype=np.float64)
-    good = np.flatnonzero(np.isfinite(det).all(axis=1)).astype(np.int64)
+    f = inputs.arrays
     a0 = np.ascontiguousarray(np.stack([b for b, _, _ in hypotheses]), dtype=np.int64)
     T0 = np.stack([T for _, T, _ in hypotheses])
     w, h = inputs.image_size
-    K, X = np.ascontiguousarray(inputs.K, dtype=np.float64), np.ascontiguousarray(inputs.landmarks_xyz)
     a, R, t, alive = refine_reassign(
-        K, X, det, good, a0, np.ascontiguousarray(T0[:, :3, :3]), np.ascontiguousarray(T0[:, :3, 3]),
+        f.K, f.landmarks_xyz, f.detections_uv, f.good, a0, np.ascontiguousarray(T0[:, :3, :3]),
+        np.ascontiguousarray(T0[:, :3, 3]),
         int(w), int(h), 0.0, float(inputs.gate_px), float(4.0 * inputs.gate_px), _REASSOCIATE_ROUNDS,
         int(inputs.need), True,
     )
-    out = []
-    for k, T in enumerate(to_transforms(R, t)):
-        m = a[k] >= 0
-        if not alive[k] or np.array_equal(a[k], a0[k]):
-            continue
-        uv, _ = project(inputs.K, T, inputs.landmarks_xyz[a[k][m]])
-        out.append((k, a[k].copy(), T, float(np.sum((uv - det[m]) ** 2)) / inputs.pixel_sigma**2))
-    return out
+    changed = np.flatnonzero(alive & np.any(a != a0, axis=1))
+    if changed.size == 0:
+        return []
+    Ts = to_transforms(R[changed], t[changed])
+    chi = _terms(inputs, np.ascontiguousarray(a[changed]), Ts)[0] / inputs.pixel_sigma**2
+    return [(int(k), a[k].copy(), T, float(c)) for k, T, c in zip(changed, Ts, chi, strict=True)]
 
 
 def offset_starts(inputs: VerifyInputs) -> list[tuple[NDArray[np.int64], NDArray[np.float64], float]]:
@@ -722,19 +778,18 @@ def offset_starts(inputs: VerifyInputs) -> list[tuple[NDArray[np.int64], NDArray
     start for :func:`reassociated` at the winner's pose when it holds at least ``need`` pairs.
     Returns ``[(assignment, cam_from_world, nan), ...]``.
     """
-    det = inputs.detections_uv
-    good = np.flatnonzero(np.isfinite(det).all(axis=1))
-    seen = np.flatnonzero(
-        predicted_in_image(inputs.K, inputs.cam_from_world, inputs.landmarks_xyz, inputs.image_size)
-    )
+    f = inputs.arrays
+    det, good = f.detections_uv, f.good
+    seen = np.flatnonzero(f.predicted)
     if seen.size < inputs.need or good.size < inputs.need:
         return []
-    uv, _ = project(inputs.K, inputs.cam_from_world, inputs.landmarks_xyz[seen])
+    uv = f.winner_uv[seen]
     tol = 2.0 * inputs.gate_px
     out = []
-    for ox, oy, _ in _offset_votes(uv, det[good], tol, TWIN_RADIUS_PX)[:_OFFSET_STARTS]:
-        moved = np.ascontiguousarray((uv + [ox, oy])[None])
-        local = assign_rounds(np.ascontiguousarray(det[good]), moved, tol, 3)[0]
+    det_good = det[good]
+    for ox, oy, _ in _offset_votes(uv, det_good, tol, TWIN_RADIUS_PX)[:_OFFSET_STARTS]:
+        moved = (uv + [ox, oy])[None]
+        local = assign_rounds(det_good, moved, tol, 3)[0]
         if np.count_nonzero(local >= 0) >= inputs.need:
             b = np.full(det.shape[0], -1, dtype=np.int64)
             b[good[local >= 0]] = seen[local[local >= 0]]
@@ -742,13 +797,40 @@ def offset_starts(inputs: VerifyInputs) -> list[tuple[NDArray[np.int64], NDArray
     return out
 
 
-def _same_centre(inputs: VerifyInputs, T: NDArray[np.float64]) -> bool:
-    """Whether ``T``'s camera centre lies inside the winner's 99.9 % position ellipsoid."""
-    cov = inputs.covariance[:3, :3]
-    if not np.all(np.isfinite(cov)):
-        return False
-    dc = pose_difference(T, inputs.cam_from_world)[:3]
-    return float(dc @ np.linalg.lstsq(cov, dc, rcond=None)[0]) <= DISTINCT_POSITION_SQ
+def _same_centres(inputs: VerifyInputs, Ts: list[NDArray[np.float64]]) -> NDArray[np.bool_]:
+    """Whether each pose's camera centre lies inside the winner's 99.9 % position ellipsoid."""
+    info = inputs.arrays.position_information
+    if not Ts or info is None:
+        return np.zeros(len(Ts), dtype=bool)
+    dc = np.stack([center(np.ascontiguousarray(T)) for T in Ts]) - inputs.arrays.centre
+    return np.einsum("ij,jk,ik->i", dc, info, dc) <= DISTINCT_POSITION_SQ
+
+
+def _fits(rivals: list[tuple[NDArray[np.int64], NDArray[np.float64], float]]) -> list[bool]:
+    """Whether each rival ``(assignment, cam_from_world, chi-square)`` passes the fit test.
+
+    The association's: :data:`_FIT_QUANTILE` of ``2 k - 6`` degrees of freedom on its ``k`` pairs.
+    """
+    return [bool(chi <= chi2_quantile(_FIT_QUANTILE, max(2 * int(np.count_nonzero(b >= 0)) - 6, 1)))
+            for b, _, chi in rivals]
+
+
+def _contenders(
+    inputs: VerifyInputs, rivals: list[tuple[NDArray[np.int64], NDArray[np.float64], float]]
+) -> list[tuple[int, float]]:
+    """``[(index, score), ...]`` of the rivals that could be the pose as well as the winner.
+
+    Those that fit (:func:`_fits`), lie at a distinct camera centre (:func:`_same_centres`) and
+    score within the ambiguity margin of the winner, or better; in the rivals' order.
+    """
+    fit = [k for k, ok in enumerate(_fits(rivals)) if ok]
+    same = _same_centres(inputs, [rivals[k][1] for k in fit])
+    kept = [k for k, s in zip(fit, same, strict=True) if not s]
+    if not kept:
+        return []
+    scores = _scores(inputs, [(rivals[k][0], rivals[k][1]) for k in kept])
+    best = inputs.winner_score
+    return [(k, float(s)) for k, s in zip(kept, scores, strict=True) if s - best < AMBIGUITY_MARGIN]
 
 
 def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
@@ -758,27 +840,24 @@ def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
     (:func:`reassociated`).
     """
     twins = twin_hypotheses(inputs)
+    rivals = twins + [r[1:] for r in reassociated(inputs, twins + offset_starts(inputs))]
+    found = _contenders(inputs, rivals)
+    if not found:
+        return None
+    k_rival, s_twin = found[0]
+    a_twin, T_twin, _ = rivals[k_rival]
     n = int(np.count_nonzero(inputs.assignment >= 0))
-    s_best = None
-    for a_twin, T_twin, chi in twins + [r[1:] for r in reassociated(inputs, twins + offset_starts(inputs))]:
-        k = int(np.count_nonzero(a_twin >= 0))
-        d = pose_difference(T_twin, inputs.cam_from_world)
-        if not chi <= chi2_quantile(_FIT_QUANTILE, max(2 * k - 6, 1)) or _same_centre(inputs, T_twin):
-            continue
-        if s_best is None:
-            s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
-        s_twin = _score(inputs, a_twin, T_twin)
-        if s_twin - s_best < AMBIGUITY_MARGIN:
-            moved = int(np.count_nonzero((a_twin >= 0) & (inputs.assignment < 0)))
-            return Refusal(
-                FailureCode.DUPLICATED_DETECTIONS,
-                f"duplicated detections: the same landmarks ({n} pairs; {k} after re-association) "
-                f"with {moved} of their detections moved to unassigned ones within {TWIN_RADIUS_PX:g} px "
-                f"fit as well (scores {s_best:.1f} and {s_twin:.1f}, margin {AMBIGUITY_MARGIN:.1f}) with "
-                f"a camera centre {float(np.linalg.norm(d[:3])):.2f} m and "
-                f"{float(np.degrees(np.linalg.norm(d[3:]))):.2f} deg away",
-            )
-    return None
+    k = int(np.count_nonzero(a_twin >= 0))
+    d = pose_difference(T_twin, inputs.cam_from_world)
+    moved = int(np.count_nonzero((a_twin >= 0) & (inputs.assignment < 0)))
+    return Refusal(
+        FailureCode.DUPLICATED_DETECTIONS,
+        f"duplicated detections: the same landmarks ({n} pairs; {k} after re-association) "
+        f"with {moved} of their detections moved to unassigned ones within {TWIN_RADIUS_PX:g} px "
+        f"fit as well (scores {inputs.winner_score:.1f} and {s_twin:.1f}, margin {AMBIGUITY_MARGIN:.1f}) "
+        f"with a camera centre {float(np.linalg.norm(d[:3])):.2f} m and "
+        f"{float(np.degrees(np.linalg.norm(d[3:]))):.2f} deg away",
+    )
 
 
 def lattice_rivals(
@@ -802,32 +881,25 @@ def lattice_rivals(
     rows = np.flatnonzero(a >= 0)
     if rows.size == 0:
         return []
-    X = inputs.landmarks_xyz
+    X = np.ascontiguousarray(inputs.landmarks_xyz, dtype=np.float64)
     P = X[a[rows]]
-    tree = cKDTree(X)
-    shifts = np.concatenate([X - P[i] for i in range(min(anchors, rows.size))])
-    dist, j = tree.query((P[None, :, :] + shifts[:, None, :]).reshape(-1, 3))
-    dist, j = dist.reshape(len(shifts), rows.size), j.reshape(len(shifts), rows.size)
-    hit = dist <= tol_m
     least = rows.size if share >= 1.0 else max(int(math.ceil(share * rows.size)), inputs.need)
+    kept, hit, j = lattice_hits(X, P, min(anchors, rows.size), float(tol_m), int(least),
+                                float(max(tol_m, LATTICE_TOL_M)))
     R, t = inputs.cam_from_world[:3, :3], inputs.cam_from_world[:3, 3]
-    out, seen = [], set()
-    for i in np.flatnonzero(hit.sum(axis=1) >= least):
-        d = shifts[i]
-        key = tuple(np.round(d / max(tol_m, LATTICE_TOL_M)).astype(int))
-        if np.linalg.norm(d) <= tol_m or key in seen or np.unique(j[i][hit[i]]).size != hit[i].sum():
-            continue
-        seen.add(key)
+    out = []
+    for k, hit_k, j_k in zip(kept, hit, j, strict=True):
+        d = X[k % len(X)] - P[k // len(X)]
         T = inputs.cam_from_world.copy()
         T[:3, 3] = t - R @ d  # camera centre C + d
         b = np.full_like(a, -1)
-        b[rows[hit[i]]] = j[i][hit[i]]
+        b[rows[hit_k]] = j_k[hit_k]
         out.append((b, T, d))
     return out
 
 
-def _spacing_m(landmarks_xyz: NDArray[np.float64]) -> float:
-    """The median distance from a landmark to its nearest other landmark, m."""
+def landmark_spacing_m(landmarks_xyz: NDArray[np.float64]) -> float:
+    """The median distance from a landmark to its nearest other landmark, m (0 for one landmark)."""
     if len(landmarks_xyz) < 2:
         return 0.0
     d, _ = cKDTree(landmarks_xyz).query(landmarks_xyz, k=2)
@@ -842,20 +914,21 @@ def _lattice_refusal(inputs: VerifyInputs) -> Refusal | None:
     :data:`LATTICE_SPACING_SHARE` of the layout's spacing) re-associated only.
     """
     exact = lattice_rivals(inputs)
-    loose = lattice_rivals(inputs, LATTICE_SHARE, LATTICE_SPACING_SHARE * _spacing_m(inputs.landmarks_xyz),
-                           _LATTICE_ANCHORS)
+    loose = lattice_rivals(inputs, LATTICE_SHARE, LATTICE_SPACING_SHARE * inputs.spacing_m, _LATTICE_ANCHORS)
     rivals = exact + loose
     if not rivals:
         return None
-    s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
-    scored = [(_score(inputs, b, T), d) for b, T, d in exact]
-    for k, b, T, chi in reassociated(inputs, rivals):
-        if chi <= chi2_quantile(_FIT_QUANTILE, max(2 * int(np.count_nonzero(b >= 0)) - 6, 1)):
-            if not _same_centre(inputs, T):
-                scored.append((_score(inputs, b, T), rivals[k][2]))
-    if not scored:
+    grown = reassociated(inputs, rivals)
+    fit = [r for r, ok in zip(grown, _fits([r[1:] for r in grown]), strict=True) if ok]
+    same = _same_centres(inputs, [r[2] for r in fit])
+    distinct = [r for r, s in zip(fit, same, strict=True) if not s]
+    hypotheses = [(b, T) for b, T, _ in exact] + [(b, T) for _, b, T, _ in distinct]
+    periods = [d for _, _, d in exact] + [rivals[k][2] for k, _, _, _ in distinct]
+    if not hypotheses:
         return None
-    s_rival, d = min(scored, key=lambda r: r[0])
+    scores = _scores(inputs, hypotheses)
+    best = int(np.argmin(scores))  # the first of equals
+    s_rival, d, s_best = float(scores[best]), periods[best], inputs.winner_score
     if s_rival - s_best >= AMBIGUITY_MARGIN:
         return None
     return Refusal(
@@ -901,31 +974,27 @@ def rival_search(inputs: VerifyInputs) -> list[tuple[NDArray[np.int64], NDArray[
 def _search_refusal(inputs: VerifyInputs) -> Refusal | None:
     """The refusal when the second search's rival (:func:`rival_search`) scores about as well."""
     rivals = rival_search(inputs)
-    if not rivals:
+    found = _contenders(inputs, rivals)
+    if not found:
         return None
-    s_best = _score(inputs, inputs.assignment, inputs.cam_from_world)
-    for b, T, chi in rivals:
-        k = int(np.count_nonzero(b >= 0))
-        dc = pose_difference(T, inputs.cam_from_world)[:3]
-        if _same_centre(inputs, T) or not chi <= chi2_quantile(_FIT_QUANTILE, max(2 * k - 6, 1)):
-            continue
-        s_rival = _score(inputs, b, T)
-        if s_rival - s_best < AMBIGUITY_MARGIN:
-            n = int(np.count_nonzero(inputs.assignment >= 0))
-            return Refusal(
-                FailureCode.AMBIGUOUS,
-                f"ambiguous pose: the detections its {n} pairs leave unexplained give another pose of "
-                f"{k} pairs, camera centre {float(np.linalg.norm(dc)):.2f} m away, scoring {s_rival:.1f} "
-                f"against {s_best:.1f} (margin {AMBIGUITY_MARGIN:.1f})",
-            )
-    return None
+    k_rival, s_rival = found[0]
+    b, T, _ = rivals[k_rival]
+    k = int(np.count_nonzero(b >= 0))
+    n = int(np.count_nonzero(inputs.assignment >= 0))
+    dc = pose_difference(T, inputs.cam_from_world)[:3]
+    return Refusal(
+        FailureCode.AMBIGUOUS,
+        f"ambiguous pose: the detections its {n} pairs leave unexplained give another pose of "
+        f"{k} pairs, camera centre {float(np.linalg.norm(dc)):.2f} m away, scoring {s_rival:.1f} "
+        f"against {inputs.winner_score:.1f} (margin {AMBIGUITY_MARGIN:.1f})",
+    )
 
 
 def verify_pose(inputs: VerifyInputs) -> Refusal | None:
     """None when the detections confirm the pose, else why not (module docstring)."""
     a = inputs.assignment
     k = int(np.count_nonzero(a >= 0))
-    predicted = predicted_in_image(inputs.K, inputs.cam_from_world, inputs.landmarks_xyz, inputs.image_size)
+    predicted = inputs.arrays.predicted
     n = int(predicted.sum())
     n_det = int(np.count_nonzero(np.isfinite(inputs.detections_uv).all(axis=1)))
     log10_nfa = chance_support(n, k, n_det, inputs.image_size, inputs.gate_px)

@@ -1,0 +1,331 @@
+"""Compiled kernels (numba) of the verification's rival searches (:mod:`localization.verify`).
+
+- :func:`offset_votes` -- the common image offsets from a set of points to another, voted in
+  cells and ranked by the points that agree (the twins' and the offset starts' offsets);
+- :func:`lattice_hits` -- the translations that carry a landmark set's paired landmarks onto
+  other landmarks (the periods of a layout);
+- :func:`leave_one_out` -- each pair's residual against the pose the other pairs give, and how
+  far leaving it out moves the camera centre (linearized);
+- :func:`hypothesis_terms` -- the terms of many hypotheses' scores at once (their pairs' fit,
+  the landmarks they predict and leave unmatched, their distance from the prior).
+
+``tests/localization/test_verify_kernels.py`` holds them to plain-numpy references. Compiled
+and cached like :mod:`localization.geometry.kernels`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from localization.geometry.kernels import camera_point
+from localization.pose.covariance import prior_distance_sq
+
+__all__ = ["hypothesis_terms", "lattice_hits", "leave_one_out", "offset_votes"]
+
+#: Relative margin within which :func:`_within` asks ``np.hypot`` rather than the squared length.
+_NEAR = 1e-9
+
+
+@njit(cache=True, nogil=True)
+def _within(dx: float, dy: float, r: float) -> bool:
+    """``np.hypot(dx, dy) <= r``, decided from ``dx^2 + dy^2`` unless within :data:`_NEAR` of ``r``.
+
+    The squared length is a few ulp from the exact one; ``np.hypot`` costs ten times more.
+    """
+    d2 = dx * dx + dy * dy
+    if d2 < (r * (1.0 - _NEAR)) ** 2:
+        return True
+    if d2 > (r * (1.0 + _NEAR)) ** 2:
+        return False
+    return np.hypot(dx, dy) <= r
+
+
+@njit(cache=True, nogil=True)
+def offset_votes(
+    pair_uv: NDArray, free_uv: NDArray, tol: float, radius: float, n_cells: int, n_out: int
+) -> NDArray:
+    """Candidate common offsets from ``pair_uv`` (P, 2) to ``free_uv`` (F, 2), most pairs agreeing first.
+
+    The offsets longer than ``tol`` and at most ``radius`` are binned in ``tol`` cells; the
+    ``n_cells`` cells whose 3 x 3 neighbourhoods hold the most distinct pairs (ties: lower cell
+    first) each give a candidate: the mean of the offsets within ``tol`` of the cell's first
+    offset (in pair-major order), with the number of distinct pairs that have an offset within
+    ``tol`` of that mean. Returns (C, 3), C <= ``n_out``: offset (2), agreeing pairs; sorted by
+    agreeing pairs, descending (ties keep the cells' order).
+    """
+    n_pairs, n_free = pair_uv.shape[0], free_uv.shape[0]
+    vx = np.empty(n_pairs * n_free)
+    vy = np.empty(n_pairs * n_free)
+    vp = np.empty(n_pairs * n_free, dtype=np.int64)
+    n = 0
+    for p in range(n_pairs):
+        for f in range(n_free):
+            ox = free_uv[f, 0] - pair_uv[p, 0]
+            oy = free_uv[f, 1] - pair_uv[p, 1]
+            if _within(ox, oy, radius) and not _within(ox, oy, tol):
+                vx[n], vy[n], vp[n] = ox, oy, p
+                n += 1
+    if n == 0:
+        return np.zeros((0, 3))
+    span = int(2 * radius / tol) + 4  # cells per axis, with room for the neighbourhood
+    half = span // 2
+    key = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        key[i] = (np.int64(np.floor(vx[i] / tol)) + half) * span + (np.int64(np.floor(vy[i] / tol)) + half)
+    # the cells, ascending, and the distinct pairs in each
+    cell_pair = np.sort(key * n_pairs + vp[:n])
+    cells = np.empty(n, dtype=np.int64)
+    per_cell = np.zeros(n, dtype=np.int64)
+    n_c = 0
+    for i in range(n):
+        if i > 0 and cell_pair[i] == cell_pair[i - 1]:
+            continue  # the same pair again in the same cell
+        c = cell_pair[i] // n_pairs
+        if n_c == 0 or cells[n_c - 1] != c:
+            cells[n_c] = c
+            n_c += 1
+        per_cell[n_c - 1] += 1
+    cells, per_cell = cells[:n_c], per_cell[:n_c]
+    votes = np.zeros(n_c, dtype=np.int64)
+    for di in range(-1, 2):
+        for dj in range(-1, 2):
+            shift = di * span + dj
+            at = 0  # cells + shift ascend too: one merge per shift
+            for c in range(n_c):
+                want = cells[c] + shift
+                while at < n_c - 1 and cells[at] < want:
+                    at += 1
+                if cells[at] == want:
+                    votes[c] += per_cell[at]
+    ranked = np.argsort(-votes, kind="mergesort")[:n_cells]
+    out = np.empty((ranked.size, 3))
+    for r in range(ranked.size):
+        c = cells[ranked[r]]
+        first = 0
+        while key[first] != c:
+            first += 1
+        fx, fy = vx[first], vy[first]
+        sx, sy, m = 0.0, 0.0, 0
+        for i in range(n):
+            if _within(vx[i] - fx, vy[i] - fy, tol):
+                sx += vx[i]
+                sy += vy[i]
+                m += 1
+        cx, cy = sx / m, sy / m
+        agree, last = 0, -1
+        for i in range(n):  # vp ascends, so a new pair is a new value
+            if vp[i] != last and _within(vx[i] - cx, vy[i] - cy, tol):
+                agree += 1
+                last = vp[i]
+        out[r, 0], out[r, 1], out[r, 2] = cx, cy, agree
+    order = np.argsort(-out[:, 2], kind="mergesort")[:n_out]
+    return out[order]
+
+
+@njit(cache=True, nogil=True)
+def lattice_hits(
+    landmarks_xyz: NDArray, paired_xyz: NDArray, anchors: int, tol_m: float, least: int, key_m: float
+) -> tuple[NDArray, NDArray, NDArray]:
+    """The translations that carry at least ``least`` of P paired landmarks onto distinct others.
+
+    The candidates run from the first ``anchors`` paired landmarks onto every landmark:
+    translation ``k = i M + m`` is ``landmarks_xyz[m] - paired_xyz[i]``; a paired landmark moved
+    by it hits the landmark nearest to it when that lies within ``tol_m``. A translation is kept
+    when at least ``least`` hit, no two on the same landmark, it is longer than ``tol_m``, and no
+    translation kept before it rounds to the same multiple of ``key_m`` (the first of each).
+    Returns ``(k (S,), hit (S, P), nearest (S, P))`` of the kept ones: their indices, which
+    paired landmarks hit, and the landmark each hits (-1 for none).
+    """
+    n_lm, n_p = landmarks_xyz.shape[0], paired_xyz.shape[0]
+    order = np.argsort(landmarks_xyz[:, 0], kind="mergesort")
+    xs = landmarks_xyz[order, 0].copy()
+    reach = tol_m * (1.0 + 1e-9) + 1e-12  # a landmark within tol_m lies within tol_m in x
+    n_s = anchors * n_lm
+    kept = np.empty(n_s, dtype=np.int64)
+    keys = np.empty((n_s, 3), dtype=np.int64)
+    hit = np.zeros((n_s, n_p), dtype=np.bool_)
+    nearest = np.full((n_s, n_p), -1, dtype=np.int64)
+    taken = np.zeros(n_lm, dtype=np.bool_)
+    n_kept = 0
+    for i in range(anchors):
+        for m in range(n_lm):
+            sx = landmarks_xyz[m, 0] - paired_xyz[i, 0]
+            sy = landmarks_xyz[m, 1] - paired_xyz[i, 1]
+            sz = landmarks_xyz[m, 2] - paired_xyz[i, 2]
+            if math.sqrt(sx * sx + sy * sy + sz * sz) <= tol_m:
+                continue
+            hits, misses, distinct = 0, 0, True
+            for p in range(n_p):
+                qx, qy, qz = paired_xyz[p, 0] + sx, paired_xyz[p, 1] + sy, paired_xyz[p, 2] + sz
+                lo = np.searchsorted(xs, qx - reach)
+                hi = np.searchsorted(xs, qx + reach, side="right")
+                best, bj = np.inf, -1
+                for t in range(lo, hi):
+                    q = order[t]
+                    dx = qx - landmarks_xyz[q, 0]
+                    dy = qy - landmarks_xyz[q, 1]
+                    dz = qz - landmarks_xyz[q, 2]
+                    d2 = dx * dx + dy * dy + dz * dz
+                    if d2 < best:
+                        best, bj = d2, q
+                if bj >= 0 and math.sqrt(best) <= tol_m:
+                    hit[n_kept, p] = True
+                    nearest[n_kept, p] = bj
+                    hits += 1
+                    if taken[bj]:
+                        distinct = False
+                    taken[bj] = True
+                else:
+                    misses += 1
+                    if misses > n_p - least:
+                        break
+            for p in range(n_p):  # clear the marks
+                if nearest[n_kept, p] >= 0:
+                    taken[nearest[n_kept, p]] = False
+            keep = hits >= least and distinct
+            if keep:
+                kx, ky, kz = np.rint(sx / key_m), np.rint(sy / key_m), np.rint(sz / key_m)
+                for r in range(n_kept):
+                    if keys[r, 0] == kx and keys[r, 1] == ky and keys[r, 2] == kz:
+                        keep = False
+                        break
+            if keep:
+                kept[n_kept] = i * n_lm + m
+                keys[n_kept, 0], keys[n_kept, 1], keys[n_kept, 2] = kx, ky, kz
+                n_kept += 1
+            else:
+                hit[n_kept] = False
+                nearest[n_kept] = -1
+    return kept[:n_kept], hit[:n_kept], nearest[:n_kept]
+
+
+@njit(cache=True, nogil=True)
+def hypothesis_terms(
+    K: NDArray, landmarks_xyz: NDArray, det: NDArray, a: NDArray, R: NDArray, t: NDArray,
+    width: int, height: int, prior_R: NDArray, prior_C: NDArray, sigmas: NDArray,
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """The terms of H hypotheses' scores: ``(chi (H,), missed (H,), prior_sq (H,), far (H,))``.
+
+    Args:
+        K: (3, 3) intrinsics.
+        landmarks_xyz: (M, 3) landmarks.
+        det: (N, 2) detections (assigned rows are finite).
+        a: (H, N) landmark of each detection, -1 when unassigned.
+        R: (H, 3, 3) the hypotheses' ``cam_from_world`` rotations.
+        t: (H, 3) their translations.
+        width: the image's width, px.
+        height: its height, px.
+        prior_R: (3, 3) the prior's rotation.
+        prior_C: (3,) its camera centre.
+        sigmas: (6,) its sigmas (position m, rotation rad).
+
+    ``chi``: the pairs' squared residuals, px^2; ``missed``: the landmarks in front of the camera
+    that project inside the image (pixel centres at integers, edges at -0.5 and ``width - 0.5``)
+    and are not assigned; ``prior_sq`` and ``far``:
+    :func:`localization.pose.covariance.prior_distance_sq`'s.
+    """
+    h_n, n = a.shape
+    n_lm = landmarks_xyz.shape[0]
+    chi = np.zeros(h_n)
+    missed = np.zeros(h_n, dtype=np.int64)
+    prior_sq = np.empty(h_n)
+    far = np.zeros(h_n, dtype=np.bool_)
+    paired = np.zeros(n_lm, dtype=np.bool_)
+    for h in range(h_n):
+        Rh, th = R[h], t[h]
+        prior_sq[h], far[h] = prior_distance_sq(Rh, th, prior_R, prior_C, sigmas)
+        paired[:] = False
+        for i in range(n):
+            j = a[h, i]
+            if j < 0:
+                continue
+            paired[j] = True
+            x, y, z = camera_point(Rh, th, landmarks_xyz, j)
+            u = (K[0, 0] * x + K[0, 1] * y) / z + K[0, 2]
+            v = K[1, 1] * y / z + K[1, 2]
+            chi[h] += (u - det[i, 0]) ** 2 + (v - det[i, 1]) ** 2
+        for j in range(n_lm):
+            if paired[j]:
+                continue
+            x, y, z = camera_point(Rh, th, landmarks_xyz, j)
+            if not z > 0.0:
+                continue
+            u = (K[0, 0] * x + K[0, 1] * y) / z + K[0, 2]
+            v = K[1, 1] * y / z + K[1, 2]
+            if -0.5 <= u <= width - 0.5 and -0.5 <= v <= height - 0.5:
+                missed[h] += 1
+    return chi, missed, prior_sq, far
+
+
+@njit(cache=True, nogil=True)
+def leave_one_out(
+    K: NDArray, R: NDArray, C: NDArray, landmarks_xyz: NDArray, det: NDArray
+) -> tuple[NDArray, NDArray, NDArray]:
+    """Each pair's leave-one-out residual and the centre's move without it, linearized at a pose.
+
+    ``R`` (3, 3) the ``cam_from_world`` rotation, ``C`` (3,) the camera centre, ``landmarks_xyz``
+    (P, 3) and ``det`` (P, 2) the pairs. With ``J_i`` the (2, 6) projection Jacobian of pair ``i``
+    w.r.t. ``(C, dtheta)`` (:func:`localization.pose.covariance.pose_jacobian`), ``N = sum J_i^T
+    J_i`` and ``B_i = I - J_i N^+ J_i^T``, returns ``(q (P,), shift (P,), det_b (P,))``:
+    ``q_i = e_i^T B_i^-1 e_i`` (px^2), the norm of the first three entries of ``N^+ J_i^T B_i^-1
+    e_i`` (m) and ``det(B_i)``; ``q`` and ``shift`` are inf where ``det(B_i) <= 1e-12`` (a pair
+    the others cannot predict).
+    """
+    n = landmarks_xyz.shape[0]
+    J = np.zeros((n, 2, 6))
+    e = np.empty((n, 2))
+    fx, fy, s = K[0, 0], K[1, 1], K[0, 1]
+    for i in range(n):
+        a0 = landmarks_xyz[i, 0] - C[0]
+        a1 = landmarks_xyz[i, 1] - C[1]
+        a2 = landmarks_xyz[i, 2] - C[2]
+        x = R[0, 0] * a0 + R[0, 1] * a1 + R[0, 2] * a2
+        y = R[1, 0] * a0 + R[1, 1] * a1 + R[1, 2] * a2
+        z = R[2, 0] * a0 + R[2, 1] * a1 + R[2, 2] * a2
+        e[i, 0] = det[i, 0] - (fx * x / z + s * y / z + K[0, 2])
+        e[i, 1] = det[i, 1] - (fy * y / z + K[1, 2])
+        d00, d01, d02 = fx / z, s / z, -(fx * x + s * y) / (z * z)
+        d11, d12 = fy / z, -fy * y / (z * z)
+        # d p / d C = -R ; d p / d dtheta = R [a]x
+        ax = np.array(((0.0, -a2, a1), (a2, 0.0, -a0), (-a1, a0, 0.0)))
+        dp = np.empty((3, 6))
+        for r in range(3):
+            for c in range(3):
+                dp[r, c] = -R[r, c]
+                dp[r, 3 + c] = R[r, 0] * ax[0, c] + R[r, 1] * ax[1, c] + R[r, 2] * ax[2, c]
+        for c in range(6):
+            J[i, 0, c] = d00 * dp[0, c] + d01 * dp[1, c] + d02 * dp[2, c]
+            J[i, 1, c] = d11 * dp[1, c] + d12 * dp[2, c]
+    N = np.zeros((6, 6))
+    for i in range(n):
+        for r in range(6):
+            for c in range(6):
+                N[r, c] += J[i, 0, r] * J[i, 0, c] + J[i, 1, r] * J[i, 1, c]
+    N_inv = np.linalg.pinv(N)
+    q = np.full(n, np.inf)
+    shift = np.full(n, np.inf)
+    det_b = np.empty(n)
+    for i in range(n):
+        G = J[i] @ N_inv  # (2, 6)
+        b00 = 1.0 - (G[0] * J[i, 0]).sum()
+        b01 = -(G[0] * J[i, 1]).sum()
+        b10 = -(G[1] * J[i, 0]).sum()
+        b11 = 1.0 - (G[1] * J[i, 1]).sum()
+        d = b00 * b11 - b01 * b10
+        det_b[i] = d
+        if not d > 1e-12:
+            continue
+        u, v = e[i, 0], e[i, 1]
+        q[i] = (u * (b11 * u - b01 * v) + v * (b00 * v - b10 * u)) / d
+        w0 = (b11 * u - b01 * v) / d  # B^-1 e
+        w1 = (b00 * v - b10 * u) / d
+        m = 0.0
+        for r in range(3):
+            g = G[0, r] * w0 + G[1, r] * w1  # (N^+ J_i^T B^-1 e)[r]; N^+ symmetric
+            m += g * g
+        shift[i] = np.sqrt(m)
+    return q, shift, det_b
