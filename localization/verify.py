@@ -114,7 +114,13 @@ from localization.pose.covariance import (
     prior_mahalanobis_sq,
 )
 from localization.stats import binomial_log_sf, chi2_quantile
-from localization.verify_kernels import hypothesis_terms, lattice_hits, leave_one_out, offset_votes
+from localization.verify_kernels import (
+    hypothesis_terms,
+    lattice_hits,
+    leave_one_out,
+    offset_votes,
+    predictions,
+)
 
 __all__ = [
     "CONFIRM_TOLERANCE_M",
@@ -295,12 +301,7 @@ class VerifyInputs:
         """The frame's arrays as the compiled kernels take them, made once per pose."""
         det = np.ascontiguousarray(self.detections_uv, dtype=np.float64)
         P = np.asarray(self.prior_cam_from_world, dtype=np.float64)
-        uv, depth = project(self.K, self.cam_from_world, self.landmarks_xyz)
-        w, h = self.image_size
-        with np.errstate(invalid="ignore"):
-            predicted = (depth > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5) & (uv[:, 1] >= -0.5) & (
-                uv[:, 1] <= h - 0.5)
-        cov = np.asarray(self.covariance, dtype=np.float64)[:3, :3]
+        uv, predicted = _predictions(self.K, self.cam_from_world, self.landmarks_xyz, self.image_size)
         return _FrameArrays(
             K=np.ascontiguousarray(self.K, dtype=np.float64),
             landmarks_xyz=np.ascontiguousarray(self.landmarks_xyz, dtype=np.float64),
@@ -310,7 +311,6 @@ class VerifyInputs:
             prior_C=center(P),
             prior_sigmas=self.prior_sigmas.as_array(),
             centre=center(np.asarray(self.cam_from_world, dtype=np.float64)),
-            position_information=np.linalg.pinv(cov) if np.all(np.isfinite(cov)) else None,
             winner_uv=uv,
             predicted=predicted,
         )
@@ -321,10 +321,8 @@ class _FrameArrays:
     """:attr:`VerifyInputs.arrays`, made once per pose.
 
     Contiguous float64 copies for the kernels; ``good`` the finite detections; the prior's
-    rotation, camera centre and sigmas (6,); the winner's camera centre, its position
-    information (the pseudo-inverse of its 3 x 3 position covariance; None when that is not
-    finite), its projections of every landmark and which it predicts in the image
-    (:func:`predicted_in_image`).
+    rotation, camera centre and sigmas (6,); the winner's camera centre, its projections of every
+    landmark and which it predicts in the image (:func:`predicted_in_image`).
     """
 
     K: NDArray[np.float64]
@@ -335,7 +333,6 @@ class _FrameArrays:
     prior_C: NDArray[np.float64]
     prior_sigmas: NDArray[np.float64]
     centre: NDArray[np.float64]
-    position_information: NDArray[np.float64] | None
     winner_uv: NDArray[np.float64]
     predicted: NDArray[np.bool_]
 
@@ -353,14 +350,19 @@ def predicted_in_image(
     image_size: tuple[int, int],
 ) -> NDArray[np.bool_]:
     """(M,) the landmarks in front of the camera whose projection falls inside the image."""
-    uv, depth = project(K, cam_from_world, landmarks_xyz)
+    return _predictions(K, cam_from_world, landmarks_xyz, image_size)[1]
+
+
+def _predictions(
+    K: NDArray[np.float64], cam_from_world: NDArray[np.float64], landmarks_xyz: NDArray[np.float64],
+    image_size: tuple[int, int],
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """:func:`localization.verify_kernels.predictions` (compiled): ``(uv (M, 2), predicted (M,))``."""
+    T = np.asarray(cam_from_world, dtype=np.float64)
     w, h = image_size
-    with np.errstate(invalid="ignore"):
-        return (
-            (depth > 0)
-            & (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5)
-            & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5)
-        )
+    return predictions(np.ascontiguousarray(K, dtype=np.float64), np.ascontiguousarray(T[:3, :3]),
+                       np.ascontiguousarray(T[:3, 3]),
+                       np.ascontiguousarray(landmarks_xyz, dtype=np.float64).reshape(-1, 3), int(w), int(h))
 
 
 def chance_support(
@@ -799,11 +801,15 @@ def offset_starts(inputs: VerifyInputs) -> list[tuple[NDArray[np.int64], NDArray
 
 def _same_centres(inputs: VerifyInputs, Ts: list[NDArray[np.float64]]) -> NDArray[np.bool_]:
     """Whether each pose's camera centre lies inside the winner's 99.9 % position ellipsoid."""
-    info = inputs.arrays.position_information
-    if not Ts or info is None:
+    cov = inputs.covariance[:3, :3]
+    if not Ts or not np.all(np.isfinite(cov)):
         return np.zeros(len(Ts), dtype=bool)
     dc = np.stack([center(np.ascontiguousarray(T)) for T in Ts]) - inputs.arrays.centre
-    return np.einsum("ij,jk,ik->i", dc, info, dc) <= DISTINCT_POSITION_SQ
+    try:
+        x = np.linalg.solve(cov, dc.T)
+    except np.linalg.LinAlgError:  # singular: the least-squares solution
+        x = np.linalg.lstsq(cov, dc.T, rcond=None)[0]
+    return np.sum(dc * x.T, axis=1) <= DISTINCT_POSITION_SQ
 
 
 def _fits(rivals: list[tuple[NDArray[np.int64], NDArray[np.float64], float]]) -> list[bool]:
@@ -833,14 +839,33 @@ def _contenders(
     return [(k, float(s)) for k, s in zip(kept, scores, strict=True) if s - best < AMBIGUITY_MARGIN]
 
 
-def _twin_refusal(inputs: VerifyInputs) -> Refusal | None:
-    """The refusal when a twin fits, is a distinct pose and scores about as well, else None.
+def _rival_refusal(inputs: VerifyInputs) -> Refusal | None:
+    """The twins' refusal (:func:`_twin_refusal`), else the layout periods' (:func:`_lattice_refusal`).
 
-    The twins are :func:`twin_hypotheses` and the same grown by re-association
-    (:func:`reassociated`).
+    Their starts grow in one batch of re-association (:func:`reassociated`; each start's growth
+    is its own, whatever the batch holds).
     """
     twins = twin_hypotheses(inputs)
-    rivals = twins + [r[1:] for r in reassociated(inputs, twins + offset_starts(inputs))]
+    starts = twins + offset_starts(inputs)
+    exact = lattice_rivals(inputs)
+    periods = exact + lattice_rivals(inputs, LATTICE_SHARE, LATTICE_SPACING_SHARE * inputs.spacing_m,
+                                     _LATTICE_ANCHORS)
+    grown = reassociated(inputs, starts + periods)
+    n = len(starts)
+    return (
+        _twin_refusal(inputs, twins + [r[1:] for r in grown if r[0] < n])
+        or _lattice_refusal(inputs, exact, periods, [(k - n, *r) for k, *r in grown if k >= n])
+    )
+
+
+def _twin_refusal(
+    inputs: VerifyInputs, rivals: list[tuple[NDArray[np.int64], NDArray[np.float64], float]]
+) -> Refusal | None:
+    """The refusal when a twin fits, is a distinct pose and scores about as well, else None.
+
+    ``rivals``: the twins (:func:`twin_hypotheses`) and the twins and offset starts
+    (:func:`offset_starts`) grown by re-association (:func:`reassociated`).
+    """
     found = _contenders(inputs, rivals)
     if not found:
         return None
@@ -887,15 +912,12 @@ def lattice_rivals(
     kept, hit, j = lattice_hits(X, P, min(anchors, rows.size), float(tol_m), int(least),
                                 float(max(tol_m, LATTICE_TOL_M)))
     R, t = inputs.cam_from_world[:3, :3], inputs.cam_from_world[:3, 3]
-    out = []
-    for k, hit_k, j_k in zip(kept, hit, j, strict=True):
-        d = X[k % len(X)] - P[k // len(X)]
-        T = inputs.cam_from_world.copy()
-        T[:3, 3] = t - R @ d  # camera centre C + d
-        b = np.full_like(a, -1)
-        b[rows[hit_k]] = j_k[hit_k]
-        out.append((b, T, d))
-    return out
+    d = X[kept % len(X)] - P[kept // len(X)]
+    T = np.repeat(inputs.cam_from_world[None], kept.size, axis=0)
+    T[:, :3, 3] = t - d @ R.T  # camera centre C + d
+    b = np.full((kept.size, a.size), -1, dtype=a.dtype)
+    b[:, rows] = np.where(hit, j, -1)
+    return list(zip(b, T, d, strict=True))
 
 
 def landmark_spacing_m(landmarks_xyz: NDArray[np.float64]) -> float:
@@ -906,19 +928,21 @@ def landmark_spacing_m(landmarks_xyz: NDArray[np.float64]) -> float:
     return float(np.median(d[:, 1]))
 
 
-def _lattice_refusal(inputs: VerifyInputs) -> Refusal | None:
+def _lattice_refusal(
+    inputs: VerifyInputs,
+    exact: list[tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]],
+    rivals: list[tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]],
+    grown: list[tuple[int, NDArray[np.int64], NDArray[np.float64], float]],
+) -> Refusal | None:
     """The refusal when a shift by a period of the layout scores within the ambiguity margin.
 
-    The exact periods of the winner's pairs (:func:`lattice_rivals`) are scored as they are and
-    re-associated; the periods of most of them (:data:`LATTICE_SHARE` of the pairs, within
-    :data:`LATTICE_SPACING_SHARE` of the layout's spacing) re-associated only.
+    The exact periods of the winner's pairs (``exact``, :func:`lattice_rivals`) are scored as
+    they are and re-associated; the periods of most of them (:data:`LATTICE_SHARE` of the pairs,
+    within :data:`LATTICE_SPACING_SHARE` of the layout's spacing) re-associated only: ``rivals``
+    both, ``grown`` their re-associations (:func:`reassociated`, indices into ``rivals``).
     """
-    exact = lattice_rivals(inputs)
-    loose = lattice_rivals(inputs, LATTICE_SHARE, LATTICE_SPACING_SHARE * inputs.spacing_m, _LATTICE_ANCHORS)
-    rivals = exact + loose
     if not rivals:
         return None
-    grown = reassociated(inputs, rivals)
     fit = [r for r, ok in zip(grown, _fits([r[1:] for r in grown]), strict=True) if ok]
     same = _same_centres(inputs, [r[2] for r in fit])
     distinct = [r for r, s in zip(fit, same, strict=True) if not s]
@@ -1009,7 +1033,6 @@ def verify_pose(inputs: VerifyInputs) -> Refusal | None:
         _minimal_fit_refusal(inputs, k)
         or _outlier_refusal(inputs)
         or _influence_refusal(inputs)
-        or _twin_refusal(inputs)
-        or _lattice_refusal(inputs)
+        or _rival_refusal(inputs)
         or _search_refusal(inputs)
     )

@@ -6,6 +6,7 @@
   other landmarks (the periods of a layout);
 - :func:`leave_one_out` -- each pair's residual against the pose the other pairs give, and how
   far leaving it out moves the camera centre (linearized);
+- :func:`predictions` -- the landmarks a pose projects into the image;
 - :func:`hypothesis_terms` -- the terms of many hypotheses' scores at once (their pairs' fit,
   the landmarks they predict and leave unmatched, their distance from the prior).
 
@@ -24,7 +25,7 @@ from numpy.typing import NDArray
 from localization.geometry.kernels import camera_point
 from localization.pose.covariance import prior_distance_sq
 
-__all__ = ["hypothesis_terms", "lattice_hits", "leave_one_out", "offset_votes"]
+__all__ = ["hypothesis_terms", "lattice_hits", "leave_one_out", "offset_votes", "predictions"]
 
 #: Relative margin within which :func:`_within` asks ``np.hypot`` rather than the squared length.
 _NEAR = 1e-9
@@ -329,3 +330,27 @@ def leave_one_out(
             m += g * g
         shift[i] = np.sqrt(m)
     return q, shift, det_b
+
+
+@njit(cache=True, nogil=True)
+def predictions(
+    K: NDArray, R: NDArray, t: NDArray, landmarks_xyz: NDArray, width: int, height: int
+) -> tuple[NDArray, NDArray]:
+    """``(uv (M, 2), predicted (M,))``: the landmarks' projections at ``cam_from_world`` (R, t).
+
+    ``predicted``: in front of the camera and inside the image (pixel centres at integers, edges
+    at -0.5 and ``width - 0.5``); ``uv`` NaN where the depth is 0.
+    """
+    n = landmarks_xyz.shape[0]
+    uv = np.empty((n, 2))
+    predicted = np.zeros(n, dtype=np.bool_)
+    for j in range(n):
+        x, y, z = camera_point(R, t, landmarks_xyz, j)
+        if z == 0.0:
+            uv[j, 0] = uv[j, 1] = np.nan
+            continue
+        u = K[0, 0] * (x / z) + K[0, 1] * (y / z) + K[0, 2]
+        v = K[1, 0] * (x / z) + K[1, 1] * (y / z) + K[1, 2]
+        uv[j, 0], uv[j, 1] = u, v
+        predicted[j] = z > 0.0 and -0.5 <= u <= width - 0.5 and -0.5 <= v <= height - 0.5
+    return uv, predicted
