@@ -8,6 +8,7 @@ modes held to zero confident wrong poses.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import replace
 
 import numpy as np
@@ -18,7 +19,7 @@ from localization.detect.learned import FIT_PIXEL_SIGMA_PX, FIT_PIXEL_SIGMAS_PX,
 from localization.detect.weights import weight_set
 from localization.geometry.camera import PAPER_IMAGE_SIZE, PAPER_K
 from localization.geometry.transforms import camera_center, look_at, project
-from localization.pose.covariance import PriorSigmas
+from localization.pose.covariance import PriorSigmas, pose_jacobian
 from localization.pose.pnp import refine_pose
 from localization.testing.fuzz import (
     CORRUPTIONS,
@@ -31,6 +32,7 @@ from localization.testing.fuzz import (
 )
 from localization.testing.synthetic import paper_prior
 from localization.verify import (
+    BIAS_SHARE,
     CONFIRM_TOLERANCE_M,
     MINIMAL_FIT_LEVERAGE,
     OUTLIER_QUANTILE,
@@ -42,6 +44,7 @@ from localization.verify import (
     leave_one_out_chi2,
     leave_one_out_shifts,
     minimal_fit_chi2_limit,
+    protection_level,
     rival_search,
 )
 
@@ -440,3 +443,42 @@ def test_a_loose_minimal_fit_stands_when_no_pair_can_have_moved_it_far():
         est = localize(tolerance_m)
         assert not est.success and est.failure_code is FailureCode.UNSUPPORTED
         assert "minimal fit (4 pairs) with residual chi-square 8.5" in est.failure_reason
+
+
+def test_the_protection_level_bounds_every_pattern_of_bounded_biases():
+    # five pairs seen from 40 m: over every sign pattern of a 0.5 px bias on the ten pixel
+    # coordinates, the centre's move (linearized) stays within the level, and the level is at
+    # most sqrt(3) times the worst pattern's move (each axis's bound is attained by some pattern)
+    X = np.array([[0.0, 0.0, 3.5], [6.0, 0.0, 3.5], [6.0, 4.0, 3.5], [0.0, 4.0, 3.5], [3.0, 2.0, 7.0]])
+    T = look_at([3.0, -30.0, 25.0], [3.0, 2.0, 4.0])
+    level = protection_level(PAPER_K, T, X, 0.5)
+    J, _ = pose_jacobian(PAPER_K, T, X)
+    S = (np.linalg.pinv(J.T @ J) @ J.T)[:3]
+    signs = itertools.product((-1.0, 1.0), repeat=10)
+    moves = [np.linalg.norm(S @ (0.5 * np.array(b))) for b in signs]
+    assert max(moves) <= level + 1e-12 <= np.sqrt(3.0) * max(moves) + 1e-12
+    assert protection_level(PAPER_K, T, X, 1.0) == pytest.approx(2.0 * level, rel=1e-12)
+
+
+def _row_from_far(distance_m: float):
+    # a long building's row of 30 corners (2 m apart along x), seen along its length's normal
+    X = np.array([[2.0 * i, 0.0, 3.5] for i in range(15)] + [[2.0 * i, 2.0, 3.5] for i in range(15)])
+    T = look_at([14.0, -distance_m, 0.6 * distance_m], [14.0, 1.0, 3.5])
+    uv, _ = project(PAPER_K, T, X)
+    return X, T, uv + np.random.default_rng(4).normal(0.0, 0.3, uv.shape)
+
+
+def test_a_pose_a_small_bias_pattern_could_carry_past_the_tolerance_is_refused_with_a_tolerance():
+    X, T, det = _row_from_far(110.0)
+    loc = Localizer(X, PAPER_K, image_size=PAPER_IMAGE_SIZE, fit_sigma_px=0.7, tolerance_m=1.0)
+    est = loc.localize(det, paper_prior(T, 0))
+    assert not est.success and est.failure_code is FailureCode.ILL_CONDITIONED
+    assert f"a bias of {BIAS_SHARE * 0.7:.2f} px on each of its 30 detections" in est.failure_reason
+    # without a tolerance the same pose is reported (the env's and the benchmarks' localizer)
+    plain = Localizer(X, PAPER_K, image_size=PAPER_IMAGE_SIZE, fit_sigma_px=0.7)
+    plain = plain.localize(det, paper_prior(T, 0))
+    assert plain.success and np.linalg.norm(plain.position - camera_center(T)) < 1.0
+    # from 25 m the same row's level stays within the tolerance, and the pose stands
+    X, T, det = _row_from_far(25.0)
+    est = loc.localize(det, paper_prior(T, 0))
+    assert est.success and np.linalg.norm(est.position - camera_center(T)) < 0.2
