@@ -111,6 +111,7 @@ from scipy.spatial import cKDTree
 
 from localization.associate.ambiguity import AMBIGUITY_MARGIN
 from localization.associate.assign_kernels import assign_rounds, refine_reassign
+from localization.associate.hypothesis_kernels import check_many, missed_many
 from localization.failure import FailureCode
 from localization.geometry.kernels import center
 from localization.geometry.transforms import project
@@ -124,7 +125,6 @@ from localization.pose.covariance import (
 )
 from localization.stats import binomial_log_sf, chi2_quantile
 from localization.verify_kernels import (
-    hypothesis_terms,
     lattice_hits,
     leave_one_out,
     offset_votes,
@@ -767,8 +767,8 @@ def _scores(
     """(H,) the negative log-likelihoods of hypotheses ``(assignment, cam_from_world)``.
 
     As the association scores them: squared residuals, a clutter cost per unassigned detection, a miss
-    cost per predicted landmark left unmatched, the prior's Mahalanobis distance (one compiled
-    call, :func:`localization.verify_kernels.hypothesis_terms`).
+    cost per predicted landmark left unmatched, the prior's Mahalanobis distance (compiled,
+    :func:`_terms`).
     """
     if not hypotheses:
         return np.zeros(0)
@@ -786,13 +786,17 @@ def _scores(
 def _terms(
     inputs: VerifyInputs, a: NDArray[np.int64], T: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], NDArray[np.bool_]]:
-    """:func:`localization.verify_kernels.hypothesis_terms` of ``a`` (H, N) at ``T`` (H, 4, 4)."""
+    """``(chi px^2, missed, prior_sq, far)`` of assignments ``a`` (H, N) at poses ``T`` (H, 4, 4).
+
+    The association's own kernels (:func:`localization.associate.hypothesis_kernels.check_many`
+    and :func:`~localization.associate.hypothesis_kernels.missed_many`), one call each.
+    """
     f = inputs.arrays
     w, h = inputs.image_size
-    return hypothesis_terms(
-        f.K, f.landmarks_xyz, f.detections_uv, a, np.ascontiguousarray(T[:, :3, :3]),
-        np.ascontiguousarray(T[:, :3, 3]), int(w), int(h), f.prior_R, f.prior_C, f.prior_sigmas,
-    )
+    R, t = np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
+    prior_sq, chi, far = check_many(f.K, f.landmarks_xyz, f.detections_uv, a, R, t, f.prior_R, f.prior_C,
+                                    f.prior_sigmas)
+    return chi, missed_many(f.K, f.landmarks_xyz, a, R, t, int(w), int(h)), prior_sq, far
 
 
 def reassociated(

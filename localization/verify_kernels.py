@@ -6,9 +6,10 @@
   other landmarks (the periods of a layout);
 - :func:`leave_one_out` -- each pair's residual against the pose the other pairs give, and how
   far leaving it out moves the camera centre (linearized);
-- :func:`predictions` -- the landmarks a pose projects into the image;
-- :func:`hypothesis_terms` -- the terms of many hypotheses' scores at once (their pairs' fit,
-  the landmarks they predict and leave unmatched, their distance from the prior).
+- :func:`predictions` -- the landmarks a pose projects into the image.
+
+The rivals' scores use the association's own kernels
+(:mod:`localization.associate.hypothesis_kernels`).
 
 ``tests/localization/test_verify_kernels.py`` holds them to plain-numpy references. Compiled
 and cached like :mod:`localization.geometry.kernels`.
@@ -23,9 +24,8 @@ from numba import njit
 from numpy.typing import NDArray
 
 from localization.geometry.kernels import camera_point
-from localization.pose.covariance import prior_distance_sq
 
-__all__ = ["hypothesis_terms", "lattice_hits", "leave_one_out", "offset_votes", "predictions"]
+__all__ = ["lattice_hits", "leave_one_out", "offset_votes", "predictions"]
 
 #: Relative margin within which :func:`_within` asks ``np.hypot`` rather than the squared length.
 _NEAR = 1e-9
@@ -202,64 +202,6 @@ def lattice_hits(
                 hit[n_kept] = False
                 nearest[n_kept] = -1
     return kept[:n_kept], hit[:n_kept], nearest[:n_kept]
-
-
-@njit(cache=True, nogil=True)
-def hypothesis_terms(
-    K: NDArray, landmarks_xyz: NDArray, det: NDArray, a: NDArray, R: NDArray, t: NDArray,
-    width: int, height: int, prior_R: NDArray, prior_C: NDArray, sigmas: NDArray,
-) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """The terms of H hypotheses' scores: ``(chi (H,), missed (H,), prior_sq (H,), far (H,))``.
-
-    Args:
-        K: (3, 3) intrinsics.
-        landmarks_xyz: (M, 3) landmarks.
-        det: (N, 2) detections (assigned rows are finite).
-        a: (H, N) landmark of each detection, -1 when unassigned.
-        R: (H, 3, 3) the hypotheses' ``cam_from_world`` rotations.
-        t: (H, 3) their translations.
-        width: the image's width, px.
-        height: its height, px.
-        prior_R: (3, 3) the prior's rotation.
-        prior_C: (3,) its camera centre.
-        sigmas: (6,) its sigmas (position m, rotation rad).
-
-    ``chi``: the pairs' squared residuals, px^2; ``missed``: the landmarks in front of the camera
-    that project inside the image (pixel centres at integers, edges at -0.5 and ``width - 0.5``)
-    and are not assigned; ``prior_sq`` and ``far``:
-    :func:`localization.pose.covariance.prior_distance_sq`'s.
-    """
-    h_n, n = a.shape
-    n_lm = landmarks_xyz.shape[0]
-    chi = np.zeros(h_n)
-    missed = np.zeros(h_n, dtype=np.int64)
-    prior_sq = np.empty(h_n)
-    far = np.zeros(h_n, dtype=np.bool_)
-    paired = np.zeros(n_lm, dtype=np.bool_)
-    for h in range(h_n):
-        Rh, th = R[h], t[h]
-        prior_sq[h], far[h] = prior_distance_sq(Rh, th, prior_R, prior_C, sigmas)
-        paired[:] = False
-        for i in range(n):
-            j = a[h, i]
-            if j < 0:
-                continue
-            paired[j] = True
-            x, y, z = camera_point(Rh, th, landmarks_xyz, j)
-            u = (K[0, 0] * x + K[0, 1] * y) / z + K[0, 2]
-            v = K[1, 1] * y / z + K[1, 2]
-            chi[h] += (u - det[i, 0]) ** 2 + (v - det[i, 1]) ** 2
-        for j in range(n_lm):
-            if paired[j]:
-                continue
-            x, y, z = camera_point(Rh, th, landmarks_xyz, j)
-            if not z > 0.0:
-                continue
-            u = (K[0, 0] * x + K[0, 1] * y) / z + K[0, 2]
-            v = K[1, 1] * y / z + K[1, 2]
-            if -0.5 <= u <= width - 0.5 and -0.5 <= v <= height - 0.5:
-                missed[h] += 1
-    return chi, missed, prior_sq, far
 
 
 @njit(cache=True, nogil=True)

@@ -1,4 +1,4 @@
-"""The verification's compiled kernels give what plain numpy gives (the code they replaced)."""
+"""The verification's compiled parts give what plain numpy gives (the code they replaced)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ from scipy.spatial import cKDTree
 from localization.geometry.camera import PAPER_IMAGE_SIZE, PAPER_K
 from localization.geometry.transforms import look_at, project
 from localization.pose.covariance import PriorSigmas, pose_jacobian, prior_mahalanobis_sq
-from localization.verify_kernels import hypothesis_terms, lattice_hits, leave_one_out, offset_votes
+from localization.verify import VerifyInputs, _scores
+from localization.verify_kernels import lattice_hits, leave_one_out, offset_votes
 
 
 def _offset_votes_numpy(pair_uv, free_uv, tol, radius, n_cells=12, n_out=3):
@@ -110,36 +111,42 @@ def test_lattice_hits_find_the_periods_of_a_grid():
     assert hit.all() and all(len(set(j)) == len(paired) for j in nearest)
 
 
-def test_hypothesis_terms_agree_with_numpy_projections():
+def _score_numpy(inputs, a, T):
+    m = a >= 0
+    uv, _ = project(inputs.K, T, inputs.landmarks_xyz[a[m]])
+    chi = float(np.sum((uv - inputs.detections_uv[m]) ** 2)) / inputs.pixel_sigma**2
+    q, depth = project(inputs.K, T, inputs.landmarks_xyz)
+    w, h = inputs.image_size
+    seen = (depth > 0) & (q[:, 0] >= -0.5) & (q[:, 0] <= w - 0.5)
+    seen &= (q[:, 1] >= -0.5) & (q[:, 1] <= h - 0.5)
+    seen[a[m]] = False
+    n_free = int(np.count_nonzero(~m & np.isfinite(inputs.detections_uv).all(axis=1)))
+    return (chi + n_free * (inputs.gate_px / inputs.pixel_sigma) ** 2 + int(seen.sum()) * inputs.miss_cost
+            + prior_mahalanobis_sq(T, inputs.prior_cam_from_world, inputs.prior_sigmas))
+
+
+def test_rival_scores_agree_with_numpy_projections():
     rng = np.random.default_rng(5)
     X = rng.uniform([-10, -10, 0], [10, 10, 8], (30, 3))
     truth = look_at([2.0, -30.0, 20.0], [0.0, 0.0, 3.0])
     uv, _ = project(PAPER_K, truth, X)
-    det = np.vstack([uv[:20] + rng.normal(0, 1, (20, 2)), rng.uniform(0, 1000, (3, 2))])
+    det = np.vstack([uv[:20] + rng.normal(0, 1, (20, 2)), rng.uniform(0, 1000, (3, 2)), [[np.nan, np.nan]]])
     prior = look_at([4.0, -28.0, 22.0], [0.5, 0.0, 3.0])
-    sig = PriorSigmas()
-    hyps = [truth, prior, look_at([-3.0, -25.0, 18.0], [0.0, 1.0, 3.0])]
-    a = np.full((3, len(det)), -1, dtype=np.int64)
-    a[:, :20] = np.arange(20)
-    a[2, 5] = -1
-    T = np.stack(hyps)
-    chi, missed, prior_sq, far = hypothesis_terms(
-        PAPER_K, X, det, a, np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3]),
-        PAPER_IMAGE_SIZE[0], PAPER_IMAGE_SIZE[1], np.ascontiguousarray(prior[:3, :3]),
-        -prior[:3, :3].T @ prior[:3, 3], sig.as_array(),
+    a = np.full(len(det), -1, dtype=np.int64)
+    a[:20] = np.arange(20)
+    inputs = VerifyInputs(
+        detections_uv=det, landmarks_xyz=X, K=PAPER_K, image_size=PAPER_IMAGE_SIZE, cam_from_world=truth,
+        assignment=a, covariance=np.eye(6), prior_cam_from_world=prior, prior_sigmas=PriorSigmas(),
+        pixel_sigma=1.0, gate_px=5.0, need=4,
     )
-    w, h = PAPER_IMAGE_SIZE
-    for k, Tk in enumerate(hyps):
-        m = a[k] >= 0
-        p, _ = project(PAPER_K, Tk, X[a[k][m]])
-        assert chi[k] == pytest.approx(np.sum((p - det[m]) ** 2), rel=1e-12)
-        q, depth = project(PAPER_K, Tk, X)
-        seen = (depth > 0) & (q[:, 0] >= -0.5) & (q[:, 0] <= w - 0.5)
-        seen &= (q[:, 1] >= -0.5) & (q[:, 1] <= h - 0.5)
-        seen[a[k][m]] = False
-        assert missed[k] == seen.sum()
-        assert not far[k] and prior_sq[k] == pytest.approx(prior_mahalanobis_sq(Tk, prior, sig), rel=1e-12)
-    assert missed[2] >= 1  # the landmark its detection left
+    b = a.copy()
+    b[5] = -1  # a landmark in view left unmatched
+    hyps = [(a, truth), (a, prior), (b, look_at([-3.0, -25.0, 18.0], [0.0, 1.0, 3.0]))]
+    got = _scores(inputs, hyps)
+    for k, (ak, Tk) in enumerate(hyps):
+        assert got[k] == pytest.approx(_score_numpy(inputs, ak, Tk), rel=1e-12)
+    assert inputs.winner_score == pytest.approx(got[0], rel=1e-15)
+    assert got[2] > got[0] + inputs.miss_cost  # the miss costs
 
 
 def test_leave_one_out_agrees_with_the_hat_matrix():
