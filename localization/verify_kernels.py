@@ -46,17 +46,12 @@ def _within(dx: float, dy: float, r: float) -> bool:
 
 
 @njit(cache=True, nogil=True)
-def offset_votes(
-    pair_uv: NDArray, free_uv: NDArray, tol: float, radius: float, n_cells: int, n_out: int
-) -> NDArray:
-    """Candidate common offsets from ``pair_uv`` (P, 2) to ``free_uv`` (F, 2), most pairs agreeing first.
+def _offsets(
+    pair_uv: NDArray, free_uv: NDArray, tol: float, radius: float
+) -> tuple[NDArray, NDArray, NDArray]:
+    """``(vx, vy, vp)``: the offsets longer than ``tol`` and at most ``radius``, pair-major.
 
-    The offsets longer than ``tol`` and at most ``radius`` are binned in ``tol`` cells; the
-    ``n_cells`` cells whose 3 x 3 neighbourhoods hold the most distinct pairs (ties: lower cell
-    first) each give a candidate: the mean of the offsets within ``tol`` of the cell's first
-    offset (in pair-major order), with the number of distinct pairs that have an offset within
-    ``tol`` of that mean. Returns (C, 3), C <= ``n_out``: offset (2), agreeing pairs; sorted by
-    agreeing pairs, descending (ties keep the cells' order).
+    ``vp``: the pair each starts from.
     """
     n_pairs, n_free = pair_uv.shape[0], free_uv.shape[0]
     vx = np.empty(n_pairs * n_free)
@@ -70,15 +65,18 @@ def offset_votes(
             if _within(ox, oy, radius) and not _within(ox, oy, tol):
                 vx[n], vy[n], vp[n] = ox, oy, p
                 n += 1
-    if n == 0:
-        return np.zeros((0, 3))
-    span = int(2 * radius / tol) + 4  # cells per axis, with room for the neighbourhood
-    half = span // 2
-    key = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        key[i] = (np.int64(np.floor(vx[i] / tol)) + half) * span + (np.int64(np.floor(vy[i] / tol)) + half)
-    # the cells, ascending, and the distinct pairs in each
-    cell_pair = np.sort(key * n_pairs + vp[:n])
+    return vx[:n], vy[:n], vp[:n]
+
+
+@njit(cache=True, nogil=True)
+def _cell_votes(key: NDArray, vp: NDArray, n_pairs: int, span: int) -> tuple[NDArray, NDArray]:
+    """``(cells, votes)``: the occupied cells (ascending) and the pairs around each.
+
+    ``votes``: the distinct pairs in each cell's 3 x 3 neighbourhood (cell ``key = row * span +
+    column``).
+    """
+    n = key.size
+    cell_pair = np.sort(key * n_pairs + vp)
     cells = np.empty(n, dtype=np.int64)
     per_cell = np.zeros(n, dtype=np.int64)
     n_c = 0
@@ -102,29 +100,86 @@ def offset_votes(
                     at += 1
                 if cells[at] == want:
                     votes[c] += per_cell[at]
+    return cells, votes
+
+
+@njit(cache=True, nogil=True)
+def _agreeing(vx: NDArray, vy: NDArray, vp: NDArray, first: int, tol: float) -> tuple[float, float, int]:
+    """``(mean x, mean y, pairs)`` of the offsets within ``tol`` of offset ``first``.
+
+    ``pairs``: the distinct pairs with an offset within ``tol`` of that mean (``vp`` ascending).
+    """
+    fx, fy = vx[first], vy[first]
+    sx, sy, m = 0.0, 0.0, 0
+    for i in range(vx.size):
+        if _within(vx[i] - fx, vy[i] - fy, tol):
+            sx += vx[i]
+            sy += vy[i]
+            m += 1
+    cx, cy = sx / m, sy / m
+    agree, last = 0, -1
+    for i in range(vx.size):  # vp ascends, so a new pair is a new value
+        if vp[i] != last and _within(vx[i] - cx, vy[i] - cy, tol):
+            agree += 1
+            last = vp[i]
+    return cx, cy, agree
+
+
+@njit(cache=True, nogil=True)
+def offset_votes(
+    pair_uv: NDArray, free_uv: NDArray, tol: float, radius: float, n_cells: int, n_out: int
+) -> NDArray:
+    """Candidate common offsets from ``pair_uv`` (P, 2) to ``free_uv`` (F, 2), most pairs agreeing first.
+
+    The offsets longer than ``tol`` and at most ``radius`` are binned in ``tol`` cells; the
+    ``n_cells`` cells whose 3 x 3 neighbourhoods hold the most distinct pairs (ties: lower cell
+    first) each give a candidate: the mean of the offsets within ``tol`` of the cell's first
+    offset (in pair-major order), with the number of distinct pairs that have an offset within
+    ``tol`` of that mean. Returns (C, 3), C <= ``n_out``: offset (2), agreeing pairs; sorted by
+    agreeing pairs, descending (ties keep the cells' order).
+    """
+    vx, vy, vp = _offsets(pair_uv, free_uv, tol, radius)
+    if vx.size == 0:
+        return np.zeros((0, 3))
+    span = int(2 * radius / tol) + 4  # cells per axis, with room for the neighbourhood
+    half = span // 2
+    key = np.empty(vx.size, dtype=np.int64)
+    for i in range(vx.size):
+        key[i] = (np.int64(np.floor(vx[i] / tol)) + half) * span + (np.int64(np.floor(vy[i] / tol)) + half)
+    cells, votes = _cell_votes(key, vp, pair_uv.shape[0], span)
     ranked = np.argsort(-votes, kind="mergesort")[:n_cells]
     out = np.empty((ranked.size, 3))
     for r in range(ranked.size):
-        c = cells[ranked[r]]
         first = 0
-        while key[first] != c:
+        while key[first] != cells[ranked[r]]:
             first += 1
-        fx, fy = vx[first], vy[first]
-        sx, sy, m = 0.0, 0.0, 0
-        for i in range(n):
-            if _within(vx[i] - fx, vy[i] - fy, tol):
-                sx += vx[i]
-                sy += vy[i]
-                m += 1
-        cx, cy = sx / m, sy / m
-        agree, last = 0, -1
-        for i in range(n):  # vp ascends, so a new pair is a new value
-            if vp[i] != last and _within(vx[i] - cx, vy[i] - cy, tol):
-                agree += 1
-                last = vp[i]
-        out[r, 0], out[r, 1], out[r, 2] = cx, cy, agree
+        out[r, 0], out[r, 1], out[r, 2] = _agreeing(vx, vy, vp, first, tol)
     order = np.argsort(-out[:, 2], kind="mergesort")[:n_out]
     return out[order]
+
+
+@njit(cache=True, nogil=True)
+def _nearest_within(
+    landmarks_xyz: NDArray, order: NDArray, xs: NDArray, qx: float, qy: float, qz: float, tol_m: float
+) -> int:
+    """The landmark nearest to ``(qx, qy, qz)`` when it lies within ``tol_m``, else -1.
+
+    ``order`` sorts the landmarks by x and ``xs`` holds their sorted x: only those within
+    ``tol_m`` in x are searched (any landmark within ``tol_m`` is among them).
+    """
+    reach = tol_m * (1.0 + 1e-9) + 1e-12
+    lo = np.searchsorted(xs, qx - reach)
+    hi = np.searchsorted(xs, qx + reach, side="right")
+    best, bj = np.inf, -1
+    for t in range(lo, hi):
+        q = order[t]
+        dx = qx - landmarks_xyz[q, 0]
+        dy = qy - landmarks_xyz[q, 1]
+        dz = qz - landmarks_xyz[q, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 < best:
+            best, bj = d2, q
+    return bj if bj >= 0 and math.sqrt(best) <= tol_m else -1
 
 
 @njit(cache=True, nogil=True)
@@ -144,7 +199,6 @@ def lattice_hits(
     n_lm, n_p = landmarks_xyz.shape[0], paired_xyz.shape[0]
     order = np.argsort(landmarks_xyz[:, 0], kind="mergesort")
     xs = landmarks_xyz[order, 0].copy()
-    reach = tol_m * (1.0 + 1e-9) + 1e-12  # a landmark within tol_m lies within tol_m in x
     n_s = anchors * n_lm
     kept = np.empty(n_s, dtype=np.int64)
     keys = np.empty((n_s, 3), dtype=np.int64)
@@ -161,19 +215,11 @@ def lattice_hits(
                 continue
             hits, misses, distinct = 0, 0, True
             for p in range(n_p):
-                qx, qy, qz = paired_xyz[p, 0] + sx, paired_xyz[p, 1] + sy, paired_xyz[p, 2] + sz
-                lo = np.searchsorted(xs, qx - reach)
-                hi = np.searchsorted(xs, qx + reach, side="right")
-                best, bj = np.inf, -1
-                for t in range(lo, hi):
-                    q = order[t]
-                    dx = qx - landmarks_xyz[q, 0]
-                    dy = qy - landmarks_xyz[q, 1]
-                    dz = qz - landmarks_xyz[q, 2]
-                    d2 = dx * dx + dy * dy + dz * dz
-                    if d2 < best:
-                        best, bj = d2, q
-                if bj >= 0 and math.sqrt(best) <= tol_m:
+                bj = _nearest_within(
+                    landmarks_xyz, order, xs, paired_xyz[p, 0] + sx, paired_xyz[p, 1] + sy,
+                    paired_xyz[p, 2] + sz, tol_m,
+                )
+                if bj >= 0:
                     hit[n_kept, p] = True
                     nearest[n_kept, p] = bj
                     hits += 1

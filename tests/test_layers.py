@@ -20,7 +20,8 @@ LAYERS: list[tuple[str, ...]] = [
     ("localization.checks", "localization.failure", "localization.stats"),
     ("localization.geometry",),
     ("localization.detect", "localization.pose"),
-    ("localization.associate",),
+    # the verification's kernels beside the search's (verify.py, a layer up, calls them)
+    ("localization.associate", "localization.verify_kernels"),
     ("localization.pipeline", "localization.verify", "localization.metrics", "localization.temporal",
      "localization.testing"),
     ("localization.aruco",),
