@@ -65,6 +65,10 @@ class PoseEstimate:
         n_hypotheses: association hypotheses evaluated.
         warm_started: True when the robust association accepted the warm start
             (:meth:`Localizer.localize`, ``warm_start``) and searched no hypothesis.
+        refused_cam_from_world: (4, 4) the pose the verification refused (what the localizer
+            returns with ``verify=False``), None unless the verification ended the frame. A caller
+            that wants a pose to look from even unconfirmed reads it here instead of localizing
+            again without the verification.
     """
 
     success: bool
@@ -79,6 +83,7 @@ class PoseEstimate:
     n_hypotheses: int = 0
     failure_code: FailureCode | None = None
     warm_started: bool = False
+    refused_cam_from_world: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         if not self.success and self.failure_code is None:
@@ -152,12 +157,14 @@ class _Failure:
         reason: for people, with the numbers of the case.
         assignment: (N,) the assignment so far, or None (all -1).
         n_hypotheses: association hypotheses evaluated.
+        refused_cam_from_world: (4, 4) the pose the verification refused, or None.
     """
 
     code: FailureCode
     reason: str
     assignment: NDArray[np.int64] | None = None
     n_hypotheses: int = 0
+    refused_cam_from_world: NDArray[np.float64] | None = None
 
 
 class Localizer:
@@ -661,7 +668,8 @@ class Localizer:
         timings["verify"] = time.perf_counter() - t
         if refusal is None:
             return None
-        return _Failure(refusal.code, refusal.reason, pose.assignment, n_hypotheses)
+        refused = pose.cam_from_world.copy()
+        return _Failure(refusal.code, refusal.reason, pose.assignment, n_hypotheses, refused)
 
     def _search(
         self, frame: _Frame, keep: NDArray[np.bool_]
@@ -693,6 +701,7 @@ class Localizer:
             timings=timings,
             prior_mahalanobis_sq=0.0,
             n_hypotheses=failure.n_hypotheses,
+            refused_cam_from_world=failure.refused_cam_from_world,
         )
 
 

@@ -104,6 +104,9 @@ def test_a_formerly_confident_wrong_pose_is_refused_with_its_reason(mode, k, cod
     assert not est.success and est.failure_code is code, est.failure_reason
     np.testing.assert_array_equal(est.cam_from_world, case.prior_cam_from_world)
     assert est.timings["verify"] > 0.0
+    # the refused pose is the unverified localization's, to the bit (the guided detector reads it there)
+    np.testing.assert_array_equal(est.refused_cam_from_world, unverified.cam_from_world)
+    assert unverified.refused_cam_from_world is None
 
 
 def test_the_tolerance_is_what_refuses_a_pose_one_pair_moves_beyond_it():

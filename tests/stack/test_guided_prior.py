@@ -10,6 +10,8 @@ from localization.geometry.camera import PAPER_K
 from localization.geometry.transforms import invert, project
 from uav_struct_env.sim.templates import SiteTemplates
 from uav_struct_env.stack import StackSpec, build_stack
+from uav_struct_env.stack.guided import GuidedDetector
+from uav_struct_env.stack.prior_starts import PriorStarts
 
 
 def _pixel_error(K, cam_from_world, truth_cam_from_world, xyz):
@@ -103,3 +105,49 @@ def test_without_any_candidate_the_alignment_gives_the_pose_and_its_gate_can_ref
     strict = _stack(site, info, min_gain=10.0)
     frame = strict.localize(image, info["landmarks"], prior, truth)
     assert not frame.estimate.success and len(frame.detections) == 0
+
+
+def _set_stack(site, info, landmarks):
+    model = site.landmarks(landmarks)
+    return build_stack(StackSpec(landmarks=landmarks, detector="guided", min_localizer_sigma_px=0.5,
+                                 scale_gates=False, localizer_kwargs={"fit_sigma_px": 0.7}),
+                       info["intrinsics"], (1280, 720), model_xyz=model.xyz, model_ids=model.ids,
+                       distortion=info["distortion"], site=site)
+
+
+def test_the_sets_of_a_frame_share_the_learned_run_and_the_starts_and_detect_as_alone(slab_view):
+    site, image, info = slab_view
+    image = image.copy()
+    image[0, 0, 0] ^= 1  # a frame no earlier test has seen (the shared starts remember the last ones)
+    slab, openings = _set_stack(site, info, "slab_corners"), _set_stack(site, info, "opening_corners")
+    assert slab.detector.seed is openings.detector.seed
+    assert slab.detector.prior_starts is openings.detector.prior_starts
+    aligner = slab.detector.prior_starts.aligner
+    calls = []
+    original = aligner.align
+    aligner.align = lambda *args: calls.append(1) or original(*args)
+    prior = invert(info["prior_world_from_cam"])
+    starts = [list(d.starts(image, prior)) for d in (slab.detector, openings.detector)]
+    assert len(calls) == 1 and len(starts[0]) >= 1
+    # the shared starts are those a detector with its own computes
+    alone = GuidedDetector(openings.detector.seed, openings.detector.types, openings.detector.localizer,
+                           openings.detector.matcher, "opening_corners", anchors=openings.detector.anchors)
+    assert alone.prior_starts is not openings.detector.prior_starts
+    for (a, sa), (b, sb) in zip(starts[1], alone.starts(image, prior), strict=True):
+        np.testing.assert_array_equal(a, b)
+        assert sa == sb
+    context = {"prior_cam_from_world": prior}
+    shared = openings.detector.detect(image, context)
+    np.testing.assert_array_equal(shared.uv, alone.detect(image, context).uv)
+
+
+def test_starts_for_another_camera_are_refused(slab_view):
+    site, _, info = slab_view
+    d = _set_stack(site, info, "slab_corners").detector
+    K = np.array(info["intrinsics"], dtype=np.float64)
+    K[:2, :3] *= 2.0  # the same camera at twice the resolution
+    other = PriorStarts(d.aligner, d.prior_starts.wide, K, info["distortion"])
+    with pytest.raises(ValueError, match="the localizer's camera"):
+        GuidedDetector(d.seed, d.types, d.localizer, d.matcher, "slab_corners", prior_starts=other)
+    with pytest.raises(TypeError, match="PriorAligner and a TemplateMatcher"):
+        PriorStarts(object(), d.prior_starts.wide, info["intrinsics"])

@@ -9,9 +9,9 @@ builds (:func:`uav_struct_env.stack.build_stack`). Per frame:
    one set's few) by a :class:`localization.Localizer` like the stack's (association, PnP,
    verification); without a pose there, the candidates of the set's type are localized against
    the set by the stack's own. A pose that neither confirms is still worth the templates: the
-   same two localizations are tried once more with the verification off (an *unconfirmed*
-   pose, typically 1-3 m off where the learned detector found three or four of a set's corners
-   and one of its candidates sat a few pixels off its corner).
+   first pose a verification refused is kept as an *unconfirmed* pose (the refusal carries it;
+   no localization runs twice), typically 1-3 m off where the learned detector found three or
+   four of a set's corners and one of its candidates sat a few pixels off its corner.
 2. **An unconfirmed pose: a wide pass.** The templates are matched within
    ``probe_search_px`` (16 px) of the landmarks' projections at it; the matches and every
    candidate of the set's type are localized by the set's own localizer, with verification.
@@ -34,6 +34,11 @@ builds (:func:`uav_struct_env.stack.build_stack`). Per frame:
    ``merge_px`` of them, and the matches. Without any pose, the set's candidates are the
    detections (the learned detector's result).
 
+The learned detector's run and the starts from the prior do not depend on the landmark set:
+:func:`~uav_struct_env.stack.build_stack` gives the guided detectors of a site's sets one
+shared seed and one :class:`~uav_struct_env.stack.prior_starts.PriorStarts`, which remember the
+frame's (:mod:`uav_struct_env.stack.frame_memo`), so a frame's second set reuses them.
+
 The stack then localizes the detections again from the prior, exactly as for any detector, so
 the final pose rests on the association and verification of every detector (the identities the
 templates were matched under are not passed on). Ground truth in the context fills
@@ -42,7 +47,6 @@ templates were matched under are not passed on). Ground truth in the context fil
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
@@ -52,9 +56,10 @@ from numpy.typing import NDArray
 from localization import Detections, Localizer
 from localization.detect.guided import Matches, TemplateMatcher
 from localization.detect.learned import truth_ids
-from localization.detect.prior_align import PriorAligner, fit_matches
+from localization.detect.prior_align import PriorAligner
 from localization.geometry.distortion import distort_points
 from localization.geometry.transforms import project
+from uav_struct_env.stack.prior_starts import PriorStarts
 
 __all__ = ["GuidedDetector", "merged"]
 
@@ -77,13 +82,6 @@ def merged(first: Detections, found: Matches,
     return np.vstack([found.uv, first.uv[rest]]), np.concatenate([found.score, scores[rest]])
 
 
-def _unverified(localizer: Localizer) -> Localizer:
-    """A copy of ``localizer`` that returns its best pose unconfirmed (no verification)."""
-    out = copy.copy(localizer)
-    out.verify = False
-    return out
-
-
 class GuidedDetector:
     """Learned candidates, a first pose, and the building model's templates at it (module docstring).
 
@@ -104,20 +102,32 @@ class GuidedDetector:
             gives no pose (None: one of the matcher's templates with its defaults).
         align_search_px: half-size of the template search around an alignment's pose, px.
         min_gain: least ratio of a confirmed pose's :meth:`PriorAligner.score` to its start's.
+        prior_starts: the starts from the prior (:class:`~uav_struct_env.stack.prior_starts.PriorStarts`),
+            shared by the detectors of a site's sets (None: its own, of ``aligner``, the anchors'
+            or the set's landmarks, ``align_search_px`` and the localizer's camera; a given one
+            must have that camera, and its own aligner and search).
+
+    Raises:
+        ValueError: if ``prior_starts`` is for another camera than the localizer's.
     """
 
     def __init__(self, seed: Any, types: Sequence[int], localizer: Localizer, matcher: TemplateMatcher,
                  landmarks: str, anchors: Localizer | None = None, merge_px: float = 8.0,
                  match_px: float = 3.0, probe_search_px: int = 16, aligner: PriorAligner | None = None,
-                 align_search_px: int = 24, min_gain: float = 1.03) -> None:
+                 align_search_px: int = 24, min_gain: float = 1.03,
+                 prior_starts: PriorStarts | None = None) -> None:
         self.seed = seed
-        self.aligner = PriorAligner(matcher.templates) if aligner is None else aligner
-        self.align_search_px = align_search_px
+        if prior_starts is None:
+            every = matcher.xyz if anchors is None else anchors.landmarks_xyz
+            prior_starts = PriorStarts(PriorAligner(matcher.templates) if aligner is None else aligner,
+                                       TemplateMatcher(every, matcher.templates), localizer.K,
+                                       localizer.distortion, align_search_px)
+        elif not prior_starts.same_camera(localizer.K, localizer.distortion):
+            raise ValueError("prior_starts must be for the localizer's camera (its K and distortion)")
+        self.prior_starts = prior_starts
+        self.aligner = prior_starts.aligner
         self.min_gain = float(min_gain)
-        every = matcher.xyz if anchors is None else anchors.landmarks_xyz
-        self.wide = TemplateMatcher(every, matcher.templates)
         self.probe_search_px = probe_search_px
-        self._probes = tuple(_unverified(x) for x in (anchors, localizer) if x is not None)
         self.types = tuple(int(t) for t in types)
         self.localizer = localizer
         self.anchors = anchors
@@ -188,20 +198,10 @@ class GuidedDetector:
     def starts(self, image: Any, prior: NDArray[np.float64]) -> Iterator[tuple[NDArray[np.float64], float]]:
         """``(pose, score)`` of each alignment of the model drawn at the prior with the image, best first.
 
-        Each pose is corrected by a pose fitted to the template matches of every structural
-        landmark within ``align_search_px`` of it (:meth:`refined`), when it is reached: the
-        alignment moves the structure as one picture, so the building's depth leaves its
-        landmarks ten to thirty pixels off.
+        Each pose corrected by a pose fitted to the template matches of every structural landmark
+        around it, when it is reached (:class:`~uav_struct_env.stack.prior_starts.PriorStarts`).
         """
-        for a in self.aligner.align(image, prior, self.localizer.K):
-            yield self.refined(image, a.cam_from_world), a.score
-
-    def refined(self, image: Any, pose: NDArray[np.float64]) -> NDArray[np.float64]:
-        """``pose`` corrected by a fit to every structural landmark's matches within ``align_search_px``."""
-        found = self.wide.find(image, pose, self.localizer.K, self.localizer.distortion,
-                               search_px=self.align_search_px)
-        fitted = fit_matches(self.wide.xyz, found, self.localizer.K, self.localizer.distortion, pose)
-        return pose if fitted is None else fitted
+        return self.prior_starts(image, prior)
 
     def near(self, first: Detections, pose: NDArray[np.float64]) -> Detections:
         """The first-pass detections within the search radius of a landmark's projection at ``pose``.
@@ -226,18 +226,22 @@ class GuidedDetector:
 
         All candidates against the anchors, else the set's own against the set: every structural
         landmark the stage has pins the templates' pose better than one set's few (four slab
-        corners of a house). Both are tried with the verification first, then without it (the
-        pose is then only where the wide pass looks: ``confirmed`` False).
+        corners of a house). Without a confirmed pose, the first pose either verification refused
+        is the unconfirmed one (the pose is then only where the wide pass looks: ``confirmed``
+        False): the pose that localization gives without the verification, read from the refusal
+        (``PoseEstimate.refused_cam_from_world``) rather than localized again.
         """
-        tries = [(self.localizer, first, self._probes[-1])]
+        tries = [(self.localizer, first)]
         if self.anchors is not None and len(every) > len(first):
-            tries.insert(0, (self.anchors, every, self._probes[0]))
-        for confirmed in (True, False):
-            for localizer, detections, probe in tries:
-                est = (localizer if confirmed else probe).localize(detections, prior)
-                if est.success:
-                    return est.cam_from_world, confirmed
-        return None, False
+            tries.insert(0, (self.anchors, every))
+        unconfirmed = None
+        for localizer, detections in tries:
+            est = localizer.localize(detections, prior)
+            if est.success:
+                return est.cam_from_world, True
+            if unconfirmed is None:
+                unconfirmed = est.refused_cam_from_world
+        return unconfirmed, False
 
     def __repr__(self) -> str:
         return f"GuidedDetector(landmarks={self.landmarks!r}, seed={self.seed!r}, matcher={self.matcher!r})"

@@ -344,7 +344,9 @@ def _learned(spec: StackSpec, width: int) -> Any:
     return _LEARNED[key]
 
 
+_SEEDS: dict[int, Any] = {}  # id of a shared learned detector -> its SharedSeed
 _TEMPLATES: list[tuple[Any, Any]] = []  # (site, its SiteTemplates): the last site's only
+_STARTS: list[tuple[Any, Any, Any]] = []  # (site, wide landmarks, their PriorStarts): the last site's
 
 
 def _templates(site: Any) -> Any:
@@ -354,6 +356,37 @@ def _templates(site: Any) -> Any:
     if not _TEMPLATES or _TEMPLATES[0][0] is not site:
         _TEMPLATES[:] = [(site, SiteTemplates(site))]
     return _TEMPLATES[0][1]
+
+
+def _shared_seed(detector: Any) -> Any:
+    """The :class:`~uav_struct_env.stack.frame_memo.SharedSeed` of a (shared) learned detector."""
+    from uav_struct_env.stack.frame_memo import SharedSeed
+
+    if id(detector) not in _SEEDS or _SEEDS[id(detector)].detector is not detector:
+        _SEEDS[id(detector)] = SharedSeed(detector)
+    return _SEEDS[id(detector)]
+
+
+def _prior_starts(site: Any, wide_xyz: NDArray[np.float64], localizer: Localizer) -> Any:
+    """The :class:`~uav_struct_env.stack.prior_starts.PriorStarts` of ``site``, its landmarks and camera.
+
+    One per site (the last site's kept), landmarks and camera: every set's guided detector of a
+    frame asks it for the same starts.
+    """
+    from localization.detect.guided import TemplateMatcher
+    from localization.detect.prior_align import PriorAligner
+    from uav_struct_env.stack.prior_starts import PriorStarts
+
+    if _STARTS and _STARTS[0][0] is not site:
+        _STARTS.clear()
+    for _, xyz, starts in _STARTS:
+        if np.array_equal(xyz, wide_xyz) and starts.same_camera(localizer.K, localizer.distortion):
+            return starts
+    templates = _templates(site)
+    starts = PriorStarts(PriorAligner(templates), TemplateMatcher(wide_xyz, templates), localizer.K,
+                         localizer.distortion)
+    _STARTS[:] = [*_STARTS[-3:], (site, np.array(wide_xyz, copy=True), starts)]
+    return starts
 
 
 def _guided(spec: StackSpec, size: tuple[int, int], localizer: Localizer, xyz: NDArray[np.float64],
@@ -373,14 +406,16 @@ def _guided(spec: StackSpec, size: tuple[int, int], localizer: Localizer, xyz: N
             f"detector='guided' renders the building model: build_stack needs site=, got {site!r}"
         )
     matcher = TemplateMatcher(xyz, _templates(site))
-    seed = _learned(replace(spec, landmarks="all"), size[0])
+    seed = _shared_seed(_learned(replace(spec, landmarks="all"), size[0]))
     types = range(len(LANDMARK_TYPES)) if spec.landmarks == "all" else [LANDMARK_TYPES.index(spec.landmarks)]
     every = site.landmarks("all").xyz
     anchors = None
     if spec.landmarks != "all" and len(every) > len(xyz):
         anchors = Localizer(every, localizer.K, association=spec.association, distortion=localizer.distortion,
                             **spec.localizer_arguments(size))
-    return GuidedDetector(seed, types, localizer, matcher, spec.landmarks, anchors=anchors)
+    starts = _prior_starts(site, xyz if anchors is None else every, localizer)
+    return GuidedDetector(seed, types, localizer, matcher, spec.landmarks, anchors=anchors,
+                          prior_starts=starts)
 
 
 def build_stack(
