@@ -15,8 +15,7 @@ wireframe, coarse to fine):
   sight changes the building's size in the frame by up to ~15 %, its attitude error turns it by
   a few degrees, up to ~13 on the train buildings), is correlated with the image's over shifts up
   to ``search_px``: first at half that resolution over a grid of ``zooms`` x ``angles_deg``, then
-  twice more finely around the best peaks (a cross of five: the peak, one zoom step either way,
-  one turn either way; 3.3 % and 4 deg, then 1.6 % and 2 deg),
+  twice more finely around the best peaks (zoom 3.3 % and 4 deg steps, then 1.6 % and 2 deg),
   and last for the shift alone at the alignment's resolution;
 * the best peaks, distinct in shift, are the hypotheses: each is an image motion
   ``u' = c + d + s R (u - c)`` (zoom ``s`` and rotation ``R`` about the principal point ``c``,
@@ -225,10 +224,9 @@ class PriorAligner:
 
 
 #: The fine level's steps around a coarse peak (zoom factor, rotation in rad), and its shift
-#: radius (alignment px): a cross of five (the peak, a zoom step either way, a turn either way)
-#: rather than the 3 x 3 grid of both, twice, the second finer.
-_FINE_STEPS = tuple(((1.0, 0.0), (1.0 - dz, 0.0), (1.0 + dz, 0.0), (1.0, -np.radians(da)),
-                     (1.0, np.radians(da))) for dz, da in ((0.033, 4.0), (0.016, 2.0)))
+#: radius (alignment px).
+_FINE_STEPS = tuple(tuple((1.0 + z, np.radians(a)) for z in (-dz, 0.0, dz) for a in (-da, 0.0, da))
+                    for dz, da in ((0.033, 4.0), (0.016, 2.0)))
 _FINE_RADIUS = 2
 _SHIFT_ONLY = ((1.0, 0.0),)
 
