@@ -310,6 +310,22 @@ class VerifyInputs:
         return landmark_spacing_m(self.landmarks_xyz)
 
     @cached_property
+    def tolerance(self) -> tuple[float, float, int]:
+        """:func:`position_tolerance` of the pose at the detector's noise: ``(tolerance, bound, seen)``.
+
+        Made once per pose for the tests that hold the pose to it (``tolerance_m`` given).
+        """
+        return position_tolerance(self.K, self.cam_from_world, self.landmarks_xyz, self.image_size,
+                                  self.fit_sigma_px, self.tolerance_m or 0.0)
+
+    @cached_property
+    def worst_leverage_m(self) -> float:
+        """The farthest one pair moves the camera centre when left out, m (:func:`leave_one_out_shifts`)."""
+        rows = np.flatnonzero(self.assignment >= 0)
+        X = self.landmarks_xyz[self.assignment[rows]]
+        return float(leave_one_out_shifts(self.K, self.cam_from_world, X, self.detections_uv[rows]).max())
+
+    @cached_property
     def winner_score(self) -> float:
         """The pose's own score, as its rivals are scored (:func:`_scores`)."""
         return float(_scores(self, [(self.assignment, self.cam_from_world)])[0])
@@ -417,10 +433,11 @@ def _minimal_fit_refusal(inputs: VerifyInputs, k: int) -> Refusal | None:
 
     With a tolerance (``tolerance_m``), a fit loose at the detector's calibrated sigma but within
     the quantile at the association's ``pixel_sigma``, whose pairs each move the camera centre
-    at most :data:`MINIMAL_FIT_LEVERAGE` of the tolerance when left out (:func:`_leverage`),
-    stands: a detection a few px off its corner, what makes a right fit loose (a blurred or
-    rolling-shutter corner), cannot have carried it that far. A fit loose at ``pixel_sigma``
-    too may rest on two wrong pairs, whose leverage one at a time says nothing.
+    at most :data:`MINIMAL_FIT_LEVERAGE` of the tolerance when left out
+    (:attr:`VerifyInputs.worst_leverage_m`), stands: a detection a few px off its corner, what
+    makes a right fit loose (a blurred or rolling-shutter corner), cannot have carried it that
+    far. A fit loose at ``pixel_sigma`` too may rest on two wrong pairs, whose leverage one at a
+    time says nothing.
     """
     limit = minimal_fit_chi2_limit(k, inputs.need)
     if not np.isfinite(limit):
@@ -432,8 +449,7 @@ def _minimal_fit_refusal(inputs: VerifyInputs, k: int) -> Refusal | None:
     if chi <= limit:
         return None
     if inputs.tolerance_m is not None and chi * (sigma / inputs.pixel_sigma) ** 2 <= limit:
-        worst, tolerance, _, _ = _leverage(inputs)
-        if worst <= MINIMAL_FIT_LEVERAGE * tolerance:
+        if inputs.worst_leverage_m <= MINIMAL_FIT_LEVERAGE * inputs.tolerance[0]:
             return None
     return Refusal(
         FailureCode.UNSUPPORTED,
@@ -504,22 +520,6 @@ def position_tolerance(
     return max(float(tolerance_m), 3.0 * bound), bound, int(seen.sum())
 
 
-def _leverage(inputs: VerifyInputs) -> tuple[float, float, float, int]:
-    """``(worst, tolerance, bound, seen)``: the farthest one pair moves the camera centre, m.
-
-    ``worst`` from :func:`leave_one_out_shifts`; ``tolerance``, ``bound`` and ``seen`` from
-    :func:`position_tolerance` at the detector's noise.
-    """
-    rows = np.flatnonzero(inputs.assignment >= 0)
-    X = inputs.landmarks_xyz[inputs.assignment[rows]]
-    shift = leave_one_out_shifts(inputs.K, inputs.cam_from_world, X, inputs.detections_uv[rows])
-    tolerance, bound, seen = position_tolerance(
-        inputs.K, inputs.cam_from_world, inputs.landmarks_xyz, inputs.image_size, inputs.fit_sigma_px,
-        inputs.tolerance_m or 0.0,
-    )
-    return float(shift.max()), tolerance, bound, seen
-
-
 def _influence_refusal(inputs: VerifyInputs) -> Refusal | None:
     """The refusal when one pair alone moves the pose beyond the tolerance, else None.
 
@@ -532,7 +532,8 @@ def _influence_refusal(inputs: VerifyInputs) -> Refusal | None:
     """
     if inputs.tolerance_m is None:
         return None
-    worst, tolerance, bound, seen = _leverage(inputs)
+    worst = inputs.worst_leverage_m
+    tolerance, bound, seen = inputs.tolerance
     if worst <= tolerance:
         return None
     rows = np.flatnonzero(inputs.assignment >= 0)
@@ -575,10 +576,7 @@ def _bias_refusal(inputs: VerifyInputs) -> Refusal | None:
     bias = BIAS_SHARE * inputs.fit_sigma_px
     level = protection_level(inputs.K, inputs.cam_from_world, inputs.landmarks_xyz[inputs.assignment[rows]],
                              bias)
-    tolerance, bound, seen = position_tolerance(
-        inputs.K, inputs.cam_from_world, inputs.landmarks_xyz, inputs.image_size, inputs.fit_sigma_px,
-        inputs.tolerance_m,
-    )
+    tolerance, bound, seen = inputs.tolerance
     if level <= tolerance:
         return None
     return Refusal(
@@ -775,8 +773,7 @@ def _scores(
     a = np.ascontiguousarray(np.stack([b for b, _ in hypotheses]), dtype=np.int64)
     T = np.stack([T for _, T in hypotheses])
     chi, missed, prior_sq, far = _terms(inputs, a, T)
-    finite = np.isfinite(inputs.detections_uv).all(axis=1)
-    n_free = np.count_nonzero((a < 0) & finite[None, :], axis=1)
+    n_free = np.count_nonzero(a[:, inputs.arrays.good] < 0, axis=1)
     for h in np.flatnonzero(far):  # near pi from the prior's rotation: the exact logarithm
         prior_sq[h] = prior_mahalanobis_sq(T[h], inputs.prior_cam_from_world, inputs.prior_sigmas)
     return (chi / inputs.pixel_sigma**2 + n_free * (inputs.gate_px / inputs.pixel_sigma) ** 2
@@ -887,17 +884,28 @@ def _fits(rivals: list[tuple[NDArray[np.int64], NDArray[np.float64], float]]) ->
             for b, _, chi in rivals]
 
 
+def _distinct_fits(
+    inputs: VerifyInputs, rivals: list[tuple[NDArray[np.int64], NDArray[np.float64], float]]
+) -> list[int]:
+    """Indices of the rivals ``(assignment, cam_from_world, chi-square)`` that fit, elsewhere.
+
+    Those that pass the fit test (:func:`_fits`) and lie at a distinct camera centre
+    (:func:`_same_centres`), in order.
+    """
+    fit = [k for k, ok in enumerate(_fits(rivals)) if ok]
+    same = _same_centres(inputs, [rivals[k][1] for k in fit])
+    return [k for k, s in zip(fit, same, strict=True) if not s]
+
+
 def _contenders(
     inputs: VerifyInputs, rivals: list[tuple[NDArray[np.int64], NDArray[np.float64], float]]
 ) -> list[tuple[int, float]]:
     """``[(index, score), ...]`` of the rivals that could be the pose as well as the winner.
 
-    Those that fit (:func:`_fits`), lie at a distinct camera centre (:func:`_same_centres`) and
-    score within the ambiguity margin of the winner, or better; in the rivals' order.
+    Those that fit at a distinct camera centre (:func:`_distinct_fits`) and score within the
+    ambiguity margin of the winner, or better; in the rivals' order.
     """
-    fit = [k for k, ok in enumerate(_fits(rivals)) if ok]
-    same = _same_centres(inputs, [rivals[k][1] for k in fit])
-    kept = [k for k, s in zip(fit, same, strict=True) if not s]
+    kept = _distinct_fits(inputs, rivals)
     if not kept:
         return []
     scores = _scores(inputs, [(rivals[k][0], rivals[k][1]) for k in kept])
@@ -1009,9 +1017,7 @@ def _lattice_refusal(
     """
     if not rivals:
         return None
-    fit = [r for r, ok in zip(grown, _fits([r[1:] for r in grown]), strict=True) if ok]
-    same = _same_centres(inputs, [r[2] for r in fit])
-    distinct = [r for r, s in zip(fit, same, strict=True) if not s]
+    distinct = [grown[i] for i in _distinct_fits(inputs, [r[1:] for r in grown])]
     hypotheses = [(b, T) for b, T, _ in exact] + [(b, T) for _, b, T, _ in distinct]
     periods = [d for _, _, d in exact] + [rivals[k][2] for k, _, _, _ in distinct]
     if not hypotheses:
