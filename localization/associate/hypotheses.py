@@ -24,10 +24,17 @@ from numpy.typing import NDArray
 from localization.associate.assign_kernels import assign_many
 from localization.associate.hypothesis_kernels import anchor_pairs, shift_votes, upright_starts
 from localization.associate.upright import score_upright_poses
+from localization.geometry.kernels import residuals
 from localization.geometry.transforms import camera_center, inverse_intrinsics
 from localization.pose.batch import project_many, rotation_between, to_transforms
 from localization.pose.covariance import PriorSigmas, prior_mahalanobis_sq
-from localization.pose.pnp import is_coplanar, pnp_candidates, reprojection_residuals
+from localization.pose.pnp import (
+    ippe_candidates,
+    is_coplanar,
+    planar_points,
+    pnp_candidates,
+    reprojection_residuals,
+)
 
 __all__ = [
     "candidate_projections",
@@ -165,7 +172,10 @@ def exhaustive_hypotheses(
     count = math.comb(n_good, k) * math.perm(m, k)
     if count > limit:
         return None
-    coplanar = is_coplanar(landmarks_xyz[idx])
+    K = np.ascontiguousarray(K, dtype=np.float64)
+    det = np.ascontiguousarray(det, dtype=np.float64)
+    landmarks_xyz = np.ascontiguousarray(landmarks_xyz, dtype=np.float64)
+    candidates = _CandidatePoses(landmarks_xyz[idx], K, is_coplanar(landmarks_xyz[idx]))
     unused_cost = (n_good - k) * (gate_px / pixel_sigma) ** 2
     scored: list[tuple[float, NDArray, NDArray]] = []
     for dsub in itertools.combinations(range(n_good), k):
@@ -173,11 +183,14 @@ def exhaustive_hypotheses(
         for msub in itertools.permutations(range(m), k):
             X = landmarks_xyz[idx[list(msub)]]
             best, best_T = np.inf, None
-            for T in pnp_candidates(X, u, K, coplanar=coplanar):
-                res, depth = reprojection_residuals(K, T, X, u)
+            for T in candidates(msub, u):
+                res, depth = residuals(K, T, X, u)  # compiled (reprojection_residuals without its checks)
                 if not np.all(depth > 0):
                     continue
-                score = float(np.sum(res**2)) / pixel_sigma**2 + prior_mahalanobis_sq(T, prior, sig)
+                score = float(np.sum(res**2)) / pixel_sigma**2
+                if score >= best:  # the prior's term (>= 0) cannot make it the best
+                    continue
+                score += prior_mahalanobis_sq(T, prior, sig)
                 if score < best:
                     best, best_T = score, T
             if best_T is not None:
@@ -186,6 +199,31 @@ def exhaustive_hypotheses(
                 scored.append((best + unused_cost, a, best_T))
     scored.sort(key=lambda t: t[0])
     return [(a, T) for _, a, T in scored[:keep]]
+
+
+class _CandidatePoses:
+    """PnP candidates of orderings of a few landmarks, the plane of each subset fitted once.
+
+    ``points`` (M, 3), the candidate landmarks; ``coplanar``, whether they all are (IPPE) or not
+    (SQPnP). Called with ``order`` (k indices into ``points``) and the pixels (k, 2) they are
+    assigned to. For coplanar landmarks the best-fit plane of the subset ``sorted(order)`` is
+    fitted once (an enumeration tries every ordering of every subset, each subset's plane the same
+    up to rounding) and each ordering indexes into its points in that plane.
+    """
+
+    def __init__(self, points: NDArray, K: NDArray, coplanar: bool) -> None:
+        self.points, self.K, self.coplanar = points, K, coplanar
+        self.planes: dict[tuple[int, ...], tuple[NDArray, NDArray, dict[int, int]]] = {}
+
+    def __call__(self, order: tuple[int, ...], uv: NDArray) -> list[NDArray[np.float64]]:
+        if not self.coplanar or len(order) < 4:
+            return pnp_candidates(self.points[list(order)], uv, self.K, coplanar=self.coplanar)
+        key = tuple(sorted(order))
+        if key not in self.planes:
+            p_from_w, Xp = planar_points(self.points[list(key)])
+            self.planes[key] = (p_from_w, Xp, {j: r for r, j in enumerate(key)})
+        p_from_w, Xp, row = self.planes[key]
+        return ippe_candidates(Xp[[row[j] for j in order]], uv, self.K, p_from_w)
 
 
 def spread_anchor_pairs(det: NDArray, k: int = 4, log_odds: NDArray | None = None) -> NDArray[np.int64]:

@@ -44,7 +44,9 @@ __all__ = [
     "PnPResult",
     "is_collinear",
     "is_coplanar",
+    "ippe_candidates",
     "plane_from_world",
+    "planar_points",
     "pnp_candidates",
     "pose_from_rt",
     "refine_pose",
@@ -139,6 +141,41 @@ def pose_from_rt(rvec: NDArray, tvec: NDArray) -> NDArray:
     return make_transform(R, np.asarray(tvec, dtype=np.float64).reshape(3))
 
 
+def planar_points(points_xyz: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(plane_from_world (4, 4), points (N, 3) in that frame with z = 0)`` of coplanar points.
+
+    The frame of :func:`plane_from_world`; z is set to exactly 0 (the OpenCV 5 IPPE workaround).
+    """
+    X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
+    p_from_w = plane_from_world(X)
+    Xp = (X @ p_from_w[:3, :3].T + p_from_w[:3, 3]).copy()
+    Xp[:, 2] = 0.0
+    return p_from_w, Xp
+
+
+def ippe_candidates(plane_xy: ArrayLike, uv: ArrayLike, K: ArrayLike,
+                    plane_from_world_: ArrayLike) -> list[NDArray[np.float64]]:
+    """Candidate ``cam_from_world`` poses (unrefined) from IPPE of points given in their plane's frame.
+
+    ``plane_xy`` (N, 3) with z = 0 and ``plane_from_world_`` as :func:`planar_points` returns them
+    (one frame serves every ordering of the same points); at least 4 points; [] when the solver
+    fails.
+    """
+    Xp = np.asarray(plane_xy, dtype=np.float64).reshape(-1, 3)
+    if Xp.shape[0] < 4:
+        return []
+    u = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    try:
+        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+            _as_cv(Xp), _as_cv(u), np.asarray(K, dtype=np.float64), None, flags=cv2.SOLVEPNP_IPPE
+        )
+    except cv2.error:
+        return []
+    p_from_w = np.asarray(plane_from_world_, dtype=np.float64)
+    out = [pose_from_rt(r, t) @ p_from_w for r, t in zip(rvecs[:n], tvecs[:n], strict=True)]
+    return [T for T in out if np.all(np.isfinite(T))]
+
+
 def pnp_candidates(
     points_xyz: ArrayLike, uv: ArrayLike, K: ArrayLike, coplanar: bool | None = None
 ) -> list[NDArray[np.float64]]:
@@ -147,33 +184,23 @@ def pnp_candidates(
     Needs at least 4 coplanar or 3 non-coplanar points; returns [] when the solver fails.
     """
     X = np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3)
-    u = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    K = np.asarray(K, dtype=np.float64)
     if coplanar is None:
         coplanar = is_coplanar(X)
-    out: list[NDArray[np.float64]] = []
+    if coplanar:
+        if X.shape[0] < 4:
+            return []
+        p_from_w, Xp = planar_points(X)
+        return ippe_candidates(Xp, uv, K, p_from_w)
+    if X.shape[0] < 3:
+        return []
+    u = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
     try:
-        if coplanar:
-            if X.shape[0] < 4:
-                return []
-            p_from_w = plane_from_world(X)
-            Xp = (X @ p_from_w[:3, :3].T + p_from_w[:3, 3]).copy()
-            Xp[:, 2] = 0.0  # exactly on z = 0: the OpenCV 5 IPPE workaround
-            n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
-                _as_cv(Xp), _as_cv(u), K, None, flags=cv2.SOLVEPNP_IPPE
-            )
-            for r, t in zip(rvecs[:n], tvecs[:n], strict=True):
-                out.append(pose_from_rt(r, t) @ p_from_w)
-        else:
-            if X.shape[0] < 3:
-                return []
-            n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
-                _as_cv(X), _as_cv(u), K, None, flags=cv2.SOLVEPNP_SQPNP
-            )
-            for r, t in zip(rvecs[:n], tvecs[:n], strict=True):
-                out.append(pose_from_rt(r, t))
+        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+            _as_cv(X), _as_cv(u), np.asarray(K, dtype=np.float64), None, flags=cv2.SOLVEPNP_SQPNP
+        )
     except cv2.error:
         return []
+    out = [pose_from_rt(r, t) for r, t in zip(rvecs[:n], tvecs[:n], strict=True)]
     return [T for T in out if np.all(np.isfinite(T))]
 
 

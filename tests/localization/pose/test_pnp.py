@@ -14,7 +14,14 @@ from localization.geometry.transforms import (
     so3_log,
 )
 from localization.pose.covariance import pose_covariance, pose_jacobian, prior_mahalanobis_sq
-from localization.pose.pnp import is_coplanar, pnp_candidates, refine_pose, solve_pnp
+from localization.pose.pnp import (
+    ippe_candidates,
+    is_coplanar,
+    planar_points,
+    pnp_candidates,
+    refine_pose,
+    solve_pnp,
+)
 
 SLAB = np.array([(-0.3, -0.3, 3.5), (8.3, -0.3, 3.5), (8.3, 11.3, 3.5), (-0.3, 11.3, 3.5)])
 
@@ -42,6 +49,26 @@ def test_ippe_plane_frame_workaround_all_orderings(rng, K):
             cands = pnp_candidates(SLAB[p], uv[p], K)
             errs = [np.linalg.norm(camera_center(c) - camera_center(T)) for c in cands]
             assert min(errs) < 1e-6
+
+
+def test_one_plane_frame_serves_every_ordering(rng, K):
+    """The exhaustive association fits a subset's plane once: IPPE in it gives each ordering's poses."""
+    for _ in range(3):
+        T = _view(rng)
+        uv, _ = project(K, T, SLAB)
+        p_from_w, Xp = planar_points(SLAB)
+        np.testing.assert_array_equal(Xp[:, 2], 0.0)
+        np.testing.assert_allclose((Xp - p_from_w[:3, 3]) @ p_from_w[:3, :3], SLAB, atol=1e-9)  # back to world
+        for perm in itertools.permutations(range(4)):
+            p = list(perm)
+            shared = ippe_candidates(Xp[p], uv[p], K, p_from_w)
+            own = pnp_candidates(SLAB[p], uv[p], K)
+            assert len(shared) == len(own) >= 1
+            errs = [np.linalg.norm(camera_center(c) - camera_center(T)) for c in shared]
+            assert min(errs) < 1e-6
+            for a in shared:  # the same candidate poses, up to rounding
+                assert min(np.abs(a - b).max() for b in own) < 1e-7
+    assert ippe_candidates(Xp[:3], uv[:3], K, p_from_w) == []
 
 
 def test_raw_ippe_defect_still_present_or_fixed(rng, K):
