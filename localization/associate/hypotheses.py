@@ -33,7 +33,6 @@ from localization.pose.pnp import (
     is_coplanar,
     planar_points,
     pnp_candidates,
-    reprojection_residuals,
 )
 
 __all__ = [

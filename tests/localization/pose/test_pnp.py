@@ -58,7 +58,7 @@ def test_one_plane_frame_serves_every_ordering(rng, K):
         uv, _ = project(K, T, SLAB)
         p_from_w, Xp = planar_points(SLAB)
         np.testing.assert_array_equal(Xp[:, 2], 0.0)
-        np.testing.assert_allclose((Xp - p_from_w[:3, 3]) @ p_from_w[:3, :3], SLAB, atol=1e-9)  # back to world
+        np.testing.assert_allclose((Xp - p_from_w[:3, 3]) @ p_from_w[:3, :3], SLAB, atol=1e-9)  # world again
         for perm in itertools.permutations(range(4)):
             p = list(perm)
             shared = ippe_candidates(Xp[p], uv[p], K, p_from_w)
