@@ -164,16 +164,7 @@ def ippe_candidates(plane_xy: ArrayLike, uv: ArrayLike, K: ArrayLike,
     Xp = np.asarray(plane_xy, dtype=np.float64).reshape(-1, 3)
     if Xp.shape[0] < 4:
         return []
-    u = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    try:
-        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
-            _as_cv(Xp), _as_cv(u), np.asarray(K, dtype=np.float64), None, flags=cv2.SOLVEPNP_IPPE
-        )
-    except cv2.error:
-        return []
-    p_from_w = np.asarray(plane_from_world_, dtype=np.float64)
-    out = [pose_from_rt(r, t) @ p_from_w for r, t in zip(rvecs[:n], tvecs[:n], strict=True)]
-    return [T for T in out if np.all(np.isfinite(T))]
+    return _generic(Xp, uv, K, cv2.SOLVEPNP_IPPE, np.asarray(plane_from_world_, dtype=np.float64))
 
 
 def pnp_candidates(
@@ -193,14 +184,21 @@ def pnp_candidates(
         return ippe_candidates(Xp, uv, K, p_from_w)
     if X.shape[0] < 3:
         return []
+    return _generic(X, uv, K, cv2.SOLVEPNP_SQPNP, None)
+
+
+def _generic(X: NDArray, uv: ArrayLike, K: ArrayLike, flag: int,
+             frame_from_world: NDArray[np.float64] | None) -> list[NDArray[np.float64]]:
+    """The finite poses of ``cv2.solvePnPGeneric`` (``flag``) of ``X`` given in a frame (None: the world)."""
     u = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
     try:
-        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
-            _as_cv(X), _as_cv(u), np.asarray(K, dtype=np.float64), None, flags=cv2.SOLVEPNP_SQPNP
-        )
+        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(_as_cv(X), _as_cv(u), np.asarray(K, dtype=np.float64), None,
+                                                 flags=flag)
     except cv2.error:
         return []
     out = [pose_from_rt(r, t) for r, t in zip(rvecs[:n], tvecs[:n], strict=True)]
+    if frame_from_world is not None:
+        out = [T @ frame_from_world for T in out]
     return [T for T in out if np.all(np.isfinite(T))]
 
 
