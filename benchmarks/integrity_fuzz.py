@@ -57,15 +57,15 @@ NEAR_PX = 80.0
 
 def run(
     mode: str, cases: int, verify: bool = True, library: FalseDetections | None = None,
-    tolerance_m: float | None = CONFIRM_TOLERANCE_M,
+    tolerance_m: float | None = CONFIRM_TOLERANCE_M, first: int = 0,
 ) -> dict:
-    """Localize ``cases`` fuzz cases under ``mode``; counts, the worst wrong pose, timings.
+    """Localize ``cases`` fuzz cases from ``first`` under ``mode``; counts, the worst wrong pose, timings.
 
     ``tolerance_m``: the localizer's (:class:`localization.Localizer`), the study's
     :data:`localization.verify.CONFIRM_TOLERANCE_M` by default, as the learned detector runs.
     """
     wrong, ok, times, codes = [], 0, [], defaultdict(int)
-    for k in range(cases):
+    for k in range(first, first + cases):
         case = draw_case(np.random.default_rng((19, k)))
         det = corrupt_detections(case, mode, np.random.default_rng((44, k)), library)
         loc = Localizer(case.landmarks_xyz, case.K, association="robust", image_size=case.image_size,
@@ -83,20 +83,26 @@ def run(
             wrong.append((k, err, std))
     worst = max(wrong, key=lambda t: t[1]) if wrong else None
     ms = 1e3 * np.asarray(times)
-    return {"mode": mode, "verify": verify, "cases": cases, "successes": ok, "wrong": len(wrong),
+    return {"mode": mode, "verify": verify, "first": first, "cases": cases, "successes": ok,
+            "wrong": len(wrong),
             "worst": worst, "median_ms": float(np.median(ms)), "p99_ms": float(np.percentile(ms, 99)),
             "max_ms": float(ms.max()), "wrong_cases": [k for k, _, _ in wrong], "codes": dict(codes)}
 
 
-def main(cases: int = 300, modes: tuple[str, ...] = CORRUPTIONS, compare: bool = False) -> list[dict]:
-    """Run every mode (and, with ``compare``, again without verification) and print the table."""
+def main(cases: int = 300, modes: tuple[str, ...] = CORRUPTIONS, compare: bool = False,
+         first: int = 0) -> list[dict]:
+    """Run every mode (and, with ``compare``, again without verification) and print the table.
+
+    ``first``: the first case's index (a long run split over processes: ``--first 0 --cases 5000``
+    and ``--first 5000 --cases 5000`` are cases 0-9999).
+    """
     warm_up(announce=print)
     rows = []
     for mode in modes:
         path = FALSE_DETECTION_LIBRARIES.get(mode)
         library = None if path is None else FalseDetections.load(path)
         for verify in (True, False) if compare else (True,):
-            rows.append(run(mode, cases, verify, library))
+            rows.append(run(mode, cases, verify, library, first=first))
     print(f"{'mode':<14} {'verify':>6} {'cases':>6} {'poses':>6} {'wrong':>6} {'worst (m, sigma m)':>20} "
           f"{'median ms':>10} {'P99 ms':>8} {'max ms':>8}")
     for r in rows:
@@ -167,9 +173,13 @@ if __name__ == "__main__":
     ap.add_argument("--cases", type=int, default=300, help="fuzz cases per mode")
     ap.add_argument("--modes", nargs="+", default=list(CORRUPTIONS), choices=CORRUPTIONS,
                     help="corruptions to run")
+    ap.add_argument("--first", type=int, default=0,
+                    help="index of the first case (to split a run over processes)")
     ap.add_argument("--compare", action="store_true", help="also run each mode without verification")
     args = ap.parse_args()
+    if args.command != "record" and (args.first < 0 or args.cases < 1):
+        ap.error(f"--first must be >= 0 and --cases >= 1, got {args.first} and {args.cases}")
     if args.command == "record":
         record(args.studies, args.out)
     else:
-        main(args.cases, tuple(args.modes), args.compare)
+        main(args.cases, tuple(args.modes), args.compare, args.first)
