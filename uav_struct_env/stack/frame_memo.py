@@ -32,6 +32,11 @@ def _same(a: Any, b: Any) -> bool:
     return bool(a == b)
 
 
+def _size(a: Any) -> int:
+    """How many elements an array argument holds (0 for others): the cost of comparing it."""
+    return a.size if isinstance(a, np.ndarray) else 0
+
+
 def _kept(a: Any) -> Any:
     """A copy of an array argument (the caller may change it in place later), others as they are."""
     return np.array(a, copy=True) if isinstance(a, np.ndarray) else a
@@ -59,9 +64,14 @@ class FrameMemo:
         self._entries: list[tuple[tuple[Any, ...], Any]] = []
 
     def __call__(self, *args: Any) -> Any:
-        """``fn(*args)``: the remembered result when the arguments equal a remembered tuple's."""
+        """``fn(*args)``: the remembered result when the arguments equal a remembered tuple's.
+
+        The smaller arguments are compared first: a pose that differs rejects an entry of the same
+        frame before its image is compared pixel for pixel.
+        """
+        order = sorted(range(len(args)), key=lambda j: _size(args[j]))
         for i, (key, value) in enumerate(self._entries):
-            if len(key) == len(args) and all(_same(k, a) for k, a in zip(key, args, strict=True)):
+            if len(key) == len(args) and all(_same(key[j], args[j]) for j in order):
                 self._entries.insert(0, self._entries.pop(i))  # the most recently used first
                 return value
         value = self.fn(*args)
