@@ -10,7 +10,10 @@ Three sources of starting hypotheses for :mod:`localization.associate.robust`:
   every (detection, projected landmark) pair proposes a 2D shift ranked by how many other pairs
   agree with it (a Hough vote, :func:`layout_shift_votes`);
 - :func:`exhaustive_hypotheses` -- small problems (a slab's four corners) enumerate every
-  one-to-one assignment.
+  one-to-one assignment;
+
+and one source of rivals: :func:`regrowth_hypotheses` -- a hypothesis' own pairs, two at a time,
+with its tilt, grown as the upright poses are.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from numpy.typing import NDArray
 
 from localization.associate.assign_kernels import assign_many
 from localization.associate.hypothesis_kernels import anchor_pairs, shift_votes, upright_starts
-from localization.associate.upright import score_upright_poses
+from localization.associate.upright import score_samples, score_upright_poses
 from localization.geometry.kernels import residuals
 from localization.geometry.transforms import camera_center, inverse_intrinsics
 from localization.pose.batch import project_many, rotation_between, to_transforms
@@ -40,9 +43,13 @@ __all__ = [
     "exhaustive_hypotheses",
     "layout_hypotheses",
     "layout_shift_votes",
+    "regrowth_hypotheses",
     "spread_anchor_pairs",
     "upright_hypotheses",
 ]
+
+#: Most pairs of a hypothesis that :func:`regrowth_hypotheses` combines two at a time (66 samples).
+REGROWTH_PAIRS = 12
 
 
 def layout_shift_votes(
@@ -283,25 +290,89 @@ def upright_hypotheses(
     if pairs.shape[0] == 0 or m < 2:
         return []
     i1, i2 = pairs[:, 0].copy(), pairs[:, 1].copy()
-    h = np.ones((det.shape[0], 3))  # homogeneous pixels
-    h[:, :2] = det
-    rays = h @ inverse_intrinsics(K).T @ prior[:3, :3]
     f64 = np.float64
-    R, t, uv, prior_sq, explained, misfit = score_upright_poses(
-        np.ascontiguousarray(det, dtype=f64), np.ascontiguousarray(rays), i1, i2,
+    scored = score_upright_poses(
+        np.ascontiguousarray(det, dtype=f64), _rays(det, K, prior[:3, :3]), i1, i2,
         np.ascontiguousarray(idx, dtype=np.int64), np.ascontiguousarray(proj, dtype=f64),
         np.ascontiguousarray(landmarks_xyz, dtype=f64), np.ascontiguousarray(K, dtype=f64),
         np.ascontiguousarray(prior[:3, :3]), camera_center(prior), np.asarray(sig.position_m, dtype=f64),
         float(sig.rotation_rad[2]), np.inf if max_prior_sq is None else float(max_prior_sq),
         float(gate_px) ** 2,
     )
+    return _gated_starts(det, idx, scored, gate_px, min_pairs, keep, n_distinct)
+
+
+def _rays(det: NDArray, K: NDArray, R_cw: NDArray) -> NDArray[np.float64]:
+    """(N, 3) world directions of detections ``det`` (N, 2) under the attitude ``R_cw`` (cam_from_world)."""
+    h = np.ones((det.shape[0], 3))  # homogeneous pixels
+    h[:, :2] = det
+    return np.ascontiguousarray(h @ inverse_intrinsics(K).T @ R_cw)
+
+
+def _gated_starts(
+    det: NDArray, idx: NDArray, scored: tuple[NDArray, ...], gate_px: float, min_pairs: int, keep: int,
+    n_distinct: int,
+) -> list[tuple[NDArray, NDArray]]:
+    """The distinct gated assignments of the best scored upright poses, with their poses.
+
+    ``scored``: :func:`localization.associate.upright.score_upright_poses`' outputs; the best
+    poses' gated assignments of ``det`` into ``idx``, until ``n_distinct`` of them differ (a pose
+    that repeats an earlier one's assignment, or pairs fewer than ``min_pairs``, would be dropped
+    by the caller): :func:`localization.associate.hypothesis_kernels.upright_starts`.
+    """
+    R, t, uv, prior_sq, explained, misfit = scored
     if prior_sq.size == 0:
         return []
-    # the best poses' gated assignments, until `n_distinct` of them differ (a pose that repeats an
-    # earlier one's assignment, or pairs fewer than `min_pairs`, would be dropped by the caller)
     a, chosen = upright_starts(
-        np.ascontiguousarray(det, dtype=f64), np.ascontiguousarray(idx, dtype=np.int64), uv, prior_sq,
+        np.ascontiguousarray(det, dtype=np.float64), np.ascontiguousarray(idx, dtype=np.int64), uv, prior_sq,
         explained, misfit, float(gate_px), int(min_pairs), int(keep), int(n_distinct),
     )
     T = to_transforms(R[chosen], t[chosen])
     return [(a[q], T[q]) for q in range(chosen.size)]
+
+
+def regrowth_hypotheses(
+    det: NDArray,
+    pairs: NDArray,
+    landmarks_xyz: NDArray,
+    idx: NDArray,
+    K: NDArray,
+    cam_from_world: NDArray,
+    prior: NDArray,
+    sig: PriorSigmas,
+    gate_px: float,
+    min_pairs: int,
+    keep: int,
+    n_distinct: int,
+) -> list[tuple[NDArray, NDArray]]:
+    """Coarse assignments grown from a hypothesis' pairs, two at a time.
+
+    A hypothesis refined from a start with most of its pairs wrong (the layout vote's shifts
+    among dense clutter) settles where a dozen right pairs and a few wrong ones fit together,
+    metres from the structure's pose, which would pair every landmark it predicts. Any two of
+    its right pairs fix that pose with the hypothesis' tilt (:mod:`localization.associate.upright`),
+    and a pose is grown from it as the upright starts are. Each pair of ``pairs`` (P, 2):
+    ``(detection row of det, landmark)``, at most :data:`REGROWTH_PAIRS` of them (spread out,
+    :func:`localization.associate.hypothesis_kernels.anchor_pairs`), gives both roots of the
+    upright problem with the tilt of ``cam_from_world``; they are scored and turned into gated
+    assignments of ``det`` into the candidate landmarks ``idx`` as :func:`upright_hypotheses`
+    does (``gate_px``, ``min_pairs``, ``keep``, ``n_distinct``). The prior term of the ranking
+    measures the yaw from ``cam_from_world``'s and the centre from ``prior``'s.
+    Returns ``[(assignment of det rows into landmarks, start cam_from_world), ...]``, best first.
+    """
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if pairs.shape[0] < 2 or idx.size < 2:
+        return []
+    f64 = np.float64
+    det = np.ascontiguousarray(det, dtype=f64)
+    chosen = anchor_pairs(np.ascontiguousarray(det[pairs[:, 0]]), REGROWTH_PAIRS)
+    s1, s2 = pairs[chosen[:, 0], 0].copy(), pairs[chosen[:, 1], 0].copy()
+    t1, t2 = pairs[chosen[:, 0], 1].copy(), pairs[chosen[:, 1], 1].copy()
+    R0 = np.ascontiguousarray(cam_from_world[:3, :3], dtype=f64)
+    scored = score_samples(
+        det, _rays(det, K, R0), s1, s2, t1, t2, np.ascontiguousarray(idx, dtype=np.int64),
+        np.ascontiguousarray(landmarks_xyz, dtype=f64), np.ascontiguousarray(K, dtype=f64), R0,
+        camera_center(prior), np.asarray(sig.position_m, dtype=f64), float(sig.rotation_rad[2]), np.inf,
+        float(gate_px) ** 2,
+    )
+    return _gated_starts(det, idx, scored, gate_px, min_pairs, keep, n_distinct)

@@ -59,7 +59,12 @@ Two methods:
        ``2 ln 100`` of the best score makes the association fail as ``ambiguous`` instead of
        guessing. Each round also tries the winner with one pair's detection swapped for an
        unassigned detection near that landmark's projection (:meth:`RobustSearch.swaps`: a
-       wrong pair the pose absorbed hides the right detection outside the inlier gate).
+       wrong pair the pose absorbed hides the right detection outside the inlier gate), and,
+       when the winner leaves the frame open (:meth:`RobustSearch.leaves_open`), the winner grown
+       again from its own pairs two at a time with its tilt (:meth:`RobustSearch.regrown`): a
+       start with most of its pairs wrong (the layout vote's shifts among dense clutter) settles
+       on a dozen right pairs and a few wrong ones metres off, and two of its right pairs give
+       the pose that every landmark in view confirms.
     5. *Minimal fits* (:meth:`RobustSearch.minimal_fit_reason`). A winner with no more pairs
        than the minimum that leaves at least as many landmarks unmatched as it pairs, of those
        its pose projects into the image, fails as ``no_consistent_association``: four pairs
@@ -95,7 +100,12 @@ from numpy.typing import NDArray
 
 from localization.associate.ambiguity import AMBIGUITY_MARGIN, ambiguity, translation_hypotheses
 from localization.associate.assign_kernels import refine_reassign
-from localization.associate.hypotheses import exhaustive_hypotheses, layout_hypotheses, upright_hypotheses
+from localization.associate.hypotheses import (
+    exhaustive_hypotheses,
+    layout_hypotheses,
+    regrowth_hypotheses,
+    upright_hypotheses,
+)
 from localization.associate.hypothesis_kernels import check_many, missed_many, warm_hypothesis
 from localization.associate.paper import Association, assign, candidate_landmarks, no_candidates
 from localization.failure import FailureCode
@@ -396,6 +406,14 @@ class RobustSearch:
         if not self.finals:
             return True
         _, a, _, missed = self.ranked()[0]
+        return self.leaves_open(a, missed)
+
+    def leaves_open(self, a: NDArray, missed: int) -> bool:
+        """Whether a hypothesis ``a`` that misses ``missed`` predicted landmarks leaves the frame open.
+
+        It leaves a quarter of the landmarks it predicts in the image unmatched, or more than one
+        (and a tenth) of the detections and at least one such landmark.
+        """
         pairs = int((a >= 0).sum())
         n_good = self.good.size
         unexplained = n_good - pairs > max(1.0, 0.1 * n_good)
@@ -587,9 +605,9 @@ class RobustSearch:
         s = self.settings
         scored = self.ranked()
         for _ in range(s.max_rival_rounds):
-            best_a, best_T = scored[0][1], scored[0][2]
+            _, best_a, best_T, best_missed = scored[0]
             chunk = self.rivals(best_a, best_T)
-            swapped = self.swaps(best_a, best_T)
+            swapped = self.swaps(best_a, best_T) + self.regrown(best_a, best_T, best_missed)
             new = self.explore(swapped + chunk, True, len(swapped))
             if not new:
                 break
@@ -644,6 +662,26 @@ class RobustSearch:
             b[pairs[rows[k]]] = -1
             out.append((b, T))
         return out
+
+    def regrown(self, a: NDArray, T: NDArray, missed: int) -> list[Start]:
+        """The winner ``a`` at ``T`` grown again from its pairs two at a time, if it leaves the frame open.
+
+        :func:`localization.associate.hypotheses.regrowth_hypotheses` with the candidate landmarks
+        at ``T``, when the winner (missing ``missed`` of the landmarks it predicts) leaves the
+        frame open (:meth:`leaves_open`): a winner refined from a start with most of its pairs
+        wrong settles on a dozen right pairs and a few wrong ones, metres from the pose that two
+        of its right pairs give and every landmark in view confirms.
+        """
+        if not self.leaves_open(a, missed):
+            return []
+        s = self.settings
+        local = a[self.good]
+        rows = np.flatnonzero(local >= 0)
+        idx, _ = candidate_landmarks(self.landmarks_xyz, self.K, T, self.image_size, self.margin_px)
+        return self.complete(regrowth_hypotheses(
+            self.det[self.good], np.column_stack([rows, local[rows]]), self.landmarks_xyz, idx, self.K, T,
+            self.prior, s.sigmas, s.coarse_gate_px, s.need, 5 * s.max_hypotheses, s.batch,
+        ))
 
     # ---------------------------------------------------------------- 5. the winner
 

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from localization.geometry.kernels import MIN_DEPTH
 
-__all__ = ["score_upright_poses", "upright_two_point"]
+__all__ = ["score_samples", "score_upright_poses", "upright_two_point"]
 
 
 @njit(cache=True, nogil=True)
@@ -232,6 +232,22 @@ def score_upright_poses(
         sum of squared distances to the nearest projection capped at ``gate_sq``.
     """
     s1, s2, t1, t2 = _similar_pairs(det, i1, i2, idx, proj)
+    return score_samples(det, rays, s1, s2, t1, t2, idx, L, K, R0, C0, sigma_pos, sigma_yaw, max_prior_sq,
+                         gate_sq)
+
+
+@njit(cache=True, nogil=True)
+def score_samples(
+    det: NDArray, rays: NDArray, s1: NDArray, s2: NDArray, t1: NDArray, t2: NDArray, idx: NDArray,
+    L: NDArray, K: NDArray, R0: NDArray, C0: NDArray, sigma_pos: NDArray, sigma_yaw: float,
+    max_prior_sq: float, gate_sq: float,
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """Upright two-point poses of given samples, each scored: :func:`score_upright_poses`' outputs.
+
+    Sample ``k`` puts landmark ``t1[k]`` on detection ``s1[k]`` and ``t2[k]`` on ``s2[k]``
+    (directions ``rays`` under the attitude ``R0``, whose yaw the prior term measures from);
+    the rest as :func:`score_upright_poses`.
+    """
     psi, C, psq, keep = _solve_samples(rays, L, s1, s2, t1, t2, C0, sigma_pos, sigma_yaw, max_prior_sq)
     sel = np.flatnonzero(keep)
     S = sel.size
