@@ -797,7 +797,8 @@ def _terms(
 
 
 def reassociated(
-    inputs: VerifyInputs, hypotheses: list[tuple[NDArray[np.int64], NDArray[np.float64], object]]
+    inputs: VerifyInputs, hypotheses: list[tuple[NDArray[np.int64], NDArray[np.float64], object]],
+    unchanged: bool = False,
 ) -> list[tuple[int, NDArray[np.int64], NDArray[np.float64], float]]:
     """Rival hypotheses grown whole: every landmark re-associated at the rival's pose.
 
@@ -809,7 +810,9 @@ def reassociated(
     stable, as the association refines its hypotheses
     (:func:`localization.associate.assign_kernels.refine_reassign`), to be scored as a
     hypothesis of its own. Returns ``[(k, assignment, cam_from_world, chi-square), ...]`` for
-    the rivals (``hypotheses[k]``) that keep at least ``need`` pairs and changed.
+    the rivals (``hypotheses[k]``) that keep at least ``need`` pairs and changed -- with
+    ``unchanged``, also those whose pairs the re-association kept (at their refined pose): a
+    period of most of the layout that pairs exactly the structure's detections is already whole.
     """
     if not hypotheses:
         return []
@@ -823,7 +826,7 @@ def reassociated(
         int(w), int(h), 0.0, float(inputs.gate_px), float(4.0 * inputs.gate_px), _REASSOCIATE_ROUNDS,
         int(inputs.need), True,
     )
-    changed = np.flatnonzero(alive & np.any(a != a0, axis=1))
+    changed = np.flatnonzero(alive & (unchanged | np.any(a != a0, axis=1)))
     if changed.size == 0:
         return []
     Ts = to_transforms(R[changed], t[changed])
@@ -916,19 +919,20 @@ def _contenders(
 def _rival_refusal(inputs: VerifyInputs) -> Refusal | None:
     """The twins' refusal (:func:`_twin_refusal`), else the layout periods' (:func:`_lattice_refusal`).
 
-    Their starts grow in one batch of re-association (:func:`reassociated`; each start's growth
-    is its own, whatever the batch holds).
+    The twins and the offset starts grow in one batch of re-association (:func:`reassociated`;
+    each start's growth is its own, whatever the batch holds), the periods in another, which
+    keeps those the re-association leaves as they were: a period of most of the layout (a winner
+    one row over, plus a clutter point off the layout's edge, is no exact period) may pair
+    exactly the structure's detections already, and it is scored at its refined pose.
     """
     twins = twin_hypotheses(inputs)
     starts = twins + offset_starts(inputs)
     exact = lattice_rivals(inputs)
     periods = exact + lattice_rivals(inputs, LATTICE_SHARE, LATTICE_SPACING_SHARE * inputs.spacing_m,
                                      _LATTICE_ANCHORS)
-    grown = reassociated(inputs, starts + periods)
-    n = len(starts)
     return (
-        _twin_refusal(inputs, twins + [r[1:] for r in grown if r[0] < n])
-        or _lattice_refusal(inputs, exact, periods, [(k - n, *r) for k, *r in grown if k >= n])
+        _twin_refusal(inputs, twins + [r[1:] for r in reassociated(inputs, starts)])
+        or _lattice_refusal(inputs, exact, periods, reassociated(inputs, periods, unchanged=True))
     )
 
 
