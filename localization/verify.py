@@ -67,9 +67,10 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   scored as a hypothesis of its own; so are starts from the winner's predictions moved by the
   common image offsets voted between them and the detections, and from the translations that
   carry at least half of the winner's pairs onto other landmarks (a period of most of the
-  layout, or of an irregular one: :func:`lattice_rivals` with ``share``). One that scores
-  within the ambiguity margin of the winner, or better, fails the pose as the twin or rival
-  would.
+  layout, or of an irregular one: :func:`lattice_rivals` with ``share``; such a period is
+  scored at its refined pose even when the re-association keeps its pairs: one that pairs
+  exactly the structure's detections is whole already). One that scores within the ambiguity
+  margin of the winner, or better, fails the pose as the twin or rival would.
 * *A second search* (:func:`rival_search`, with ``search``). A winner that pairs a patch of
   the detections (a few of each ghost copy, each with the wrong landmark) lies no image offset
   or period from the structure's pose. When it leaves at least as many detections unassigned
