@@ -27,7 +27,9 @@ from localization.pose.covariance import prior_distance_sq
 
 __all__ = [
     "anchor_pairs",
+    "best_cells",
     "check_many",
+    "distinct_cells",
     "MAX_GRID",
     "missed_many",
     "neighbour_votes",
@@ -77,6 +79,68 @@ def neighbour_votes(ux: NDArray, uy: NDArray, cnt: NDArray) -> NDArray:
 
 
 @njit(cache=True, nogil=True)
+def distinct_cells(cx: NDArray, cy: NDArray, p: int) -> tuple[NDArray, NDArray, NDArray, NDArray, int]:
+    """The distinct cells among the first ``p`` of ``(cx, cy)``, sorted by x, then y.
+
+    Returns ``(ux, uy, cnt, cell, nu)``: the ``nu`` distinct cells (``ux[:nu]``, ``uy[:nu]``),
+    the proposals in each (``cnt[:nu]``) and each proposal's cell index (``cell[:p]``). A
+    counting sort over the cells' bounding box when it holds at most :data:`MAX_GRID` cells
+    (two passes over the proposals), else a sort of the cell keys.
+    """
+    ux = np.empty(p, dtype=np.int64)
+    uy = np.empty(p, dtype=np.int64)
+    cnt = np.zeros(p, dtype=np.int64)
+    cell = np.empty(p, dtype=np.int64)
+    x0, x1, y0, y1 = cx[0], cx[0], cy[0], cy[0]
+    for e in range(1, p):
+        x0, x1 = min(x0, cx[e]), max(x1, cx[e])
+        y0, y1 = min(y0, cy[e]), max(y1, cy[e])
+    gw, gh = x1 - x0 + 1, y1 - y0 + 1
+    nu = 0
+    if gw * gh <= MAX_GRID:
+        index = np.zeros(gw * gh, dtype=np.int64)  # proposals per cell, then each cell's rank + 1
+        for e in range(p):
+            index[(cx[e] - x0) * gh + cy[e] - y0] += 1
+        for g in range(gw * gh):
+            if index[g] > 0:
+                ux[nu], uy[nu], cnt[nu] = x0 + g // gh, y0 + g % gh, index[g]
+                nu += 1
+                index[g] = nu
+        for e in range(p):
+            cell[e] = index[(cx[e] - x0) * gh + cy[e] - y0] - 1
+        return ux, uy, cnt, cell, nu
+    order = np.argsort(cx[:p] * (np.int64(1) << 32) + cy[:p])  # equal keys: one cell, any order
+    for r in range(p):
+        e = order[r]
+        if nu == 0 or cx[e] != ux[nu - 1] or cy[e] != uy[nu - 1]:
+            ux[nu], uy[nu] = cx[e], cy[e]
+            nu += 1
+        cell[e] = nu - 1
+        cnt[nu - 1] += 1
+    return ux, uy, cnt, cell, nu
+
+
+@njit(cache=True, nogil=True)
+def best_cells(votes: NDArray, k: int) -> NDArray:
+    """The indices of the ``k`` largest ``votes`` (ties: the lower index), largest first.
+
+    ``np.argsort(-votes * n + arange(n))[:k]`` by ``k`` passes over the votes, not a sort.
+    """
+    n = votes.size
+    k = min(k, n)
+    out = np.empty(k, dtype=np.int64)
+    taken = np.zeros(n, dtype=np.bool_)
+    for r in range(k):
+        b = -1
+        for c in range(n):
+            if not taken[c] and (b < 0 or votes[c] > votes[b]):
+                b = c
+        out[r] = b
+        taken[b] = True
+    return out
+
+
+@njit(cache=True, nogil=True)
 def shift_votes(det: NDArray, proj: NDArray, vote_px: float, k: int) -> tuple[NDArray, NDArray]:
     """The ``k`` best-voted image shifts of each layout ``proj`` (L, M, 2) onto ``det`` (N, 2).
 
@@ -112,27 +176,15 @@ def shift_votes(det: NDArray, proj: NDArray, vote_px: float, k: int) -> tuple[ND
         if p == 0:
             continue
         # distinct cells in (x, y) order, their proposal counts and coordinate sums (in input order)
-        order = np.argsort(cx[:p] * (np.int64(1) << 32) + cy[:p])  # equal keys: one cell, any order
-        ux = np.empty(p, dtype=np.int64)
-        uy = np.empty(p, dtype=np.int64)
-        cnt = np.zeros(p, dtype=np.int64)
-        cell = np.empty(p, dtype=np.int64)
-        nu = 0
-        for r in range(p):
-            e = order[r]
-            if nu == 0 or cx[e] != ux[nu - 1] or cy[e] != uy[nu - 1]:
-                ux[nu], uy[nu] = cx[e], cy[e]
-                nu += 1
-            cell[e] = nu - 1
-            cnt[nu - 1] += 1
+        ux, uy, cnt, cell, nu = distinct_cells(cx, cy, p)
         sumx = np.zeros(nu)
         sumy = np.zeros(nu)
         for e in range(p):
             sumx[cell[e]] += sx[e]
             sumy[cell[e]] += sy[e]
         votes = neighbour_votes(ux[:nu], uy[:nu], cnt[:nu])
-        best = np.argsort((-votes[:nu]) * nu + np.arange(nu))  # most votes, then the lower cell
-        for r in range(min(k, nu)):
+        best = best_cells(votes[:nu], k)  # most votes, then the lower cell
+        for r in range(best.size):
             c = best[r]
             mx, my = sumx[c] / cnt[c], sumy[c] / cnt[c]
             ax, ay, na = 0.0, 0.0, 0

@@ -102,6 +102,31 @@ def test_neighbour_votes_count_the_3x3_neighbourhood_on_the_grid_and_by_search(r
     np.testing.assert_array_equal(neighbour_votes(ux, uy, cnt_far), _brute_votes(ux, uy, cnt_far))
 
 
+def _reference_cells(cx: np.ndarray, cy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    cells, cell, cnt = np.unique(np.stack([cx, cy], axis=1), axis=0, return_inverse=True, return_counts=True)
+    return cells[:, 0], cells[:, 1], cnt, cell.ravel()
+
+
+def test_distinct_cells_count_on_the_grid_and_by_sort_alike(rng):
+    from localization.associate.hypothesis_kernels import MAX_GRID, distinct_cells
+
+    cx, cy = rng.integers(-40, 41, size=500), rng.integers(-30, 31, size=500)
+    for x, y in ((cx, cy), (np.append(cx, 2 * MAX_GRID), np.append(cy, -7))):  # grid, then sort
+        ux, uy, cnt, cell, nu = distinct_cells(x, y, x.size)
+        rx, ry, rcnt, rcell = _reference_cells(x, y)
+        assert nu == rx.size
+        for got, want in ((ux[:nu], rx), (uy[:nu], ry), (cnt[:nu], rcnt), (cell, rcell)):
+            np.testing.assert_array_equal(got, want)
+
+
+def test_best_cells_rank_by_votes_then_the_lower_cell():
+    from localization.associate.hypothesis_kernels import best_cells
+
+    votes = np.array([3, 7, 7, 1, 9, 7])
+    assert best_cells(votes, 4).tolist() == [4, 1, 2, 5]
+    assert best_cells(votes, 9).tolist() == np.argsort(-votes * 6 + np.arange(6)).tolist()
+
+
 def test_shift_votes_find_a_planted_image_shift(rng):
     from localization.associate.hypothesis_kernels import shift_votes
 
