@@ -15,7 +15,7 @@ mode: cases, successes, confident wrong poses, the worst of them, and the median
 slowest localization time; with ``--compare``, the same without the verification
 (:mod:`localization.verify`) beside it.
 
-    .venv/bin/python benchmarks/integrity_fuzz.py --cases 300 [--compare]
+    .venv/bin/python benchmarks/integrity_fuzz.py --cases 300 [--compare] [--time-budget S]
 
 ``record`` writes the replayed library (:class:`localization.testing.fuzz.FalseDetections`) from
 study folders of the learned detector (their ``detections.csv``): for the ``detector`` mode only
@@ -57,19 +57,21 @@ NEAR_PX = 80.0
 
 def run(
     mode: str, cases: int, verify: bool = True, library: FalseDetections | None = None,
-    tolerance_m: float | None = CONFIRM_TOLERANCE_M, first: int = 0,
+    tolerance_m: float | None = CONFIRM_TOLERANCE_M, first: int = 0, time_budget_s: float | None = None,
 ) -> dict:
     """Localize ``cases`` fuzz cases from ``first`` under ``mode``; counts, the worst wrong pose, timings.
 
     ``tolerance_m``: the localizer's (:class:`localization.Localizer`), the study's
     :data:`localization.verify.CONFIRM_TOLERANCE_M` by default, as the learned detector runs.
+    ``time_budget_s``: the localizer's per-frame budget (:mod:`localization.budget`), or None.
     """
     wrong, ok, times, codes = [], 0, [], defaultdict(int)
     for k in range(first, first + cases):
         case = draw_case(np.random.default_rng((19, k)))
         det = corrupt_detections(case, mode, np.random.default_rng((44, k)), library)
         loc = Localizer(case.landmarks_xyz, case.K, association="robust", image_size=case.image_size,
-                        pixel_sigma=case.pixel_sigma, verify=verify, tolerance_m=tolerance_m)
+                        pixel_sigma=case.pixel_sigma, verify=verify, tolerance_m=tolerance_m,
+                        time_budget_s=time_budget_s)
         t0 = time.perf_counter()
         est = loc.localize(det, case.prior_cam_from_world)
         times.append(time.perf_counter() - t0)
@@ -90,19 +92,22 @@ def run(
 
 
 def main(cases: int = 300, modes: tuple[str, ...] = CORRUPTIONS, compare: bool = False,
-         first: int = 0) -> list[dict]:
+         first: int = 0, time_budget_s: float | None = None) -> list[dict]:
     """Run every mode (and, with ``compare``, again without verification) and print the table.
 
     ``first``: the first case's index (a long run split over processes: ``--first 0 --cases 5000``
-    and ``--first 5000 --cases 5000`` are cases 0-9999).
+    and ``--first 5000 --cases 5000`` are cases 0-9999). ``time_budget_s``: each frame's budget
+    (failures past it count as ``timed_out``; the max column shows how far a frame overran it).
     """
     warm_up(announce=print)
+    budget = "none" if time_budget_s is None else f"{time_budget_s:g} s per frame"
+    print(f"cases {first}-{first + cases - 1} per mode; time budget: {budget}")
     rows = []
     for mode in modes:
         path = FALSE_DETECTION_LIBRARIES.get(mode)
         library = None if path is None else FalseDetections.load(path)
         for verify in (True, False) if compare else (True,):
-            rows.append(run(mode, cases, verify, library, first=first))
+            rows.append(run(mode, cases, verify, library, first=first, time_budget_s=time_budget_s))
     print(f"{'mode':<14} {'verify':>6} {'cases':>6} {'poses':>6} {'wrong':>6} {'worst (m, sigma m)':>20} "
           f"{'median ms':>10} {'P99 ms':>8} {'max ms':>8}")
     for r in rows:
@@ -176,10 +181,14 @@ if __name__ == "__main__":
     ap.add_argument("--first", type=int, default=0,
                     help="index of the first case (to split a run over processes)")
     ap.add_argument("--compare", action="store_true", help="also run each mode without verification")
+    ap.add_argument("--time-budget", type=float, default=None, metavar="S",
+                    help="each frame's time budget, s (Localizer time_budget_s); default none")
     args = ap.parse_args()
     if args.command != "record" and (args.first < 0 or args.cases < 1):
         ap.error(f"--first must be >= 0 and --cases >= 1, got {args.first} and {args.cases}")
+    if args.time_budget is not None and not 0 < args.time_budget < float("inf"):
+        ap.error(f"--time-budget must be a positive number of seconds, got {args.time_budget}")
     if args.command == "record":
         record(args.studies, args.out)
     else:
-        main(args.cases, tuple(args.modes), args.compare, args.first)
+        main(args.cases, tuple(args.modes), args.compare, args.first, args.time_budget)

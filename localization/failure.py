@@ -55,3 +55,6 @@ class FailureCode(str, Enum):
     #: pose predicts, places elsewhere: a nearby pose explains the image clearly better
     #: (:mod:`uav_struct_env.stack.confirm`).
     UNCONFIRMED = "unconfirmed"
+    #: The localization did not finish within the localizer's time budget (``time_budget_s``,
+    #: :mod:`localization.budget`): a search cut short cannot rule out the rivals a full one finds.
+    TIMED_OUT = "timed_out"

@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from localization.associate.paper import Association, associate_paper
 from localization.associate.robust import associate_robust
+from localization.budget import Deadline
 from localization.checks import check_choice, check_number
 from localization.detect.interface import Detections, check_image_size
 from localization.failure import FailureCode
@@ -115,6 +116,7 @@ class _Frame:
         prior_sigmas: the prior's uncertainty for this frame.
         scores: (N,) the detections' probabilities of being landmarks, or None.
         warm_start: (4, 4) the predicted ``cam_from_world`` to try first, or None.
+        deadline: when the call must be done (``time_budget_s``), or None.
     """
 
     detections_uv: NDArray[np.float64]
@@ -122,6 +124,7 @@ class _Frame:
     prior_sigmas: PriorSigmas
     scores: NDArray[np.float64] | None
     warm_start: NDArray[np.float64] | None
+    deadline: Deadline | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -165,6 +168,11 @@ class _Failure:
     assignment: NDArray[np.int64] | None = None
     n_hypotheses: int = 0
     refused_cam_from_world: NDArray[np.float64] | None = None
+
+
+def _optional_positive(name: str, value: float | None) -> float | None:
+    """None, or ``value`` checked to be a positive finite number (:func:`check_number`)."""
+    return None if value is None else check_number(name, value, 0, lo_open=True)
 
 
 class Localizer:
@@ -217,6 +225,10 @@ class Localizer:
             the bound of the landmarks it predicts, where that is larger): a pose that leaving out
             one of its pairs moves farther fails as ill-conditioned (:mod:`localization.verify`).
             None (default): no such test.
+        time_budget_s: the most wall-clock seconds one :meth:`localize` call may take; a call
+            past it fails as ``TIMED_OUT`` (:mod:`localization.budget`: the robust search checks
+            it between steps, so a call may overrun by one step). None (default): no bound, and
+            the results are the same to the bit whatever the machine's speed or load.
 
     Raises:
         TypeError, ValueError: on bad arguments, naming the value and what was expected.
@@ -245,6 +257,7 @@ class Localizer:
         verify: bool = True,
         fit_sigma_px: float | None = None,
         tolerance_m: float | None = None,
+        time_budget_s: float | None = None,
     ) -> None:
         X = as_points("landmarks_xyz", landmarks_xyz, 3)
         if X.shape[0] == 0:
@@ -270,7 +283,7 @@ class Localizer:
         self.min_correspondences = check_number(
             "min_correspondences", min_correspondences, 3, integer=True
         )
-        self.gate_px = None if gate_px is None else check_number("gate_px", gate_px, 0, lo_open=True)
+        self.gate_px = _optional_positive("gate_px", gate_px)
         self.coarse_gate_px = check_number("coarse_gate_px", coarse_gate_px, 0, lo_open=True)
         self.max_hypotheses = check_number(
             "max_hypotheses", max_hypotheses, 0, integer=True, type_error=ValueError
@@ -278,15 +291,9 @@ class Localizer:
         self.prior_sigmas = self._prior_sigmas(prior_sigmas)
         self.ransac = bool(ransac)
         self.ransac_threshold_px = check_number("ransac_threshold_px", ransac_threshold_px, 0, lo_open=True)
-        self.max_position_std_m = (
-            None
-            if max_position_std_m is None
-            else check_number("max_position_std_m", max_position_std_m, 0, lo_open=True)
-        )
-        self.max_prior_mahalanobis_sq = (
-            None
-            if max_prior_mahalanobis_sq is None
-            else check_number("max_prior_mahalanobis_sq", max_prior_mahalanobis_sq, 0, lo_open=True)
+        self.max_position_std_m = _optional_positive("max_position_std_m", max_position_std_m)
+        self.max_prior_mahalanobis_sq = _optional_positive(
+            "max_prior_mahalanobis_sq", max_prior_mahalanobis_sq
         )
         self.coplanar = is_coplanar(X)
         self.distortion = distortion
@@ -296,12 +303,9 @@ class Localizer:
         if not isinstance(verify, (bool, np.bool_)):
             raise TypeError(f"verify must be True or False, got {verify!r}")
         self.verify = bool(verify)
-        self.fit_sigma_px = (
-            None if fit_sigma_px is None else check_number("fit_sigma_px", fit_sigma_px, 0, lo_open=True)
-        )
-        self.tolerance_m = (
-            None if tolerance_m is None else check_number("tolerance_m", tolerance_m, 0, lo_open=True)
-        )
+        self.fit_sigma_px = _optional_positive("fit_sigma_px", fit_sigma_px)
+        self.tolerance_m = _optional_positive("tolerance_m", tolerance_m)
+        self.time_budget_s = _optional_positive("time_budget_s", time_budget_s)
 
     @property
     def distortion(self) -> NDArray[np.float64]:
@@ -365,11 +369,13 @@ class Localizer:
         prior_sigmas: PriorSigmas | None = None,
         scores: NDArray[np.float64] | None = None,
         warm_start: NDArray[np.float64] | None = None,
+        deadline: Deadline | None = None,
     ) -> Association:
         """Run the configured association only (validated inputs).
 
         ``prior_sigmas`` and ``warm_start`` as in :meth:`localize`; ``scores`` the detections'
-        probabilities of being landmarks (robust mode only).
+        probabilities of being landmarks (robust mode only); ``deadline`` the robust search's
+        (:mod:`localization.budget`; None: no bound).
         """
         if self.association == "paper":
             return associate_paper(
@@ -391,6 +397,7 @@ class Localizer:
             max_prior_mahalanobis_sq=self.max_prior_mahalanobis_sq,
             detection_scores=scores,
             warm_start=warm_start,
+            deadline=deadline,
         )
 
     def localize(
@@ -431,14 +438,15 @@ class Localizer:
                 4x4 rigid transform.
         """
         t0 = time.perf_counter()
-        frame = self._frame(detections_uv, prior_cam_from_world, prior_sigmas, warm_start)
+        frame = self._frame(detections_uv, prior_cam_from_world, prior_sigmas, warm_start, t0)
         t1 = time.perf_counter()
         timings = {"validate": t1 - t0}
         failure = self._check_detections(frame.detections_uv)
         if failure is not None:  # no association can help: fail before trying any
             return self._failed(frame, failure, timings, t0)
         assoc = self.associate(
-            frame.detections_uv, frame.prior, frame.prior_sigmas, frame.scores, frame.warm_start
+            frame.detections_uv, frame.prior, frame.prior_sigmas, frame.scores, frame.warm_start,
+            frame.deadline,
         )
         t2 = time.perf_counter()
         timings["associate"] = t2 - t1
@@ -452,6 +460,10 @@ class Localizer:
         failure = self._check_pose(pose, assoc.n_hypotheses)
         if failure is None:
             failure = self._verify(frame, pose, assoc.n_hypotheses, timings)
+        if failure is None and frame.deadline is not None and frame.deadline.passed():
+            # past the deadline the verification's own search may have been cut short
+            reason = frame.deadline.reason("the pose was confirmed")
+            failure = _Failure(FailureCode.TIMED_OUT, reason, pose.assignment, assoc.n_hypotheses)
         if failure is not None:
             return self._failed(frame, failure, timings, t0)
         timings["total"] = time.perf_counter() - t0
@@ -482,8 +494,12 @@ class Localizer:
         prior_cam_from_world: ArrayLike,
         prior_sigmas: PriorSigmas | tuple | None,
         warm_start: ArrayLike | None,
+        start: float,
     ) -> _Frame:
-        """:meth:`localize`'s arguments validated, the detections undistorted to pinhole pixels."""
+        """:meth:`localize`'s arguments validated, the detections undistorted to pinhole pixels.
+
+        ``start``: the call's start on ``time.perf_counter``'s clock (the deadline's origin).
+        """
         scores = None
         if isinstance(detections_uv, Detections):
             if self.use_scores and self.association == "robust" and detections_uv.scores is not None:
@@ -496,7 +512,7 @@ class Localizer:
         if warm_start is not None:
             warm_start = check_transform("warm_start", warm_start)
         sigmas = self.prior_sigmas if prior_sigmas is None else self._prior_sigmas(prior_sigmas)
-        return _Frame(det, prior, sigmas, scores, warm_start)
+        return _Frame(det, prior, sigmas, scores, warm_start, Deadline.after(self.time_budget_s, start))
 
     def _check_detections(self, det: NDArray[np.float64]) -> _Failure | None:
         """Why these detections cannot give a pose (too few usable, on one line), else None."""
@@ -676,7 +692,7 @@ class Localizer:
     ) -> tuple[NDArray[np.int64], NDArray[np.float64]] | None:
         """The association over the detections ``keep`` marks (the others as NaN rows, unassigned)."""
         det = np.where(keep[:, None], frame.detections_uv, np.nan)
-        assoc = self.associate(det, frame.prior, frame.prior_sigmas, frame.scores)
+        assoc = self.associate(det, frame.prior, frame.prior_sigmas, frame.scores, deadline=frame.deadline)
         if assoc.failure_reason is not None:
             return None
         return assoc.assignment, assoc.cam_from_world

@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: Lowest first. A module belongs to the layer of the longest prefix that names it.
 LAYERS: list[tuple[str, ...]] = [
-    ("localization.checks", "localization.failure", "localization.stats"),
+    ("localization.budget", "localization.checks", "localization.failure", "localization.stats"),
     ("localization.geometry",),
     ("localization.detect", "localization.pose"),
     # the verification's kernels beside the search's (verify.py, a layer up, calls them)

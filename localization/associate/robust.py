@@ -108,6 +108,7 @@ from localization.associate.hypotheses import (
 )
 from localization.associate.hypothesis_kernels import check_many, missed_many, warm_hypothesis
 from localization.associate.paper import Association, assign, candidate_landmarks, no_candidates
+from localization.budget import Deadline, OutOfTime
 from localization.failure import FailureCode
 from localization.geometry.transforms import camera_center, make_transform, project
 from localization.pose.batch import to_transforms
@@ -263,6 +264,7 @@ class RobustSearch:
         margin_px: float,
         settings: RobustSettings,
         detection_scores: NDArray[np.float64] | None = None,
+        deadline: Deadline | None = None,
     ) -> None:
         self.det = detections_uv
         self.landmarks_xyz = landmarks_xyz
@@ -279,6 +281,7 @@ class RobustSearch:
         self.rejected = {"prior": 0, "fit": 0}
         self.tried = 0
         self.voted = False
+        self.deadline = deadline
         self._ranked: dict[int, list[Scored]] = {}
 
     # ---------------------------------------------------------------- the sequence
@@ -300,6 +303,17 @@ class RobustSearch:
         )
         if idx.size == 0:
             return no_candidates(self.unassigned(), self.prior, np.inf, 0)
+        try:
+            return self.search(idx, proj)
+        except OutOfTime as out:
+            n, code = len(self.finals), FailureCode.TIMED_OUT
+            return Association(self.unassigned(), self.prior, 0.0, np.inf, n, out.reason, code)
+
+    def search(self, idx: NDArray, proj: NDArray) -> Association:
+        """Steps 1-5 from the prior's candidate landmarks ``idx`` (projections ``proj``).
+
+        Raises :class:`localization.budget.OutOfTime` when the deadline passes between steps.
+        """
         self.search_starts(idx, proj)
         if not self.finals:
             return self.no_final_failure()
@@ -311,6 +325,11 @@ class RobustSearch:
                 self.unassigned(), self.prior, 0.0, np.inf, len(self.finals), reason, FailureCode.AMBIGUOUS
             )
         return self.conclude(scored[0])
+
+    def check_time(self, step: str) -> None:
+        """Raise :class:`localization.budget.OutOfTime` before ``step`` if the deadline has passed."""
+        if self.deadline is not None:
+            self.deadline.check(f"the robust association's {step}")
 
     def unassigned(self) -> NDArray[np.int64]:
         """(N,) no detection assigned: a failure's assignment."""
@@ -388,6 +407,7 @@ class RobustSearch:
 
     def layout_starts(self) -> list[Start]:
         """The layout vote's hypotheses (:func:`localization.associate.hypotheses.layout_hypotheses`)."""
+        self.check_time("layout vote")
         s = self.settings
         return self.complete(
             [(a, T) for _, a, T in layout_hypotheses(
@@ -458,6 +478,7 @@ class RobustSearch:
         self.tried += len(chunk)
         if not chunk:
             return []
+        self.check_time(f"refinement of {len(chunk)} hypotheses")
         a, T, alive = self.refine(
             np.stack([c[0] for c in chunk]), np.stack([c[1] for c in chunk]), first_robust
         )
@@ -605,6 +626,7 @@ class RobustSearch:
         s = self.settings
         scored = self.ranked()
         for _ in range(s.max_rival_rounds):
+            self.check_time("rival search")
             _, best_a, best_T, best_missed = scored[0]
             chunk = self.rivals(best_a, best_T)
             swapped = self.swaps(best_a, best_T) + self.regrown(best_a, best_T, best_missed)
@@ -768,6 +790,7 @@ def associate_robust(
     fit_quantile: float = 1.0 - 1e-6,
     detection_scores: NDArray[np.float64] | None = None,
     warm_start: NDArray[np.float64] | None = None,
+    deadline: Deadline | None = None,
 ) -> Association:
     """Robust association: upright two-point hypotheses, batched re-association, likelihood scoring.
 
@@ -822,6 +845,9 @@ def associate_robust(
         warm_start: (4, 4) a predicted ``cam_from_world`` for this frame, or None: tried before
             any hypothesis and accepted only when it explains the whole frame (module docstring,
             *Warm start*); else the full search runs. Not validated here.
+        deadline: the call's :class:`localization.budget.Deadline`, or None: checked before each
+            step of the search (each batch refined, the layout vote, each rival round); past it
+            the association fails as ``TIMED_OUT``.
     """
     settings = RobustSettings.resolve(
         K,
@@ -844,7 +870,7 @@ def associate_robust(
     )
     search = RobustSearch(
         detections_uv, landmarks_xyz, K, prior_cam_from_world, image_size, margin_px, settings,
-        detection_scores,
+        detection_scores, deadline,
     )
     return search.run(warm_start)
 
