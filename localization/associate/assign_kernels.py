@@ -49,67 +49,76 @@ def pair_sq(det: NDArray, proj: NDArray) -> NDArray:
 
 
 @njit(cache=True, nogil=True)
-def _gated_pair_sq(det: NDArray, proj: NDArray, gate_sq: float) -> NDArray:
-    """(N, M) :func:`pair_sq`, inf beyond the gate ``gate_sq`` (squared) and where NaN."""
-    d2 = pair_sq(det, proj)
-    for i in range(det.shape[0]):
-        for j in range(proj.shape[0]):
-            if not d2[i, j] <= gate_sq:  # NaN too
-                d2[i, j] = np.inf
-    return d2
+def _gated_pairs(det: NDArray, proj: NDArray, gate_sq: float) -> tuple[NDArray, NDArray, NDArray]:
+    """The (detection, projection) pairs within the gate ``gate_sq`` (squared), in (i, j) order.
 
-
-@njit(cache=True, nogil=True)
-def _mutual_nearest(d2: NDArray, jn: NDArray, inn: NDArray, ok: NDArray) -> bool:
-    """One pass of mutual nearest neighbours on squared distances ``d2`` (N, M); whether any pair.
-
-    Into ``jn`` (N,) the nearest projection of each detection and ``inn`` (M,) the nearest
-    detection of each projection (the first of equals); ``ok`` (N,): whether detection ``i`` and
-    its nearest projection are each other's nearest at a finite distance.
+    Returns ``(i (P,), j (P,), squared distance (P,))``; NaN rows and columns give no pair.
     """
-    n, m = d2.shape
-    for i in range(n):  # nearest projection of each detection (first of equals)
-        best, jb = d2[i, 0], 0
-        for j in range(1, m):
-            if d2[i, j] < best:
-                best, jb = d2[i, j], j
-        jn[i] = jb
-    for j in range(m):  # nearest detection of each projection
-        best, ib = d2[0, j], 0
-        for i in range(1, n):
-            if d2[i, j] < best:
-                best, ib = d2[i, j], i
-        inn[j] = ib
-    anyok = False
+    n, m = det.shape[0], proj.shape[0]
+    cap = 0
     for i in range(n):
-        ok[i] = inn[jn[i]] == i and d2[i, jn[i]] < np.inf
-        anyok = anyok or ok[i]
-    return anyok
+        for j in range(m):
+            du = det[i, 0] - proj[j, 0]
+            dv = det[i, 1] - proj[j, 1]
+            if du * du + dv * dv <= gate_sq:  # NaN is never within
+                cap += 1
+    pi = np.empty(cap, dtype=np.int64)
+    pj = np.empty(cap, dtype=np.int64)
+    pd = np.empty(cap)
+    q = 0
+    for i in range(n):
+        for j in range(m):
+            du = det[i, 0] - proj[j, 0]
+            dv = det[i, 1] - proj[j, 1]
+            d = du * du + dv * dv
+            if d <= gate_sq:
+                pi[q], pj[q], pd[q] = i, j, d
+                q += 1
+    return pi, pj, pd
 
 
 @njit(cache=True, nogil=True)
 def assign_one(det: NDArray, proj: NDArray, gate_sq: float, rounds: int, out: NDArray) -> None:
     """Greedy mutual-nearest-neighbour assignment of ``det`` (N, 2) to ``proj`` (M, 2).
 
-    Into ``out`` (N,) (-1: unassigned), as :func:`assign_many` defines it.
+    Into ``out`` (N,) (-1: unassigned), as :func:`assign_many` defines it: each pass pairs every
+    detection and projection that are each other's nearest (the first of equal distances, in
+    index order) among those still free within the gate. The passes run over the gated pairs
+    only (:func:`_gated_pairs`), so a pass costs the pairs within the gate, not ``N x M``.
     """
     n, m = det.shape[0], proj.shape[0]
     out[:] = -1
     if n == 0 or m == 0:
         return
-    d2 = _gated_pair_sq(det, proj, gate_sq)
+    pi, pj, pd = _gated_pairs(det, proj, gate_sq)
+    row_free = np.ones(n, dtype=np.bool_)
+    col_free = np.ones(m, dtype=np.bool_)
     jn = np.empty(n, dtype=np.int64)
     inn = np.empty(m, dtype=np.int64)
-    ok = np.empty(n, dtype=np.bool_)
+    best_row = np.empty(n)
+    best_col = np.empty(m)
     for _ in range(rounds):
-        if not _mutual_nearest(d2, jn, inn, ok):
-            break
+        jn[:] = -1
+        inn[:] = -1
+        best_row[:] = np.inf
+        best_col[:] = np.inf
+        for q in range(pi.size):  # (i, j) order: strict < keeps the first of equals both ways
+            i, j, d = pi[q], pj[q], pd[q]
+            if row_free[i] and col_free[j]:
+                if d < best_row[i]:
+                    best_row[i], jn[i] = d, j
+                if d < best_col[j]:
+                    best_col[j], inn[j] = d, i
+        paired = False
         for i in range(n):
-            if ok[i]:
-                j = jn[i]
+            j = jn[i]
+            if j >= 0 and inn[j] == i:
                 out[i] = j
-                d2[i, :] = np.inf
-                d2[:, j] = np.inf
+                row_free[i] = False
+                col_free[j] = False
+                paired = True
+        if not paired:
+            break
 
 
 @njit(cache=True, nogil=True)

@@ -82,6 +82,40 @@ def test_nan_detections_stay_unassigned_and_clutter_is_not_paired(rng):
     np.testing.assert_array_equal(out_a[0], a)
 
 
+def _dense_assign(det: np.ndarray, proj: np.ndarray, gate_sq: float, rounds: int) -> np.ndarray:
+    """Mutual nearest neighbours on the full (N, M) matrix: the definition the kernel must keep."""
+    with np.errstate(invalid="ignore"):
+        d2 = ((det[:, None, :] - proj[None]) ** 2).sum(axis=2)
+        d2[~(d2 <= gate_sq)] = np.inf
+    out = np.full(det.shape[0], -1)
+    for _ in range(rounds):
+        jn, inn = d2.argmin(axis=1), d2.argmin(axis=0)  # argmin: the first of equals
+        ok = (inn[jn] == np.arange(det.shape[0])) & np.isfinite(d2[np.arange(det.shape[0]), jn])
+        if not ok.any():
+            break
+        out[ok] = jn[ok]
+        d2[ok, :] = np.inf
+        d2[:, jn[ok]] = np.inf
+    return out
+
+
+def test_assignment_over_the_gated_pairs_is_the_dense_mutual_nearest_one(rng):
+    from localization.associate.assign_kernels import assign_many
+
+    for trial in range(300):  # integer pixels: equal distances, whose ties the index order breaks
+        n, m = rng.integers(1, 40), rng.integers(1, 30)
+        det = rng.integers(0, 60, (n, 2)).astype(float)
+        proj = rng.integers(0, 60, (3, m, 2)).astype(float)
+        det[rng.random(n) < 0.1] = np.nan
+        proj[rng.random((3, m)) < 0.1] = np.nan
+        gate = float(rng.choice([3.0, 8.0, 25.0, 100.0]))
+        rounds = int(rng.integers(1, 4))
+        got = assign_many(det, proj, gate, rounds)
+        for h in range(3):
+            np.testing.assert_array_equal(got[h], _dense_assign(det, proj[h], gate * gate, rounds),
+                                          err_msg=f"trial {trial}, layout {h}")
+
+
 def _brute_votes(ux: np.ndarray, uy: np.ndarray, cnt: np.ndarray) -> np.ndarray:
     near = (np.abs(ux[:, None] - ux[None]) <= 1) & (np.abs(uy[:, None] - uy[None]) <= 1)
     return near.astype(np.int64) @ cnt
