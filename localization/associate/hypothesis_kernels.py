@@ -505,6 +505,74 @@ def anchor_pairs(det: NDArray, k: int) -> NDArray:
     return out
 
 
+#: Up to this squared cap the nearest projections are searched in a window of u (a projection
+#: behind the camera, at ``_FAR_PX``, is then always beyond the cap); above it, all of them.
+_WINDOW_MAX_CAP_SQ = 0.25 * _FAR_PX**2
+
+
+@njit(cache=True, nogil=True)
+def _nearest_brute(det: NDArray, uv: NDArray, near: NDArray) -> None:
+    """Into ``near`` (N,) each detection's squared distance to the nearest projection of ``uv``.
+
+    ``uv`` (M, 2); a NaN projection counts as one at (``_FAR_PX``, ``_FAR_PX``).
+    """
+    for i in range(det.shape[0]):
+        best = np.inf
+        for j in range(uv.shape[0]):
+            if np.isnan(uv[j, 0]):
+                du = det[i, 0] - _FAR_PX
+                dv = det[i, 1] - _FAR_PX
+            else:
+                du = det[i, 0] - uv[j, 0]
+                dv = det[i, 1] - uv[j, 1]
+            d = du * du + dv * dv
+            if d < best:
+                best = d
+        near[i] = best
+
+
+@njit(cache=True, nogil=True)
+def _nearest_in_window(det: NDArray, uv: NDArray, cap_sq: float, order: NDArray, near: NDArray) -> None:
+    """:func:`_nearest_brute` where it is below ``cap_sq``, else a value at or above it.
+
+    Only the finite projections within ``sqrt(cap_sq)`` in u of a detection are measured (sorted
+    by u, found by binary search; the window a part in 1e9 wider, so that rounding never drops
+    one inside the cap): any other lies at least the cap away, and the caller caps. The
+    distances are computed as :func:`_nearest_brute` computes them: the capped values agree to
+    the bit. ``order`` (M,): workspace.
+    """
+    cap = np.sqrt(cap_sq) * (1.0 + 1e-9)
+    k = 0
+    for j in range(uv.shape[0]):
+        if not np.isnan(uv[j, 0]):
+            order[k] = j
+            k += 1
+    us = np.empty(k)
+    for r in range(k):
+        us[r] = uv[order[r], 0]
+    srt = np.argsort(us, kind="mergesort")
+    for i in range(det.shape[0]):
+        u0 = det[i, 0] - cap
+        lo, hi = 0, k  # first projection with u >= u0
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if us[srt[mid]] < u0:
+                lo = mid + 1
+            else:
+                hi = mid
+        best = np.inf
+        for r in range(lo, k):
+            j = order[srt[r]]
+            if uv[j, 0] > det[i, 0] + cap:
+                break
+            du = det[i, 0] - uv[j, 0]
+            dv = det[i, 1] - uv[j, 1]
+            d = du * du + dv * dv
+            if d < best:
+                best = d
+        near[i] = best
+
+
 @njit(cache=True, nogil=True)
 def translation_scores(
     det: NDArray, p: NDArray, shift: NDArray, K: NDArray, cap_sq: float
@@ -529,6 +597,8 @@ def translation_scores(
     depth = np.empty((n_t, m))
     explained = np.zeros(n_t, dtype=np.int64)
     misfit = np.zeros(n_t)
+    order = np.empty(m, dtype=np.int64)
+    near = np.empty(det.shape[0])
     for q in range(n_t):
         for j in range(m):
             x = p[j, 0] - shift[q, 0]
@@ -542,19 +612,12 @@ def translation_scores(
             else:
                 uv[q, j, 0] = np.nan
                 uv[q, j, 1] = np.nan
+        if cap_sq < _WINDOW_MAX_CAP_SQ:
+            _nearest_in_window(det, uv[q], cap_sq, order, near)
+        else:
+            _nearest_brute(det, uv[q], near)
         for i in range(det.shape[0]):
-            best = np.inf
-            for j in range(m):
-                if np.isnan(uv[q, j, 0]):
-                    du = det[i, 0] - _FAR_PX
-                    dv = det[i, 1] - _FAR_PX
-                else:
-                    du = det[i, 0] - uv[q, j, 0]
-                    dv = det[i, 1] - uv[q, j, 1]
-                d = du * du + dv * dv
-                if d < best:
-                    best = d
-            best = min(best, cap_sq)
+            best = min(near[i], cap_sq)
             if best < cap_sq:
                 explained[q] += 1
             misfit[q] += best

@@ -102,6 +102,21 @@ def test_translation_scores_is_the_capped_nearest_distance_after_each_move(rng):
     assert np.isnan(uv[-1]).all() and explained[-1] == 0 and misfit[-1] == 6 * 400.0
 
 
+
+def test_the_nearest_projection_in_a_window_of_u_is_the_brute_force_one_below_the_cap(rng):
+    from localization.associate.hypothesis_kernels import _nearest_brute, _nearest_in_window
+
+    for _ in range(200):  # integer pixels: detections exactly the cap away in u, and in distance
+        det = rng.integers(0, 400, (int(rng.integers(1, 200)), 2)).astype(float)
+        uv = rng.integers(0, 400, (int(rng.integers(1, 40)), 2)).astype(float)
+        uv[rng.random(uv.shape[0]) < 0.2] = np.nan  # behind the camera
+        cap_sq = float(rng.choice([9.0, 25.0, 1600.0, 2.0, 1e6]))
+        brute, window = np.empty(det.shape[0]), np.empty(det.shape[0])
+        _nearest_brute(det, uv, brute)
+        _nearest_in_window(det, uv, cap_sq, np.empty(uv.shape[0], dtype=np.int64), window)
+        np.testing.assert_array_equal(np.minimum(window, cap_sq), np.minimum(brute, cap_sq))
+
+
 def test_pose_covariance_is_the_inverse_information_of_pose_jacobian(rng):
     from localization.pose.covariance import pose_covariance, pose_jacobian
 
