@@ -69,6 +69,37 @@ def test_spec_takes_detector_objects_and_rejects_bad_values():
         build_stack(StackSpec(), PAPER_K, (1280, 720), model_xyz=np.zeros((3, 3)))
 
 
+
+class Projected:
+    """Detects every landmark exactly where ``T`` projects it."""
+
+    def __init__(self, X, T):
+        from localization.geometry.transforms import project
+
+        self.uv = project(PAPER_K, T, X)[0]
+
+    def detect(self, image, context):
+        from localization import Detections
+
+        return Detections(self.uv)
+
+
+def test_a_time_budget_reaches_the_localizer_and_a_frame_past_it_fails_as_timed_out():
+    from localization import FailureCode
+    from localization.geometry.transforms import look_at
+    from uav_struct_env.wrappers.localize import failure_code_number
+
+    X = np.random.default_rng(0).uniform(-5, 5, (8, 3))
+    T = look_at([3.0, -25.0, 15.0], [0.0, 0.0, 0.0])
+    spec = StackSpec(detector=Projected(X, T), localizer_kwargs={"time_budget_s": 1e-9})
+    stack = build_stack(spec, PAPER_K, (1280, 720), model_xyz=X)
+    assert stack.localizer.time_budget_s == 1e-9
+    est = stack.localize(None, {}, T).estimate
+    assert not est.success and est.failure_code is FailureCode.TIMED_OUT
+    assert failure_code_number(est.failure_code) == len(FailureCode)  # the last code, appended
+    free = build_stack(StackSpec(detector=Projected(X, T)), PAPER_K, (1280, 720), model_xyz=X)
+    assert free.localize(None, {}, T).estimate.success
+
 def test_learned_weights_by_name():
     """``learned:NAME`` is ``learned`` with the named set's two files; explicit files override."""
     from localization.detect.weights import weight_set
