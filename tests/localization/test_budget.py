@@ -19,10 +19,10 @@ from localization.verify import CONFIRM_TOLERANCE_M
 NO_TIME_S = 1e-9
 
 
-def _clutter_case(k: int = 8027):
-    """Fuzz case ``k`` with 2,000 clutter points (8027: 2,055 detections, 60 candidates)."""
+def _clutter_case(k: int = 8027, mode: str = "clutter_2000"):
+    """Fuzz case ``k`` with ``mode``'s clutter (8027: 2,055 detections, 60 candidates)."""
     case = draw_case(np.random.default_rng((19, k)))
-    return case, corrupt_detections(case, "clutter_2000", np.random.default_rng((44, k)))
+    return case, corrupt_detections(case, mode, np.random.default_rng((44, k)))
 
 
 def _localizer(case, **kw) -> Localizer:
@@ -71,10 +71,10 @@ def test_a_pose_finished_after_the_deadline_is_refused(scene, association):
 
 
 def test_a_budget_the_call_fits_in_changes_nothing():
-    case, det = _clutter_case(3)
+    case, det = _clutter_case(3, "clutter_500")
     free = _localizer(case).localize(det, case.prior_cam_from_world)
     bounded = _localizer(case, time_budget_s=600.0).localize(det, case.prior_cam_from_world)
-    assert free.success == bounded.success and free.failure_code == bounded.failure_code
+    assert free.success and bounded.success  # a pose through the whole search and verification
     np.testing.assert_array_equal(free.cam_from_world, bounded.cam_from_world)
     np.testing.assert_array_equal(free.assignment, bounded.assignment)
 
