@@ -30,6 +30,7 @@ __all__ = [
     "best_cells",
     "check_many",
     "distinct_cells",
+    "median_inplace",
     "MAX_GRID",
     "missed_many",
     "neighbour_votes",
@@ -455,6 +456,62 @@ def missed_many(
     return out
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _sq_dist(det: NDArray, i: int, j: int) -> float:
+    """Squared pixel distance of detections ``i`` and ``j``."""
+    du = det[i, 0] - det[j, 0]
+    dv = det[i, 1] - det[j, 1]
+    return du * du + dv * dv
+
+
+@njit(cache=True, nogil=True)
+def _kth_smallest(a: NDArray, k: int) -> float:
+    """The ``k``-th smallest of ``a`` (0-based), ``a`` partially reordered (quickselect).
+
+    After the call ``a[:k]`` holds values at most the result (Hoare partitions).
+    """
+    lo, hi = 0, a.size - 1
+    while hi > lo:
+        mid = (lo + hi) >> 1
+        x, y, z = a[lo], a[mid], a[hi]  # median of three as the pivot
+        pivot = max(min(x, y), min(max(x, y), z))
+        i, j = lo, hi
+        while i <= j:
+            while a[i] < pivot:
+                i += 1
+            while a[j] > pivot:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            return a[k]
+    return a[k]
+
+
+@njit(cache=True, nogil=True)
+def median_inplace(a: NDArray) -> float:
+    """``np.median(a)`` of a non-empty finite ``a``, to the bit, reordering ``a`` (no copy).
+
+    The middle value, or the mean ``(lo + hi) / 2`` of the two middle ones as numba's
+    ``np.median`` computes it; order statistics do not depend on how they are selected.
+    """
+    n = a.size
+    half = n >> 1
+    hi = _kth_smallest(a, half)
+    if n & 1:
+        return hi
+    lo = a[0]
+    for i in range(1, half):  # the largest of the values below the half
+        lo = max(lo, a[i])
+    return (lo + hi) / 2
+
+
 @njit(cache=True, nogil=True)
 def anchor_pairs(det: NDArray, k: int) -> NDArray:
     """(P, 2) every pair among ``k`` spread-out detections (N, 2) of the dense part of the image.
@@ -467,16 +524,13 @@ def anchor_pairs(det: NDArray, k: int) -> NDArray:
     n = det.shape[0]
     if n < 2:
         return np.empty((0, 2), dtype=np.int64)
-    d2 = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            du = det[i, 0] - det[j, 0]
-            dv = det[i, 1] - det[j, 1]
-            d2[i, j] = du * du + dv * dv
     if n > k:
         spread = np.empty(n)
-        for i in range(n):
-            spread[i] = np.median(d2[i])
+        row = np.empty(n)
+        for i in range(n):  # one row at a time: no (N, N) matrix, selected in place
+            for j in range(n):
+                row[j] = _sq_dist(det, i, j)
+            spread[i] = median_inplace(row)
         pool = np.flatnonzero(spread <= np.median(spread))
         if pool.size < k:
             pool = np.argsort(spread, kind="mergesort")[:k]
@@ -486,7 +540,7 @@ def anchor_pairs(det: NDArray, k: int) -> NDArray:
     sub = np.empty((p, p))
     for i in range(p):
         for j in range(p):
-            sub[i, j] = d2[pool[i], pool[j]]
+            sub[i, j] = _sq_dist(det, pool[i], pool[j])
     chosen = np.empty(min(k, p), dtype=np.int64)
     chosen[0] = np.argmax(sub.sum(axis=1))
     dmin = sub[chosen[0]].copy()

@@ -117,6 +117,16 @@ def test_the_nearest_projection_in_a_window_of_u_is_the_brute_force_one_below_th
         np.testing.assert_array_equal(np.minimum(window, cap_sq), np.minimum(brute, cap_sq))
 
 
+
+def test_the_median_selected_in_place_is_numpys_to_the_bit(rng):
+    from localization.associate.hypothesis_kernels import median_inplace
+
+    for n in [1, 2, 3, 4, *rng.integers(5, 400, 200).tolist()]:
+        a = rng.uniform(0, 1e6, n) if n % 3 else np.round(rng.uniform(0, 5, n))  # ties too
+        want = np.median(a)
+        assert median_inplace(a.copy()) == want, n  # == on floats: the same bits
+
+
 def test_pose_covariance_is_the_inverse_information_of_pose_jacobian(rng):
     from localization.pose.covariance import pose_covariance, pose_jacobian
 
