@@ -564,6 +564,14 @@ def anchor_pairs(det: NDArray, k: int) -> NDArray:
 _WINDOW_MAX_CAP_SQ = 0.25 * _FAR_PX**2
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _sq_to(det: NDArray, i: int, u: float, v: float) -> float:
+    """Squared pixel distance of detection ``i`` to the point ``(u, v)``."""
+    du = det[i, 0] - u
+    dv = det[i, 1] - v
+    return du * du + dv * dv
+
+
 @njit(cache=True, nogil=True)
 def _nearest_brute(det: NDArray, uv: NDArray, near: NDArray) -> None:
     """Into ``near`` (N,) each detection's squared distance to the nearest projection of ``uv``.
@@ -573,14 +581,9 @@ def _nearest_brute(det: NDArray, uv: NDArray, near: NDArray) -> None:
     for i in range(det.shape[0]):
         best = np.inf
         for j in range(uv.shape[0]):
-            if np.isnan(uv[j, 0]):
-                du = det[i, 0] - _FAR_PX
-                dv = det[i, 1] - _FAR_PX
-            else:
-                du = det[i, 0] - uv[j, 0]
-                dv = det[i, 1] - uv[j, 1]
-            d = du * du + dv * dv
-            if d < best:
+            far = np.isnan(uv[j, 0])
+            d = _sq_to(det, i, _FAR_PX if far else uv[j, 0], _FAR_PX if far else uv[j, 1])
+            if d < best:  # not min(): a NaN detection keeps inf, as before
                 best = d
         near[i] = best
 
@@ -619,9 +622,7 @@ def _nearest_in_window(det: NDArray, uv: NDArray, cap_sq: float, order: NDArray,
             j = order[srt[r]]
             if uv[j, 0] > det[i, 0] + cap:
                 break
-            du = det[i, 0] - uv[j, 0]
-            dv = det[i, 1] - uv[j, 1]
-            d = du * du + dv * dv
+            d = _sq_to(det, i, uv[j, 0], uv[j, 1])
             if d < best:
                 best = d
         near[i] = best
