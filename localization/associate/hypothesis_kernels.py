@@ -514,7 +514,7 @@ def median_inplace(a: NDArray) -> float:
 
 @njit(cache=True, nogil=True)
 def anchor_pairs(det: NDArray, k: int) -> NDArray:
-    """(P, 2) every pair among ``k`` spread-out detections (N, 2) of the dense part of the image.
+    """(P, 2) every pair among ``k`` spread-out finite detections (N, 2) of the dense part of the image.
 
     The spread-out part of :func:`localization.associate.hypotheses.spread_anchor_pairs` (whose
     docstring says why): detections whose median squared distance to the others is at most the
