@@ -64,8 +64,9 @@ def test_a_pose_finished_after_the_deadline_is_refused(scene, association):
     X, T, uv = scene
     prior = T.copy()
     prior[:3, 3] += 0.5
-    est = Localizer(X, np.array([[800.0, 0, 640], [0, 800, 360], [0, 0, 1]]), association=association,
-                    time_budget_s=NO_TIME_S).localize(uv, prior)
+    K = np.array([[800.0, 0, 640], [0, 800, 360], [0, 0, 1]])
+    assert Localizer(X, K, association=association).localize(uv, prior).success  # without a budget
+    est = Localizer(X, K, association=association, time_budget_s=NO_TIME_S).localize(uv, prior)
     assert not est.success and est.failure_code is FailureCode.TIMED_OUT
     assert est.failure_reason.startswith("out of time") and "budget" in est.failure_reason
 
