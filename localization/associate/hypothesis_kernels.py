@@ -456,7 +456,7 @@ def missed_many(
     return out
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _sq_dist(det: NDArray, i: int, j: int) -> float:
     """Squared pixel distance of detections ``i`` and ``j``."""
     du = det[i, 0] - det[j, 0]
@@ -564,7 +564,7 @@ def anchor_pairs(det: NDArray, k: int) -> NDArray:
 _WINDOW_MAX_CAP_SQ = 0.25 * _FAR_PX**2
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _sq_to(det: NDArray, i: int, u: float, v: float) -> float:
     """Squared pixel distance of detection ``i`` to the point ``(u, v)``."""
     du = det[i, 0] - u
