@@ -110,7 +110,7 @@ def warm_up(announce: Callable[[str], None] | None = print) -> float:
     for landmarks in (tops, slab):
         _localize_views(landmarks, K, rng)
     _localize_views(tops, K, rng, distortion=np.array([-0.1, 0.02, 0.0, 0.0, 0.0]))
-    # the public closed form the search calls from compiled code only: compiled on its own too,
-    # so that every kernel of the package is cached (kernels_cached) and the next run is silent
+    # the public closed form (the search solves it inside compiled code, never through this
+    # entry): compiled too, so that every kernel of the package is cached (kernels_cached)
     upright_two_point(np.array([[0.1, 0.0, 1.0]]), np.array([[-0.1, 0.0, 1.0]]), tops[:1], tops[1:2])
     return time.perf_counter() - t0

@@ -33,6 +33,7 @@ __all__ = [
     "pair_sq",
     "project_into",
     "refine_reassign",
+    "sq_to",
 ]
 
 
@@ -49,18 +50,24 @@ def pair_sq(det: NDArray, proj: NDArray) -> NDArray:
 
 
 @njit(cache=True, nogil=True)
+def sq_to(det: NDArray, i: int, u: float, v: float) -> float:
+    """Squared pixel distance of detection ``i`` of ``det`` (N, 2) to the point ``(u, v)``."""
+    du = det[i, 0] - u
+    dv = det[i, 1] - v
+    return du * du + dv * dv
+
+
+@njit(cache=True, nogil=True)
 def _gated_pairs(det: NDArray, proj: NDArray, gate_sq: float) -> tuple[NDArray, NDArray, NDArray]:
     """The (detection, projection) pairs within the gate ``gate_sq`` (squared), in (i, j) order.
 
     Returns ``(i (P,), j (P,), squared distance (P,))``; NaN rows and columns give no pair.
     """
     n, m = det.shape[0], proj.shape[0]
-    cap = 0
+    cap = 0  # counted first, so that no (N, M) buffer is needed
     for i in range(n):
         for j in range(m):
-            du = det[i, 0] - proj[j, 0]
-            dv = det[i, 1] - proj[j, 1]
-            if du * du + dv * dv <= gate_sq:  # NaN is never within
+            if sq_to(det, i, proj[j, 0], proj[j, 1]) <= gate_sq:  # NaN is never within
                 cap += 1
     pi = np.empty(cap, dtype=np.int64)
     pj = np.empty(cap, dtype=np.int64)
@@ -68,9 +75,7 @@ def _gated_pairs(det: NDArray, proj: NDArray, gate_sq: float) -> tuple[NDArray, 
     q = 0
     for i in range(n):
         for j in range(m):
-            du = det[i, 0] - proj[j, 0]
-            dv = det[i, 1] - proj[j, 1]
-            d = du * du + dv * dv
+            d = sq_to(det, i, proj[j, 0], proj[j, 1])
             if d <= gate_sq:
                 pi[q], pj[q], pd[q] = i, j, d
                 q += 1

@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from localization.associate.assign_kernels import assign_one, project_into, refine_reassign
+from localization.associate.assign_kernels import assign_one, project_into, refine_reassign, sq_to
 from localization.geometry.kernels import MIN_DEPTH, camera_point
 from localization.pose.covariance import prior_distance_sq
 
@@ -457,14 +457,6 @@ def missed_many(
 
 
 @njit(cache=True, nogil=True)
-def _sq_dist(det: NDArray, i: int, j: int) -> float:
-    """Squared pixel distance of detections ``i`` and ``j``."""
-    du = det[i, 0] - det[j, 0]
-    dv = det[i, 1] - det[j, 1]
-    return du * du + dv * dv
-
-
-@njit(cache=True, nogil=True)
 def _kth_smallest(a: NDArray, k: int) -> float:
     """The ``k``-th smallest of ``a`` (0-based), ``a`` partially reordered (quickselect).
 
@@ -529,7 +521,7 @@ def anchor_pairs(det: NDArray, k: int) -> NDArray:
         row = np.empty(n)
         for i in range(n):  # one row at a time: no (N, N) matrix, selected in place
             for j in range(n):
-                row[j] = _sq_dist(det, i, j)
+                row[j] = sq_to(det, i, det[j, 0], det[j, 1])
             spread[i] = median_inplace(row)
         pool = np.flatnonzero(spread <= np.median(spread))
         if pool.size < k:
@@ -540,7 +532,7 @@ def anchor_pairs(det: NDArray, k: int) -> NDArray:
     sub = np.empty((p, p))
     for i in range(p):
         for j in range(p):
-            sub[i, j] = _sq_dist(det, pool[i], pool[j])
+            sub[i, j] = sq_to(det, pool[i], det[pool[j], 0], det[pool[j], 1])
     chosen = np.empty(min(k, p), dtype=np.int64)
     chosen[0] = np.argmax(sub.sum(axis=1))
     dmin = sub[chosen[0]].copy()
@@ -565,14 +557,6 @@ _WINDOW_MAX_CAP_SQ = 0.25 * _FAR_PX**2
 
 
 @njit(cache=True, nogil=True)
-def _sq_to(det: NDArray, i: int, u: float, v: float) -> float:
-    """Squared pixel distance of detection ``i`` to the point ``(u, v)``."""
-    du = det[i, 0] - u
-    dv = det[i, 1] - v
-    return du * du + dv * dv
-
-
-@njit(cache=True, nogil=True)
 def _nearest_brute(det: NDArray, uv: NDArray, near: NDArray) -> None:
     """Into ``near`` (N,) each detection's squared distance to the nearest projection of ``uv``.
 
@@ -582,7 +566,7 @@ def _nearest_brute(det: NDArray, uv: NDArray, near: NDArray) -> None:
         best = np.inf
         for j in range(uv.shape[0]):
             far = np.isnan(uv[j, 0])
-            d = _sq_to(det, i, _FAR_PX if far else uv[j, 0], _FAR_PX if far else uv[j, 1])
+            d = sq_to(det, i, _FAR_PX if far else uv[j, 0], _FAR_PX if far else uv[j, 1])
             if d < best:  # not min(): a NaN detection keeps inf, as before
                 best = d
         near[i] = best
@@ -622,7 +606,7 @@ def _nearest_in_window(det: NDArray, uv: NDArray, cap_sq: float, order: NDArray,
             j = order[srt[r]]
             if uv[j, 0] > det[i, 0] + cap:
                 break
-            d = _sq_to(det, i, uv[j, 0], uv[j, 1])
+            d = sq_to(det, i, uv[j, 0], uv[j, 1])
             if d < best:
                 best = d
         near[i] = best
