@@ -28,14 +28,11 @@ with the default learned detector then runs the adapted set.
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-
-import numpy as np
 
 from localization.checks import check_number
 from localization.detect.weights import (
@@ -49,11 +46,9 @@ from localization.detect.weights import (
     weight_set,
 )
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.training.finetune import Laps, dataset_config, finetune, render_dataset
 
 __all__ = ["AdaptConfig", "adapt", "main"]
-
-#: The refiner's batch (the trainer's default), or every mined window if there are fewer.
-REFINER_BATCH = 128
 
 
 @dataclass(frozen=True)
@@ -65,7 +60,8 @@ class AdaptConfig:
         refiner_layouts: layouts of the refiner's dataset.
         views: viewpoints per layout.
         keypoint_steps: fine-tuning steps of the keypoint network (batch 16, 256 x 192 crops).
-        refiner_steps: fine-tuning steps of the refiner (batch :data:`REFINER_BATCH`).
+        refiner_steps: fine-tuning steps of the refiner (batch
+            :data:`~uav_struct_env.training.finetune.REFINER_BATCH`).
         keypoint_lr: peak learning rate of the keypoint network (warm-up, then cosine).
         refiner_lr: peak learning rate of the refiner.
         seed: dataset seed of the keypoint network's renders (the refiner's: ``seed + 1``) and
@@ -96,82 +92,23 @@ class AdaptConfig:
                              type_error=ConfigError)
 
 
-class _StepBar:
-    """A progress bar over a trainer's steps, fed by its log records (one every 50 steps)."""
-
-    def __init__(self, total: int, desc: str, progress: bool) -> None:
-        from tqdm import tqdm
-
-        self.bar = tqdm(total=total, desc=desc, unit="step", disable=not progress)
-
-    def __call__(self, record: dict) -> None:
-        if "step" in record:
-            self.bar.update(record["step"] - self.bar.n)
-            self.bar.set_postfix(loss=record["loss"])
-
-    def close(self) -> None:
-        self.bar.update(self.bar.total - self.bar.n)
-        self.bar.close()
-
-
 def _render(ifc: Path, out: Path, layouts: int, seed: int, scale: float, config: AdaptConfig,
             progress: bool) -> Path:
     """Render one labelled dataset of the building (activity, camera and imaging mixed)."""
-    from uav_struct_env.datasets.landmarks import DatasetConfig, generate
-
-    dataset = DatasetConfig(n_layouts=layouts, views_per_layout=config.views, seed=seed, scale=scale,
-                            site=str(ifc), activity="mixed", camera="mixed", imaging="mixed")
-    return generate(dataset, out, workers=config.render_workers, progress=progress)
+    return render_dataset(dataset_config(ifc, layouts, config.views, seed, scale), out, config.render_workers,
+                          progress)
 
 
 def _train_networks(ifc: Path, work: Path, final: dict, config: AdaptConfig, progress: bool) -> dict:
     """Render both datasets and fine-tune both networks; returns the phases' costs and counts."""
-    from uav_struct_env.training import train_detector, train_refiner
-
-    base = weight_set(DEFAULT_WEIGHTS)
-    minutes: dict[str, float] = {}
-    t = time.perf_counter()
-
-    def lap(name: str) -> None:
-        nonlocal t
-        minutes[name] = round((time.perf_counter() - t) / 60.0, 2)
-        t = time.perf_counter()
-
+    laps = Laps()
     keypoint_data = _render(ifc, work / "keypoint_data", config.layouts, config.seed, 0.5, config, progress)
     refiner_data = _render(ifc, work / "refiner_data", config.refiner_layouts, config.seed + 1, 1.0, config,
                            progress)
-    lap("render")
-    bar = _StepBar(config.keypoint_steps, "keypoint network", progress)
-    kp = train_detector.train(str(keypoint_data.parent), str(work / "keypoint"), minutes=1e9,
-                              max_steps=config.keypoint_steps, lr=config.keypoint_lr, seed=config.seed,
-                              threads=config.threads, workers=0, init=base.model, warmup_steps=100,
-                              log=bar)
-    bar.close()
-    shutil.move(kp["onnx"], final["model"])
-    lap("keypoint_network")
-    windows = train_refiner.mine(str(refiner_data.parent), str(work / "windows.npz"),
-                                 model=str(final["model"]), seed=config.seed, progress=progress)
-    lap("mine")
-    bar = _StepBar(config.refiner_steps, "patch refiner", progress)
-    with np.load(windows) as arrays:  # a building too small for one batch of windows trains on all it has
-        batch = min(REFINER_BATCH, len(arrays["kind"]))
-    ref = train_refiner.train(str(windows), str(work / "refiner"), minutes=1e9, batch=batch,
-                              max_steps=config.refiner_steps, lr=config.refiner_lr, seed=config.seed,
-                              threads=config.threads, workers=0, detector_model=str(final["model"]),
-                              init=base.refiner, warmup_steps=50, log=bar)
-    bar.close()
-    shutil.move(ref["onnx"], final["refiner"])
-    lap("refiner")
-    return {"minutes": {**minutes, "total": round(sum(minutes.values()), 2)},
-            "steps": {"keypoint_network": kp["steps"], "refiner": ref["steps"]},
-            "images": {"keypoint_network": kp["train_images"], "refiner": len(_labels(refiner_data))},
-            "refiner_windows": ref["train_windows"], "refiner_batch": batch}
-
-
-def _labels(path: Path) -> list:
-    from uav_struct_env.datasets.landmarks import load_labels
-
-    return load_labels(path)["images"]
+    laps("render")
+    counts = finetune(config, weight_set(DEFAULT_WEIGHTS), [keypoint_data], [refiner_data], final, work,
+                      progress, laps)
+    return {"minutes": {**laps.minutes, "total": round(sum(laps.minutes.values()), 2)}, **counts}
 
 
 def adapt(ifc: str | Path, root: str | Path | None = None, config: AdaptConfig | None = None,
