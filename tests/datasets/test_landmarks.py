@@ -295,3 +295,33 @@ def test_camera_imaging_degrades_every_other_pair_of_images_and_nothing_else(tmp
     expected = r"imaging must be one of \('ideal', 'camera', 'mixed'\), got 'jpeg'"
     with pytest.raises(ConfigError, match=expected):
         DatasetConfig(imaging="jpeg")
+
+
+class _Bodies:
+    """Records the boxes ``_add_clutter`` places (their half extents and poses)."""
+
+    def __init__(self) -> None:
+        self.boxes: list[tuple[tuple, np.ndarray]] = []
+
+    def add_body(self, half_extents, rgba, pose) -> None:
+        self.boxes.append((tuple(half_extents), np.asarray(pose)))
+
+
+def test_clutter_on_a_stage_without_a_floor_stays_on_the_ground():
+    """A building whose stage is columns alone (a steel frame): the ground's clutter, none on a slab.
+
+    The generator stopped on such a stage (``max()`` of no slab tops) and no dataset of the
+    corpus's steel frame could be rendered.
+    """
+    from types import SimpleNamespace
+
+    from uav_struct_env.datasets.landmarks import _add_clutter
+
+    site = SimpleNamespace(footprint_bounds=(0.0, 0.0, 20.0, 12.0), floor=())
+    for seed in range(20):
+        bodies = _Bodies()
+        _add_clutter(bodies, site, np.random.default_rng(seed))
+        assert len(bodies.boxes) >= 3
+        # every box stands on the ground or on a stack outside the footprint (none up on a floor)
+        outside = [not (0 <= pose[0, 3] <= 20 and 0 <= pose[1, 3] <= 12) for _, pose in bodies.boxes]
+        assert all(outside), seed

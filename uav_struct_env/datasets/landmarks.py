@@ -213,6 +213,8 @@ def _add_clutter(world, site: Site, rng: np.random.Generator) -> None:
                                _yaw_pose(x, y, z + he[2], yaw + rng.uniform(-0.2, 0.2)))
                 z += 2 * he[2]
     # Small stacks on the slab, kept 1 m inside its edges (they must not sit on a landmark).
+    if not site.floor:  # a stage of columns alone (a steel frame's): no slab to stack on
+        return
     top = max(s.z_top for s in site.floor)
     for _ in range(int(rng.integers(0, 3))):
         if xmax - xmin < 3 or ymax - ymin < 3:
