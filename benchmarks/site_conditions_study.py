@@ -175,7 +175,8 @@ if __name__ == "__main__":
     ap.add_argument("--workers", type=int, default=2, help="study processes")
     ap.add_argument("--keep", default=None, help="also keep every run's outputs in this folder")
     ap.add_argument("--detector", default="learned",
-                    help="learned (the default weights) or learned:NAME, a named weight set (learned:active)")
+                    help="learned (the default weights), learned:NAME (a named weight set: learned:active), "
+                    "guided or guided:NAME (the BIM-guided detector with those weights)")
     ap.add_argument("--detector-model", default=None, help="keypoint-network weights to evaluate")
     ap.add_argument("--refiner-model", default=None, help="patch-refiner weights to evaluate")
     sys.exit(main(**vars(ap.parse_args())))

@@ -125,6 +125,24 @@ def test_learned_weights_by_name():
         StackSpec(landmarks="aruco", detector="learned:active")
 
 
+def test_guided_weights_by_name():
+    """``guided:NAME`` is the guided detector with the named set's files; unknown names are refused."""
+    from localization.detect.weights import weight_set
+
+    active = weight_set("active")
+    spec = StackSpec(landmarks="slab_corners", detector="guided:active")
+    assert (spec.detector, spec.detector_model) == ("guided", active.model)
+    assert spec.refiner_model == active.refiner
+    assert spec == StackSpec(landmarks="slab_corners", detector="guided", detector_model=active.model,
+                             refiner_model=active.refiner)
+    with pytest.raises(ConfigError, match=r"detector 'guided:v9' names unknown weights 'v9'; 'guided:NAME' "
+                                          r"takes NAME one of \('landmarks_v1'"):
+        StackSpec(detector="guided:v9")
+    for name in ("projection:active", "aruco:active"):  # only the detectors with networks take weights
+        with pytest.raises(ConfigError, match="detector must be one of"):
+            StackSpec(detector=name)
+
+
 def test_same_spec_and_frame_give_the_same_estimate_through_study_and_wrapper():
     config = protocol.StudyConfig(
         methods=("column_tops",), n_viewpoints=1, image_size=(320, 180), pixel_sigma=0.0

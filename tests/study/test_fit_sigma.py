@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from localization.detect.guided import GUIDED_FIT_SIGMA_PX
 from localization.detect.learned import FIT_PIXEL_SIGMAS_PX
 from localization.geometry.camera import PAPER_K
 from localization.verify import CONFIRM_TOLERANCE_M
@@ -29,3 +30,12 @@ def test_the_learned_stack_declares_the_detectors_fit_sigma(detector, imaging, e
     assert loc.tolerance_m == (None if expected is None else CONFIRM_TOLERANCE_M)
     aruco = stack_spec(config, next(m for m in METHODS if m.key == "aruco_1.0m"))
     assert "fit_sigma_px" not in aruco.localizer_kwargs
+
+
+def test_the_guided_stack_declares_its_own_fit_sigma_whatever_the_weights():
+    for detector in ("guided", "guided:active"):
+        spec = stack_spec(StudyConfig(detector=detector, imaging="camera"),
+                          next(m for m in METHODS if m.key == "slab_corners"))
+        assert spec.detector == "guided"
+        assert spec.localizer_kwargs["fit_sigma_px"] == GUIDED_FIT_SIGMA_PX
+        assert spec.localizer_kwargs["tolerance_m"] == CONFIRM_TOLERANCE_M

@@ -157,6 +157,9 @@ def test_learned_detector_weights_by_name():
                                           r"takes NAME one of \('landmarks_v1', 'landmarks_active_v4', "
                                           r"'active'\)"):
         StudyConfig(detector="learned:v9")
+    guided = study_config(_parser().parse_args(["--detector", "guided:active", "--quick"]))
+    assert (guided.detector, guided.detector_model, guided.refiner_model) == (
+        "guided", by_name.detector_model, by_name.refiner_model)
 
 
 def test_cli_reports_bad_options_without_a_traceback(capsys):

@@ -107,12 +107,14 @@ def settings_line(plan: PhotoPlan, detector: str, camera: str | None, prior: str
 
 
 def check_detector(name: str) -> str:
-    """``--detector``: ``guided``, ``learned`` or ``learned:NAME`` with NAME a weight set; returned unchanged.
+    """``--detector``: ``guided``, ``learned``, ``learned:NAME`` or ``guided:NAME``; returned unchanged.
+
+    NAME is a weight set of :mod:`localization.detect.weights`.
 
     Raises:
         PhotoError: naming the value and the names accepted.
     """
-    names = ("guided", "learned", *(f"learned:{n}" for n in WEIGHT_NAMES))
+    names = ("guided", "learned", *(f"{kind}:{n}" for kind in ("learned", "guided") for n in WEIGHT_NAMES))
     if name not in names:
         raise PhotoError(f"--detector must be one of {names}, got {name!r}")
     return name
@@ -210,7 +212,7 @@ def _parser() -> CommandParser:
                    help="learned (the default weights), learned:NAME, a weight set of "
                    f"localization.detect.weights ({', '.join(WEIGHT_NAMES)}), or guided: the learned "
                    "detector's first pose, then the IFC model's templates matched in the photo "
-                   "(docs/photos.md)")
+                   "(docs/photos.md); guided:NAME runs it with the weight set NAME")
     p.add_argument("--out", default="localized", help="output folder")
     p.add_argument("--no-figures", action="store_true", help="write poses.csv and poses.json only")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier run in --out")

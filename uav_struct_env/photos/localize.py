@@ -295,8 +295,8 @@ def localize_photos(
         ifc: the building's IFC file.
         detector: ``"learned"`` (default), ``"learned:NAME"`` (a weight set of
             :mod:`localization.detect.weights`), ``"guided"`` (the BIM-guided detector,
-            :mod:`uav_struct_env.stack.guided`: its templates are rendered from the IFC stage) or a
-            :class:`localization.Detector` object.
+            :mod:`uav_struct_env.stack.guided`: its templates are rendered from the IFC stage),
+            ``"guided:NAME"`` (the same with a weight set) or a :class:`localization.Detector` object.
         progress: called with 1 after each photo.
         **options: :func:`plan_photos`'s: ``stage`` (an :func:`~uav_struct_env.site.ifc_stages`
             name; None: the last), ``landmarks`` (default ``all``), ``camera`` (a calibration file

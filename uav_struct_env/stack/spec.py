@@ -64,32 +64,34 @@ PAPER_WIDTH_PX: int = PAPER_IMAGE_SIZE[0]
 _ARUCO_MODES = ("average", "joint")
 #: Detectors that run the learned detector's networks (and take its weight files).
 _LEARNED_DETECTORS = ("learned", "guided")
-#: ``"learned:NAME"`` runs the learned detector with the weight set ``NAME``.
-_LEARNED_PREFIX = "learned:"
+#: ``"learned:NAME"`` (``"guided:NAME"``) runs the learned (guided) detector with the weight set
+#: ``NAME`` (:func:`resolve_learned`).
 
 
 def resolve_learned(detector: Any, detector_model: Any, refiner_model: Any) -> tuple[Any, Any, Any]:
-    """``(detector, detector_model, refiner_model)`` with a ``"learned:NAME"`` detector resolved.
+    """``(detector, detector_model, refiner_model)`` with a ``"learned:NAME"`` or ``"guided:NAME"`` resolved.
 
     ``"learned:NAME"`` names a weight set of :mod:`localization.detect.weights`
     (``learned:landmarks_v1``, ``learned:landmarks_active_v4`` or ``learned:active``): it becomes
-    ``"learned"`` with that set's keypoint network and refiner files, each unless given explicitly.
-    Any other detector is returned unchanged with the two files.
+    ``"learned"`` with that set's keypoint network and refiner files, each unless given explicitly;
+    ``"guided:NAME"`` likewise becomes ``"guided"`` (the BIM-guided detector, whose first pass runs
+    the learned networks) with the set's files. Any other detector is returned unchanged with the
+    two files.
 
     Raises:
         ConfigError: for an unknown weight-set name, listing the known ones.
     """
-    if not (isinstance(detector, str) and detector.startswith(_LEARNED_PREFIX)):
+    kind, sep, name = detector.partition(":") if isinstance(detector, str) else ("", "", "")
+    if not sep or kind not in _LEARNED_DETECTORS:
         return detector, detector_model, refiner_model
-    name = detector[len(_LEARNED_PREFIX):]
     if name not in WEIGHT_NAMES:
         raise ConfigError(
-            f"detector {detector!r} names unknown weights {name!r}; 'learned:NAME' takes NAME one of "
+            f"detector {detector!r} names unknown weights {name!r}; '{kind}:NAME' takes NAME one of "
             f"{WEIGHT_NAMES}"
         )
     named = weight_set(name)
     return (
-        "learned",
+        kind,
         named.model if detector_model is None else detector_model,
         named.refiner if refiner_model is None else refiner_model,
     )
@@ -140,7 +142,8 @@ class StackSpec:
             ``"learned"`` with that set's two files in ``detector_model`` and ``refiner_model``),
             ``"guided"`` (:class:`uav_struct_env.stack.guided.GuidedDetector`: the learned
             detector, a first pose, then the building model's templates matched at that pose;
-            needs the site: ``build_stack(..., site=)``),
+            needs the site: ``build_stack(..., site=)``), ``"guided:NAME"`` (the same with the
+            weight set ``NAME``, e.g. ``"guided:active"``; stored as ``"guided"`` with its files),
             ``"aruco"`` (OpenCV markers; needs ``landmarks="aruco"``), or any object with
             ``detect(image, context) -> Detections`` (used as given).
         association: ``"robust"`` or ``"paper"``.

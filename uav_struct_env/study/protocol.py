@@ -164,7 +164,8 @@ class StudyConfig:
             ``miss_rate`` and ``false_positives`` then only set the localizer's noise model), or
             ``"learned:NAME"`` with a weight set of :mod:`localization.detect.weights`
             (``"learned:active"``: the active-site set), stored as ``"learned"`` with the set's
-            two files in ``detector_model`` and ``refiner_model``.
+            two files in ``detector_model`` and ``refiner_model``, or ``"guided"`` (the BIM-guided
+            detector, :mod:`uav_struct_env.stack.guided`) and ``"guided:NAME"`` likewise.
         association: ``"robust"`` or ``"paper"`` (plain linear assignment).
         noise: onboard prior model, ``"paper"`` (3 m, 2/2/5 deg, alternating signs) or
             ``"gnss_ins"``.

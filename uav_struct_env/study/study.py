@@ -137,7 +137,8 @@ def _parser() -> CommandParser:
     p.add_argument(
         "--detector",
         default=None,
-        help=f"landmark detector: {', '.join(DETECTORS)}, learned:NAME ({', '.join(WEIGHT_NAMES)}; "
+        help=f"landmark detector: {', '.join(DETECTORS)}, learned:NAME or guided:NAME (NAME a weight set: "
+        f"{', '.join(WEIGHT_NAMES)}; "
         "default: guided for an IFC --site, learned otherwise; learned: the method from the rendered "
         "pixels with the default weights, or with those "
         "`uav-struct adapt` made for an IFC --site when they exist; guided: the learned detector, a "
