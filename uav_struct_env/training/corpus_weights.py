@@ -105,12 +105,15 @@ def train_buildings(exclude: tuple[str, ...] = (), manifest: Path = MANIFEST,
     ``IfcImportError``) is skipped with its reason, as is one named in ``exclude``.
 
     Raises:
-        ConfigError: ``exclude`` names a file that is not in the train split, or a train file is
-            missing (fetch the corpus first: ``python benchmarks/fetch_ifc_corpus.py``).
+        ConfigError: no manifest, ``exclude`` names a file that is not in the train split, or a
+            train file is missing (fetch the corpus first: ``python benchmarks/fetch_ifc_corpus.py``).
     """
     from uav_struct_env.errors import IfcImportError
     from uav_struct_env.site.ifc import ifc_stages
 
+    if not Path(manifest).is_file():
+        raise ConfigError(f"no corpus manifest at {manifest}: the corpus weights are trained from a checkout "
+                          "of the repository (data/ifc_corpus/manifest.json)")
     entries = json.loads(Path(manifest).read_text())["files"]
     files = Path(files) if files is not None else Path(manifest).parent / "files"
     train = {e["name"]: e for e in entries if e["split"] == "train"}
