@@ -34,7 +34,6 @@ import time
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
-from localization.checks import check_number
 from localization.detect.weights import (
     ADAPTED_DIR_ENV,
     ADAPTED_PROVENANCE,
@@ -45,8 +44,14 @@ from localization.detect.weights import (
     file_sha256,
     weight_set,
 )
-from uav_struct_env.errors import ConfigError
-from uav_struct_env.training.finetune import Laps, dataset_config, finetune, render_dataset
+from uav_struct_env.training.finetune import (
+    Laps,
+    add_setting_options,
+    check_settings,
+    dataset_config,
+    finetune,
+    render_dataset,
+)
 
 __all__ = ["AdaptConfig", "adapt", "main"]
 
@@ -82,14 +87,7 @@ class AdaptConfig:
     render_workers: int = 2
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.type == "int":
-                check_number(f"AdaptConfig.{f.name}", value, 0 if f.name == "seed" else 1, integer=True,
-                             error=ConfigError, type_error=ConfigError)
-            else:
-                check_number(f"AdaptConfig.{f.name}", value, 0, 1, lo_open=True, error=ConfigError,
-                             type_error=ConfigError)
+        check_settings(self)
 
 
 def _render(ifc: Path, out: Path, layouts: int, seed: int, scale: float, config: AdaptConfig,
@@ -159,7 +157,6 @@ def adapt(ifc: str | Path, root: str | Path | None = None, config: AdaptConfig |
 def _parser() -> argparse.ArgumentParser:
     from uav_struct_env.validate import CommandParser
 
-    d = AdaptConfig()
     p = CommandParser(prog="uav-struct adapt",
                       description="Fine-tune the learned detector on renders of one building (IFC), "
                       "for `uav-struct study --site` on that file.")
@@ -168,9 +165,7 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"folder of adapted sets (default {adapted_root()}, or $UAV_STRUCT_ADAPTED_DIR); "
                    "the set goes to OUT/<sha256 of the file>/")
     p.add_argument("--overwrite", action="store_true", help="replace the building's adapted set")
-    for f in fields(AdaptConfig):
-        p.add_argument("--" + f.name.replace("_", "-"), type=int if f.type == "int" else float,
-                       default=getattr(d, f.name), help=f"(default {getattr(d, f.name)})")
+    add_setting_options(p, AdaptConfig)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     return p
 

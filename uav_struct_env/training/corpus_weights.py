@@ -35,10 +35,16 @@ from collections import Counter
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
-from localization.checks import check_number
 from localization.detect.weights import DEFAULT_WEIGHTS, MODELS_DIR, file_sha256, weight_set
 from uav_struct_env.errors import ConfigError
-from uav_struct_env.training.finetune import Laps, dataset_config, finetune, render_dataset
+from uav_struct_env.training.finetune import (
+    Laps,
+    add_setting_options,
+    check_settings,
+    dataset_config,
+    finetune,
+    render_dataset,
+)
 
 __all__ = ["CorpusConfig", "main", "train_buildings", "train_corpus_weights"]
 
@@ -50,22 +56,15 @@ MANIFEST = REPO / "data" / "ifc_corpus" / "manifest.json"
 
 @dataclass(frozen=True)
 class CorpusConfig:
-    """Settings of the corpus fine-tune (the model card names the ones of each committed set).
+    """Settings of the corpus fine-tune (the model card names the ones of each candidate).
 
     Attributes:
         layouts: keypoint-network layouts per building (each a stage drawn at random).
         refiner_layouts: refiner layouts per building.
-        random_layouts: keypoint-network layouts of random sites.
-        random_refiner_layouts: refiner layouts of random sites.
-        views: viewpoints per layout.
-        keypoint_steps: fine-tuning steps of the keypoint network (batch 16, 256 x 192 crops).
-        refiner_steps: fine-tuning steps of the refiner (batch 128).
-        keypoint_lr: peak learning rate of the keypoint network (warm-up, then cosine).
-        refiner_lr: peak learning rate of the refiner.
-        seed: dataset seed of the keypoint network's renders (the refiner's: ``seed + 1``) and
-            training seed of both networks.
-        threads: torch threads.
-        render_workers: rendering processes.
+        random_layouts: keypoint-network layouts of random sites (0: none).
+        random_refiner_layouts: refiner layouts of random sites (0: none).
+        views, keypoint_steps, refiner_steps, keypoint_lr, refiner_lr, seed, threads,
+            render_workers: as :class:`~uav_struct_env.training.adapt.AdaptConfig`'s.
     """
 
     layouts: int = 24
@@ -82,15 +81,7 @@ class CorpusConfig:
     render_workers: int = 2
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.type == "int":
-                low = 0 if f.name in ("seed", "random_layouts", "random_refiner_layouts") else 1
-                check_number(f"CorpusConfig.{f.name}", value, low, integer=True, error=ConfigError,
-                             type_error=ConfigError)
-            else:
-                check_number(f"CorpusConfig.{f.name}", value, 0, 1, lo_open=True, error=ConfigError,
-                             type_error=ConfigError)
+        check_settings(self, ("seed", "random_layouts", "random_refiner_layouts"))
 
 
 def _manifest_path(entry: dict, files: Path) -> Path:
@@ -245,7 +236,6 @@ def train_corpus_weights(name: str, out: str | Path = MODELS_DIR, work: str | Pa
 def _parser() -> argparse.ArgumentParser:
     from uav_struct_env.validate import CommandParser
 
-    d = CorpusConfig()
     p = CommandParser(prog="python -m uav_struct_env.training.corpus_weights",
                       description="Fine-tune the default detector weights on renders of the IFC corpus's "
                       "train buildings and of random sites, into one named weight set.")
@@ -256,9 +246,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="folder of the rendered datasets, kept and reused (default: %(default)s)")
     p.add_argument("--exclude", default="", help="comma-separated train buildings to leave out (validation)")
     p.add_argument("--overwrite", action="store_true", help="replace the set's files")
-    for f in fields(CorpusConfig):
-        p.add_argument("--" + f.name.replace("_", "-"), type=int if f.type == "int" else float,
-                       default=getattr(d, f.name), help=f"(default {getattr(d, f.name)})")
+    add_setting_options(p, CorpusConfig)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     return p
 

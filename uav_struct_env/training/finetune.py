@@ -19,18 +19,22 @@ validation set).
 
 from __future__ import annotations
 
+import argparse
 import shutil
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import fields
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
+from localization.checks import check_number
 from localization.detect.weights import WeightSet
+from uav_struct_env.errors import ConfigError
 
-__all__ = ["REFINER_BATCH", "FinetuneSettings", "Laps", "StepBar", "dataset_config", "finetune",
-           "render_dataset"]
+__all__ = ["REFINER_BATCH", "FinetuneSettings", "Laps", "StepBar", "add_setting_options", "check_settings",
+           "dataset_config", "finetune", "render_dataset"]
 
 #: The refiner's batch (the trainer's default), or every mined window if there are fewer.
 REFINER_BATCH = 128
@@ -45,6 +49,35 @@ class FinetuneSettings(Protocol):
     refiner_lr: float
     seed: int
     threads: int
+
+
+def check_settings(config: Any, zero_ok: Sequence[str] = ("seed",)) -> None:
+    """Check every field of a settings dataclass (``AdaptConfig``, ``CorpusConfig``).
+
+    Integers must be at least 1 (at least 0 for the fields in ``zero_ok``), floats (learning
+    rates) in (0, 1].
+
+    Raises:
+        ConfigError: naming the class, the field and the value.
+    """
+    name = type(config).__name__
+    for f in fields(config):
+        value = getattr(config, f.name)
+        if f.type == "int":
+            check_number(f"{name}.{f.name}", value, 0 if f.name in zero_ok else 1, integer=True,
+                         error=ConfigError, type_error=ConfigError)
+        else:
+            check_number(f"{name}.{f.name}", value, 0, 1, lo_open=True, error=ConfigError,
+                         type_error=ConfigError)
+
+
+def add_setting_options(parser: argparse.ArgumentParser, cls: type) -> None:
+    """One ``--field-name`` option per field of the settings dataclass ``cls``, its default shown."""
+    defaults = cls()
+    for f in fields(cls):
+        value = getattr(defaults, f.name)
+        parser.add_argument("--" + f.name.replace("_", "-"), type=int if f.type == "int" else float,
+                            default=value, help=f"(default {value})")
 
 
 class StepBar:
