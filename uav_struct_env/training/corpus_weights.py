@@ -1,6 +1,6 @@
 """Weights fine-tuned on the real-building corpus's train buildings.
 
-``python -m uav_struct_env.training.corpus_weights --name NAME`` fine-tunes the default weight
+``python -m uav_struct_env.training.corpus_weights --name NAME --out DIR`` fine-tunes the default weight
 set (:data:`localization.detect.weights.DEFAULT_WEIGHTS`) on renders of every building of the
 corpus's **train** split (``data/ifc_corpus/manifest.json``) that imports, and of random sites,
 into one named set: ``OUT/NAME.onnx``, ``OUT/NAME_refiner.onnx`` and ``OUT/NAME_provenance.json``.
@@ -178,7 +178,8 @@ def _targets(out: Path, name: str) -> dict[str, Path]:
             "provenance": out / f"{name}_provenance.json"}
 
 
-def train_corpus_weights(name: str, out: str | Path = MODELS_DIR, work: str | Path = "runs/corpus_weights",
+def train_corpus_weights(name: str, out: str | Path = "runs/corpus_weights/weights",
+                         work: str | Path = "runs/corpus_weights",
                          config: CorpusConfig | None = None, exclude: tuple[str, ...] = (),
                          progress: bool = True, overwrite: bool = False,
                          manifest: Path = MANIFEST) -> dict[str, Path]:
@@ -241,7 +242,9 @@ def _parser() -> argparse.ArgumentParser:
                       "train buildings and of random sites, into one named weight set.")
     p.add_argument("--name", required=True, help="the set's name: OUT/NAME.onnx, OUT/NAME_refiner.onnx, "
                    "OUT/NAME_provenance.json")
-    p.add_argument("--out", default=str(MODELS_DIR), help="folder of the set's files (default: %(default)s)")
+    p.add_argument("--out", default="runs/corpus_weights/weights",
+                   help="folder of the set's files (default: %(default)s; a set adopted for the package goes "
+                   f"to {MODELS_DIR} with its model-card section)")
     p.add_argument("--work", default="runs/corpus_weights",
                    help="folder of the rendered datasets, kept and reused (default: %(default)s)")
     p.add_argument("--exclude", default="", help="comma-separated train buildings to leave out (validation)")
