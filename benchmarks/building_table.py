@@ -68,7 +68,8 @@ def main(argv: list[str] | None = None) -> int:
     """Print the table of the study folders given; returns 0."""
     from uav_struct_env.study.cells import read_records_csv
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     ap.add_argument("folders", nargs="+", type=Path, help="study output folders (each with per_image.csv)")
     ap.add_argument("--check", action="store_true", help="mark item 2's targets per row")
     args = ap.parse_args(argv)

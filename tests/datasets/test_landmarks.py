@@ -106,6 +106,30 @@ def test_an_ifc_building_dataset_labels_its_own_landmarks(tmp_path):
     assert n > 0
 
 
+def test_stages_limit_the_layouts_to_those_stages(tmp_path, capsys):
+    """``--stages A``: every layout of the building at stage A; a bad stage list is refused in one line."""
+    pytest.importorskip("ifcopenshell")
+    from pathlib import Path
+
+    from uav_struct_env.site import ifc_stages
+
+    duplex = Path(__file__).resolve().parents[1] / "data" / "ifc" / "duplex.ifc"
+    top = ifc_stages(duplex)[-1]
+    out = tmp_path / "top"
+    assert cli_main([str(out), "--site", str(duplex), "--stages", top, "--layouts", "2", "--views", "1",
+                     "--scale", "0.25", "--renderer", "tiny"]) == 0
+    data = load_labels(out)
+    assert {rec["stage"] for rec in data["images"]} == {top}
+    assert data["config"]["stages"] == [top] and f"stages {top}" in data["settings"]
+    with pytest.raises(ConfigError, match=r"DatasetConfig.stages: \['Level 9/slab'\] not stages of duplex"):
+        DatasetConfig(site=str(duplex), stages=("Level 9/slab",))
+    with pytest.raises(ConfigError, match="applies to a building file"):
+        DatasetConfig(stages=("slab",))
+    assert cli_main([str(tmp_path / "no"), "--site", str(duplex), "--stages", "Attic/slab"]) == 2
+    assert "not stages of duplex.ifc" in capsys.readouterr().err
+    assert not (tmp_path / "no").exists()
+
+
 def test_a_missing_site_file_is_refused_before_anything_is_written(tmp_path, capsys):
     out = tmp_path / "never"
     assert cli_main([str(out), "--site", str(tmp_path / "missing.ifc")]) == 2

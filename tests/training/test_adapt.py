@@ -111,6 +111,17 @@ def test_an_interrupted_adaptation_leaves_no_set(tmp_path, monkeypatch):
     assert list(adapted_folder(file_sha256(DUPLEX), tmp_path).iterdir()) == []
 
 
+def test_floor_stages_are_the_stages_the_study_evaluates():
+    from uav_struct_env.site import ifc_stages
+    from uav_struct_env.study.protocol import StudyConfig
+    from uav_struct_env.training.adapt import floor_stages
+
+    every = ifc_stages(DUPLEX)
+    study = StudyConfig(site=str(DUPLEX), detector="projection")
+    assert floor_stages(DUPLEX) == tuple(s for s in study._stages.values() if s is not None)
+    assert floor_stages(DUPLEX, every[0]) == (every[0],) and len(every) > 1
+
+
 def test_adapt_command_refuses_bad_input(tmp_path, capsys):
     from uav_struct_env.cli import main
 

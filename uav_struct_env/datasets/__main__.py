@@ -20,6 +20,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="dataset seed (held-out sets: another)")
     ap.add_argument("--scale", type=float, default=0.5, help="saved image scale of 1280x720")
     ap.add_argument("--renderer", default="auto", choices=["auto", "tiny", "egl"])
+    ap.add_argument("--stages", default=None,
+                    help="with a building file: comma-separated stages the layouts draw from (default: all)")
     ap.add_argument("--site", default="random",
                     help="random (a new random site per layout) or a site file (*.json) / IFC file "
                          "(*.ifc): that building at a stage drawn per layout")
@@ -45,7 +47,8 @@ def main(argv: list[str] | None = None) -> int:
         config = DatasetConfig(n_layouts=args.layouts, views_per_layout=args.views, seed=args.seed,
                                scale=args.scale, renderer=args.renderer, site=args.site,
                                activity=args.activity, camera=args.camera,
-                               imaging=args.imaging)
+                               imaging=args.imaging,
+                               stages=tuple(args.stages.split(",")) if args.stages else None)
         check_option("--workers", args.workers, 1, integer=True)
         check_output_dir(args.out_dir, overwrite=args.overwrite, option="out_dir")
     except INPUT_ERRORS as err:

@@ -4,7 +4,8 @@ Used to train and evaluate the learned landmark detector (:mod:`localization.det
 Each *layout* is one random site (:func:`uav_struct_env.site.random_site`, both construction
 stages, with or without ArUco markers) -- or, with ``site`` a site file or an IFC file, that
 building at one of its stages drawn per layout (``python -m uav_struct_env.datasets OUT --site
-building.ifc``: a held-out set on a real building) -- with its own concrete/ground textures, a random texture
+building.ifc``: a held-out set on a real building; ``stages`` / ``--stages A,B`` draws from those
+stages only) -- with its own concrete/ground textures, a random texture
 resolution and 3-14 clutter boxes (stacks of building material and equipment-sized boxes on the
 ground, a few small stacks on the slab away from its edges). Each layout is seen from
 ``views_per_layout`` random viewpoints: any azimuth, 10-40 m out from the slab edge, 8-30 m up,
@@ -147,6 +148,7 @@ class DatasetConfig:
     activity: str = "none"
     camera: str = "paper"
     imaging: str = "ideal"
+    stages: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.site, str) or not (
@@ -159,6 +161,8 @@ class DatasetConfig:
             )
         if self.site != "random":
             object.__setattr__(self, "site", str(Path(self.site).resolve()))
+        if self.stages is not None:
+            self._check_stages()
         check_choice("DatasetConfig.activity", self.activity, ACTIVITIES, error=ConfigError)
         check_choice("DatasetConfig.camera", self.camera, CAMERAS, error=ConfigError)
         check_choice("DatasetConfig.imaging", self.imaging, IMAGINGS, error=ConfigError)
@@ -174,6 +178,21 @@ class DatasetConfig:
                 raise ConfigError(
                     f"DatasetConfig.{name} must be (low, high), 0 < low <= high, got {(lo, hi)!r}"
                 )
+
+    def _check_stages(self) -> None:
+        """``stages``: a non-empty tuple of the building file's stage names."""
+        if self.site == "random":
+            raise ConfigError("DatasetConfig.stages applies to a building file (site *.json or *.ifc), "
+                              "not to random sites")
+        if not isinstance(self.stages, (tuple, list)) or not self.stages:
+            raise ConfigError("DatasetConfig.stages must be a non-empty tuple of stage names, got "
+                              f"{self.stages!r}")
+        names = [st.name for st in make_site(self.site, _first_stage(self.site), None).stages]
+        unknown = [s for s in self.stages if s not in names]
+        if unknown:
+            raise ConfigError(f"DatasetConfig.stages: {unknown} not stages of {Path(self.site).name} "
+                              f"(its stages: {names})")
+        object.__setattr__(self, "stages", tuple(str(s) for s in self.stages))
 
     @property
     def image_size(self) -> tuple[int, int]:
@@ -341,7 +360,8 @@ def render_layout(config: DatasetConfig, layout: int, out_dir: Path | None = Non
         marker_size = [None, 0.5, 1.0][int(rng.integers(3))]
         site = random_site(rng, stage=stage, marker_size=marker_size)
     else:
-        stages = [st.name for st in make_site(config.site, _first_stage(config.site), None).stages]
+        stages = config.stages or [st.name for st in
+                                   make_site(config.site, _first_stage(config.site), None).stages]
         stage = str(rng.choice(stages))
         marker_size = [None, 0.5, 1.0][int(rng.integers(3))]
         site = make_site(config.site, stage, marker_size)
@@ -450,14 +470,16 @@ def generate(config: DatasetConfig, out_dir: str | Path, workers: int = 1,
 
 def _write_labels(path: Path, config: DatasetConfig, records: list[dict]) -> None:
     settings = asdict(config)
-    for key, default in (("camera", "paper"), ("imaging", "ideal")):
+    for key, default in (("camera", "paper"), ("imaging", "ideal"), ("stages", None)):
         if settings[key] == default:  # as written before the generator had them (load_labels fills it in)
             del settings[key]
     made_by = software()
     labels = {
         "format": FORMAT, "types": list(LANDMARK_TYPES), "image_size": list(config.image_size),
         "source_size": list(config.source_size), "scale": config.scale,
-        "config": settings, "software": made_by, "settings": settings_line(asdict(config), made_by),
+        "config": settings, "software": made_by,
+        "settings": settings_line({k: v for k, v in asdict(config).items() if k != "stages" or v is not None},
+                                  made_by),
         "images": records,
     }
     path.write_text(json.dumps(labels))

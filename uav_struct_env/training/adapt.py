@@ -90,19 +90,33 @@ class AdaptConfig:
         check_settings(self)
 
 
+def floor_stages(ifc: str | Path, stage: str | None = None) -> tuple[str, ...]:
+    """The stages of the floor ``uav-struct study --site ifc [--stage stage]`` evaluates.
+
+    Its slab stage and its columns stage (those it has), as the study resolves them
+    (:meth:`uav_struct_env.site.Site.floor_stage`); None: the study's default floor.
+    """
+    from uav_struct_env.site import make_site
+
+    site = make_site(str(ifc), stage=stage, marker_size=None)
+    return tuple(s for s in (site.floor_stage("slab"), site.floor_stage("columns")) if s is not None)
+
+
 def _render(ifc: Path, out: Path, layouts: int, seed: int, scale: float, config: AdaptConfig,
-            progress: bool) -> Path:
+            progress: bool, stages: tuple[str, ...] | None = None) -> Path:
     """Render one labelled dataset of the building (activity, camera and imaging mixed)."""
-    return render_dataset(dataset_config(ifc, layouts, config.views, seed, scale), out, config.render_workers,
-                          progress)
+    return render_dataset(dataset_config(ifc, layouts, config.views, seed, scale, stages), out,
+                          config.render_workers, progress)
 
 
-def _train_networks(ifc: Path, work: Path, final: dict, config: AdaptConfig, progress: bool) -> dict:
+def _train_networks(ifc: Path, work: Path, final: dict, config: AdaptConfig, progress: bool,
+                    stages: tuple[str, ...] | None = None) -> dict:
     """Render both datasets and fine-tune both networks; returns the phases' costs and counts."""
     laps = Laps()
-    keypoint_data = _render(ifc, work / "keypoint_data", config.layouts, config.seed, 0.5, config, progress)
+    keypoint_data = _render(ifc, work / "keypoint_data", config.layouts, config.seed, 0.5, config, progress,
+                            stages)
     refiner_data = _render(ifc, work / "refiner_data", config.refiner_layouts, config.seed + 1, 1.0, config,
-                           progress)
+                           progress, stages)
     laps("render")
     counts = finetune(config, weight_set(DEFAULT_WEIGHTS), [keypoint_data], [refiner_data], final, work,
                       progress, laps)
@@ -110,7 +124,7 @@ def _train_networks(ifc: Path, work: Path, final: dict, config: AdaptConfig, pro
 
 
 def adapt(ifc: str | Path, root: str | Path | None = None, config: AdaptConfig | None = None,
-          progress: bool = True, overwrite: bool = False) -> Path:
+          progress: bool = True, overwrite: bool = False, stages: tuple[str, ...] | None = None) -> Path:
     """Adapt the default weights to the building file ``ifc``; returns the set's folder.
 
     Args:
@@ -120,6 +134,8 @@ def adapt(ifc: str | Path, root: str | Path | None = None, config: AdaptConfig |
         config: the settings (None: :class:`AdaptConfig`'s defaults).
         progress: show progress bars.
         overwrite: replace a set adapted before (otherwise such a folder is refused).
+        stages: the building's stages the renders draw from (:func:`floor_stages` gives a floor's);
+            None: every stage.
 
     Raises:
         uav_struct_env.outputs.OutputExistsError: the building has an adapted set and not ``overwrite``.
@@ -138,7 +154,7 @@ def adapt(ifc: str | Path, root: str | Path | None = None, config: AdaptConfig |
                       owned=(ADAPTED_PROVENANCE, "adapted_*.onnx")) as staged, \
             tempfile.TemporaryDirectory(prefix="uav-struct-adapt-") as work:
         final = {"model": staged.stage / target.model.name, "refiner": staged.stage / target.refiner.name}
-        costs = _train_networks(ifc, Path(work), final, config, progress)
+        costs = _train_networks(ifc, Path(work), final, config, progress, stages)
         record = {
             "building": {"file": str(ifc), "name": ifc.name, "sha256": sha},
             "weights": {"name": target.name, "model": target.model.name, "refiner": target.refiner.name,
@@ -146,6 +162,7 @@ def adapt(ifc: str | Path, root: str | Path | None = None, config: AdaptConfig |
                         "base_sha256": {k: file_sha256(getattr(weight_set(DEFAULT_WEIGHTS), k))
                                         for k in ("model", "refiner")}},
             "settings": asdict(config),
+            "stages": None if stages is None else list(stages),
             "software": {**software(), "torch": torch.__version__},
             **costs,
             "wall_minutes": round((time.perf_counter() - t0) / 60.0, 2),

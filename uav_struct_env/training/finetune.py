@@ -113,15 +113,17 @@ class Laps:
         self._t = time.perf_counter()
 
 
-def dataset_config(site: str | Path, layouts: int, views: int, seed: int, scale: float):
+def dataset_config(site: str | Path, layouts: int, views: int, seed: int, scale: float,
+                   stages: tuple[str, ...] | None = None):
     """One fine-tuning dataset's settings (a ``DatasetConfig``): activity, camera, imaging ``mixed``.
 
-    ``site`` is ``"random"`` or a building file (site JSON or IFC).
+    ``site`` is ``"random"`` or a building file (site JSON or IFC); ``stages``: the building's
+    stages its layouts draw from (None: all).
     """
     from uav_struct_env.datasets.landmarks import DatasetConfig
 
     return DatasetConfig(n_layouts=layouts, views_per_layout=views, seed=seed, scale=scale, site=str(site),
-                         activity="mixed", camera="mixed", imaging="mixed")
+                         activity="mixed", camera="mixed", imaging="mixed", stages=stages)
 
 
 def render_dataset(config, out: Path, workers: int, progress: bool) -> Path:
