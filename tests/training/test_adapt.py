@@ -130,3 +130,7 @@ def test_adapt_command_refuses_bad_input(tmp_path, capsys):
     assert err.startswith("uav-struct adapt: error: ifc") and "does not exist" in err
     assert main(["adapt", str(DUPLEX), "--keypoint-steps", "0"]) == 2
     assert "AdaptConfig.keypoint_steps" in capsys.readouterr().err
+    assert main(["adapt", str(DUPLEX), "--stage", "Attic/slab"]) == 2
+    assert "Attic/slab" in capsys.readouterr().err
+    assert main(["adapt", str(DUPLEX), "--stage", "Roof/slab", "--all-stages"]) == 2
+    assert "--stage 'Roof/slab' and --all-stages: choose one" in capsys.readouterr().err

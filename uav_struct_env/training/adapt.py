@@ -1,8 +1,9 @@
 """``uav-struct adapt b.ifc``: fine-tune the learned detector on renders of one building.
 
 The building model is known before the flight, so the detector can be prepared for it. The
-command renders the building at its stages (:mod:`uav_struct_env.datasets.landmarks` with
-``site=b.ifc``: every layout one of its stages, activity, camera and imaging all ``mixed``), then
+command renders the building (:mod:`uav_struct_env.datasets.landmarks` with ``site=b.ifc``:
+every layout the floor the study evaluates, :func:`floor_stages`, or with ``--all-stages`` one of
+every stage drawn at random; activity, camera and imaging all ``mixed``), then
 fine-tunes the default weights (:data:`localization.detect.weights.DEFAULT_WEIGHTS`) on them:
 
 1. the keypoint network, from its committed ONNX file, on ``layouts x views`` half-resolution
@@ -44,6 +45,7 @@ from localization.detect.weights import (
     file_sha256,
     weight_set,
 )
+from uav_struct_env.errors import ConfigError
 from uav_struct_env.training.finetune import (
     Laps,
     add_setting_options,
@@ -182,6 +184,12 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"folder of adapted sets (default {adapted_root()}, or $UAV_STRUCT_ADAPTED_DIR); "
                    "the set goes to OUT/<sha256 of the file>/")
     p.add_argument("--overwrite", action="store_true", help="replace the building's adapted set")
+    p.add_argument("--stage", default=None,
+                   help="the floor the renders show, by any of its stage names, as uav-struct study --stage "
+                   "takes it (default: the floor the study evaluates by default)")
+    p.add_argument("--all-stages", action="store_true",
+                   help="render every stage of the building, one drawn per layout (the default before "
+                   "2026-11-28)")
     add_setting_options(p, AdaptConfig)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     return p
@@ -200,13 +208,17 @@ def main(argv: list[str] | None = None) -> int:
         check_input_file(args.ifc, option="ifc", what="IFC file")
         check_site(args.ifc)
         config = AdaptConfig(**{f.name: getattr(args, f.name) for f in fields(AdaptConfig)})
+        if args.all_stages and args.stage is not None:
+            raise ConfigError(f"--stage {args.stage!r} and --all-stages: choose one")
+        stages = None if args.all_stages else floor_stages(args.ifc, args.stage)
         import torch  # noqa: F401  (the train extra)
     except ImportError as err:
         return refuse(prog, f"{err}; adapt trains with torch: pip install 'uav-struct-env[train]'")
     except INPUT_ERRORS as err:
         return refuse(prog, err)
     try:
-        folder = adapt(args.ifc, args.out, config, progress=not args.no_progress, overwrite=args.overwrite)
+        folder = adapt(args.ifc, args.out, config, progress=not args.no_progress, overwrite=args.overwrite,
+                       stages=stages)
     except (OutputExistsError, NotADirectoryError) as err:
         return refuse(prog, err)
     except WorkerDied as err:
