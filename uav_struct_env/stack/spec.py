@@ -64,8 +64,6 @@ PAPER_WIDTH_PX: int = PAPER_IMAGE_SIZE[0]
 _ARUCO_MODES = ("average", "joint")
 #: Detectors that run the learned detector's networks (and take its weight files).
 _LEARNED_DETECTORS = ("learned", "guided")
-#: ``"learned:NAME"`` (``"guided:NAME"``) runs the learned (guided) detector with the weight set
-#: ``NAME`` (:func:`resolve_learned`).
 
 
 def resolve_learned(detector: Any, detector_model: Any, refiner_model: Any) -> tuple[Any, Any, Any]:
