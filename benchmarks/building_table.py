@@ -22,17 +22,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from wrong_poses import is_wrong  # noqa: E402
-
-
-def _ok(r: dict) -> bool:
-    return r["success"] in ("True", "1", "true")
+from wrong_poses import is_success, is_wrong, rows_by_method  # noqa: E402
 
 
 def row(rows: list[dict]) -> dict:
@@ -44,13 +39,13 @@ def row(rows: list[dict]) -> dict:
     true = sum(int(r["n_true_detections"]) for r in seen)
     f1 = pooled_scores(sum(int(r["n_correct"]) for r in seen), sum(int(r["n_assigned"]) for r in seen),
                        true).f1
-    ok = [r for r in seen if _ok(r)]
+    ok = [r for r in seen if is_success(r)]
     med = float(np.median([float(r["translation_error_m"]) for r in ok])) if ok else float("nan")
     bound = float(np.median([float(r["crb_translation_m"]) for r in ok])) if ok else float("nan")
     detection = true / visible if visible else float("nan")
     return {"views": len(rows), "posable": len(seen), "detection": detection,
             "f1": f1, "poses": len(ok), "median_m": med, "bound_m": bound,
-            "wrong": sum(is_wrong(r) for r in rows), "successes": sum(_ok(r) for r in rows)}
+            "wrong": sum(is_wrong(r) for r in rows), "successes": sum(is_success(r) for r in rows)}
 
 
 def _pct(x: float) -> str:
@@ -66,8 +61,6 @@ def _targets(f: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Print the table of the study folders given; returns 0."""
-    from uav_struct_env.study.cells import read_records_csv
-
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     ap.add_argument("folders", nargs="+", type=Path, help="study output folders (each with per_image.csv)")
@@ -78,11 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---|---:|---:|---:|---:|---:|" + ("---|" if args.check else ""))
     poses = wrong = 0
     for folder in args.folders:
-        by_method: dict[str, list[dict]] = defaultdict(list)
-        for r in read_records_csv(folder / "per_image.csv"):
-            if not r["method"].startswith("aruco"):
-                by_method[r["method"]].append(r)
-        for method, rows in by_method.items():
+        for method, rows in rows_by_method(folder / "per_image.csv").items():
             f = row(rows)
             poses, wrong = poses + f["successes"], wrong + f["wrong"]
             ratio = f" ({f['median_m'] / f['bound_m']:.2f}x)" if f["poses"] else ""

@@ -46,15 +46,10 @@ SETS = ("slab_corners", "opening_corners", "column_tops")
 
 
 def local_path(entry: dict, files: str | Path | None = None) -> Path:
-    """Where the manifest entry's file lives on this machine (it may not exist).
+    """Where the manifest entry's file lives here (:func:`uav_struct_env.site.corpus.corpus_file`)."""
+    from uav_struct_env.site.corpus import corpus_file
 
-    ``files/<name>.ifc`` when ``files`` is given and holds it, else the entry's ``local_path``
-    relative to the repository root (where the shipped duplex lives).
-    """
-    if files is not None and (Path(files) / f"{entry['name']}.ifc").exists():
-        return Path(files) / f"{entry['name']}.ifc"
-    p = Path(entry["local_path"])
-    return p if p.is_absolute() else ROOT / p
+    return corpus_file(entry, files)
 
 
 def site_digest(path: str | Path) -> str:

@@ -64,11 +64,27 @@ def limit_m(bound_m: float) -> float:
     return max(FLOOR_M, FACTOR * bound_m) if math.isfinite(bound_m) else FLOOR_M
 
 
+def is_success(row: dict) -> bool:
+    """Whether a ``per_image.csv`` row is a success."""
+    return row["success"] in ("True", "1", "true")
+
+
 def is_wrong(row: dict) -> bool:
     """Whether a ``per_image.csv`` row is a wrong success."""
-    if row["success"] not in ("True", "1", "true"):
+    if not is_success(row):
         return False
     return float(row["translation_error_m"]) > limit_m(float(row["crb_translation_m"]))
+
+
+def rows_by_method(path: Path, structural_only: bool = True) -> dict[str, list[dict]]:
+    """The rows of one ``per_image.csv`` by method, in file order (the ArUco ones left out unless asked)."""
+    from uav_struct_env.study.cells import read_records_csv
+
+    by_method: dict[str, list[dict]] = defaultdict(list)
+    for r in read_records_csv(path):
+        if not (structural_only and r["method"].startswith("aruco")):
+            by_method[r["method"]].append(r)
+    return by_method
 
 
 def per_image_files(folders: list[Path]) -> list[Path]:
@@ -81,20 +97,12 @@ def per_image_files(folders: list[Path]) -> list[Path]:
 
 def count(folders: list[Path], structural_only: bool = True) -> dict[str, dict]:
     """Print and return, per ``per_image.csv`` and method: views, posable views, successes, wrong."""
-    from uav_struct_env.study.cells import read_records_csv
-
     summary = {}
     total = [0, 0]
     for path in per_image_files(folders):
-        rows = read_records_csv(path)
-        by_method = defaultdict(list)
-        for r in rows:
-            if structural_only and r["method"].startswith("aruco"):
-                continue
-            by_method[r["method"]].append(r)
         name = str(path.parent)
-        for method, mine in by_method.items():
-            ok = [r for r in mine if r["success"] in ("True", "1", "true")]
+        for method, mine in rows_by_method(path, structural_only).items():
+            ok = [r for r in mine if is_success(r)]
             wrong = [r for r in mine if is_wrong(r)]
             posable = sum(int(r["n_visible"]) >= 4 for r in mine)
             errs = [float(r["translation_error_m"]) for r in ok]

@@ -53,7 +53,8 @@ def test_train_buildings_keeps_what_imports_and_says_why_it_skips(tmp_path):
         train_buildings(("h",), manifest=manifest)
     with pytest.raises(ConfigError, match=r"no corpus manifest at .*nowhere\.json: the corpus weights are "):
         train_buildings(manifest=tmp_path / "nowhere.json")
-    missing = _manifest(tmp_path, [{"name": "gone", "split": "train"}])
+    gone = {"name": "gone", "split": "train", "local_path": "data/ifc_corpus/files/gone.ifc"}
+    missing = _manifest(tmp_path, [gone])
     with pytest.raises(ConfigError, match=r"train buildings missing: .*files/gone\.ifc; fetch them with"):
         train_buildings(manifest=missing)
 

@@ -37,6 +37,7 @@ from pathlib import Path
 
 from localization.detect.weights import DEFAULT_WEIGHTS, MODELS_DIR, file_sha256, weight_set
 from uav_struct_env.errors import ConfigError
+from uav_struct_env.site.corpus import MANIFEST, REPO, corpus_file
 from uav_struct_env.training.finetune import (
     Laps,
     add_setting_options,
@@ -48,10 +49,6 @@ from uav_struct_env.training.finetune import (
 
 __all__ = ["CorpusConfig", "main", "train_buildings", "train_corpus_weights"]
 
-#: The repository's root (the manifest and the corpus's files are found from it).
-REPO = Path(__file__).resolve().parents[2]
-#: The corpus manifest (source, sha256, licence and split of every file).
-MANIFEST = REPO / "data" / "ifc_corpus" / "manifest.json"
 
 
 @dataclass(frozen=True)
@@ -84,16 +81,13 @@ class CorpusConfig:
         check_settings(self, ("seed", "random_layouts", "random_refiner_layouts"))
 
 
-def _manifest_path(entry: dict, files: Path) -> Path:
-    return REPO / entry["local_path"] if entry.get("local_path") else files / f"{entry['name']}.ifc"
-
-
 def train_buildings(exclude: tuple[str, ...] = (), manifest: Path = MANIFEST,
                     files: Path | None = None) -> tuple[list[tuple[str, Path]], dict[str, str]]:
     """The train split's buildings that import: ``([(name, path)], {skipped name: reason})``.
 
     A building of the train split that has no stage a camera can use (the importer's
-    ``IfcImportError``) is skipped with its reason, as is one named in ``exclude``.
+    ``IfcImportError``) is skipped with its reason, as is one named in ``exclude``. Each file is
+    found by :func:`uav_struct_env.site.corpus.corpus_file` (``files``: a folder tried first).
 
     Raises:
         ConfigError: no manifest, ``exclude`` names a file that is not in the train split, or a
@@ -106,13 +100,12 @@ def train_buildings(exclude: tuple[str, ...] = (), manifest: Path = MANIFEST,
         raise ConfigError(f"no corpus manifest at {manifest}: the corpus weights are trained from a checkout "
                           "of the repository (data/ifc_corpus/manifest.json)")
     entries = json.loads(Path(manifest).read_text())["files"]
-    files = Path(files) if files is not None else Path(manifest).parent / "files"
     train = {e["name"]: e for e in entries if e["split"] == "train"}
     unknown = sorted(set(exclude) - set(train))
     if unknown:
         raise ConfigError(f"--exclude {','.join(unknown)}: not a train building of {manifest} "
                           f"(train: {', '.join(sorted(train))})")
-    paths = {name: _manifest_path(e, files) for name, e in train.items()}
+    paths = {name: corpus_file(e, files) for name, e in train.items()}
     missing = [str(p) for p in paths.values() if not p.is_file()]
     if missing:
         raise ConfigError(f"train buildings missing: {', '.join(missing)}; fetch them with "
