@@ -510,6 +510,7 @@ def _build(opt: dict[str, Any], out: Path, stop: _StopRequest):
     from stable_baselines3.common.vec_env import VecNormalize
 
     from uav_struct_env.training.policy_files import RESUME_FILE, load_rng_state, restore_rng_state
+    from uav_struct_env.wrappers import TRAIN_CONFIGS
 
     with stop.children():
         vec = make_vec_env(opt["config"], opt["n_envs"], opt["num_cpus"], opt["seed"],
@@ -525,10 +526,17 @@ def _build(opt: dict[str, Any], out: Path, stop: _StopRequest):
     # every vector key normalized; an image stays uint8 for the CNN, which scales it itself
     vectors = [k for k, s in vec.observation_space.spaces.items() if not is_image_space(s)]
     vec = VecNormalize(vec, norm_obs=True, norm_reward=True, gamma=opt["gamma"], norm_obs_keys=vectors)
-    model = PPO("MultiInputPolicy", vec, n_steps=opt["n_steps"], batch_size=opt["batch_size"],
+    policy, policy_kwargs = "MultiInputPolicy", {"net_arch": list(opt["net_arch"]),
+                                                 "log_std_init": opt["log_std_init"]}
+    actor_keys = TRAIN_CONFIGS[opt["config"]].actor_keys
+    if actor_keys:  # the policy reads these keys, the value function every key
+        from uav_struct_env.training.asymmetric import AsymmetricActorCriticPolicy
+
+        policy, policy_kwargs = AsymmetricActorCriticPolicy, {**policy_kwargs, "actor_keys": list(actor_keys)}
+    model = PPO(policy, vec, n_steps=opt["n_steps"], batch_size=opt["batch_size"],
                 n_epochs=opt["n_epochs"], learning_rate=opt["learning_rate"], gamma=opt["gamma"],
                 ent_coef=opt["ent_coef"], tensorboard_log=tb, device="cpu", verbose=0,
-                policy_kwargs={"net_arch": list(opt["net_arch"]), "log_std_init": opt["log_std_init"]})
+                policy_kwargs=policy_kwargs)
     return vec, model
 
 
@@ -640,7 +648,9 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--out", default=DEFAULTS["out"], help="output folder")
     p.add_argument("--overwrite", action="store_true",
                    help="train into an --out folder that already holds files (else refused)")
-    p.add_argument("--config", default=DEFAULTS["config"], help="TRAIN_CONFIGS name: state | image | pixels")
+    p.add_argument("--config", default=DEFAULTS["config"],
+                   help="TRAIN_CONFIGS name: state | image | pixels | pixels_critic (the policy reads "
+                        "pixels' keys, its value function every key)")
     p.add_argument("--total-timesteps", type=int, default=DEFAULTS["total_timesteps"])
     p.add_argument("--minutes", type=float, default=None, help="stop after this wall-clock time")
     p.add_argument(

@@ -217,7 +217,9 @@ def load_ppo(path: str | Path, observation_space: Any, action_space: Any, *, dev
     """SB3 ``PPO.load`` of ``model.zip`` without unpickling its cloudpickled entries.
 
     ``observation_space`` and ``action_space`` are the env's (one agent's); the policy class is
-    ``MultiInputPolicy`` for dict observations, else ``MlpPolicy``. An image key is given to the
+    ``MultiInputPolicy`` for dict observations (the asymmetric actor-critic,
+    :class:`~uav_struct_env.training.asymmetric.AsymmetricActorCriticPolicy`, where the model's
+    ``policy_kwargs`` name ``actor_keys``), else ``MlpPolicy``. An image key is given to the
     model channel-first, as SB3 trained it (``VecTransposeImage``); its ``predict`` transposes
     the env's channel-last images itself. Training-only state (the last observations, episode
     buffers, schedules) is replaced by empty values: the model predicts.
@@ -239,6 +241,10 @@ def load_ppo(path: str | Path, observation_space: Any, action_space: Any, *, dev
         raise ValueError(f"{str(path)!r} is not a stable-baselines3 model file: {err}") from None
     pickled = sorted(k for k, v in data.items() if isinstance(v, dict) and ":serialized:" in v)
     policy = MultiInputActorCriticPolicy if isinstance(observation_space, spaces.Dict) else ActorCriticPolicy
+    if isinstance(data.get("policy_kwargs"), dict) and "actor_keys" in data["policy_kwargs"]:
+        from uav_struct_env.training.asymmetric import AsymmetricActorCriticPolicy
+
+        policy = AsymmetricActorCriticPolicy  # its actor reads actor_keys, its critic every key
     if isinstance(observation_space, spaces.Dict):
         channel_last = {k for k, s in observation_space.spaces.items()
                         if is_image_space(s) and not is_image_space_channels_first(s)}

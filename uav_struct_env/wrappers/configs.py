@@ -19,6 +19,11 @@ on 2 CPU cores (docs/training.md):
   has before any localization: the 64 x 36 ``image``, ``gnss`` and ``attitude`` (no ``pose``,
   ``pose_std``, ``localized`` or ``layout``: the projection detector that makes them reads the
   simulator's landmark truth). A viewpoint policy from the camera (issue 41, item 4).
+* ``"pixels_critic"``: the ``image`` configuration's env, reward and observation, of which the
+  policy reads only the ``pixels`` keys (``actor_keys``: ``image``, ``gnss``, ``attitude``); the
+  value function, used only in training, reads every key
+  (:class:`uav_struct_env.training.asymmetric.AsymmetricActorCriticPolicy`, an asymmetric
+  actor-critic). The trained policy is a policy from pixels as ``pixels``' is.
 """
 
 from __future__ import annotations
@@ -40,7 +45,9 @@ __all__ = ["TRAIN_CONFIGS", "TrainConfig", "make_localization_env", "make_train_
 class TrainConfig:
     """An environment configuration for training: env overrides + wrapper options.
 
-    ``wrapper`` holds :class:`~uav_struct_env.wrappers.LocalizationWrapper` keyword arguments; a
+    ``wrapper`` holds :class:`~uav_struct_env.wrappers.LocalizationWrapper` keyword arguments;
+    ``actor_keys``, when given, the observation keys the trained policy reads (the others feed its
+    value function only, in training: an asymmetric actor-critic); a
     ``"mode"`` key (the former name of ``"association"``, as saved configurations may hold it) is
     read as ``"association"`` with a FutureWarning, for one release.
     """
@@ -49,8 +56,10 @@ class TrainConfig:
     env: dict[str, Any] = field(default_factory=dict)
     wrapper: dict[str, Any] = field(default_factory=dict)
     preset: str = "train"
+    actor_keys: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "actor_keys", tuple(self.actor_keys))
         if "mode" in self.wrapper:  # the former name of association=, for one release
             warnings.warn(
                 "the wrapper option 'mode' is renamed 'association' (as in StackSpec and Localizer); "
@@ -68,10 +77,14 @@ class TrainConfig:
         )
 
     def as_dict(self) -> dict[str, Any]:
-        """The configuration as JSON-ready data (tuples as lists); :meth:`from_dict` reads it."""
-        return json.loads(json.dumps(
-            {"name": self.name, "preset": self.preset, "env": self.env, "wrapper": self.wrapper}
-        ))
+        """The configuration as JSON-ready data (tuples as lists); :meth:`from_dict` reads it.
+
+        ``actor_keys`` only where given (a configuration without them reads as before).
+        """
+        data = {"name": self.name, "preset": self.preset, "env": self.env, "wrapper": self.wrapper}
+        if self.actor_keys:
+            data["actor_keys"] = self.actor_keys
+        return json.loads(json.dumps(data))
 
     @classmethod
     def from_dict(cls, data: Any) -> TrainConfig:
@@ -81,15 +94,17 @@ class TrainConfig:
             ConfigError: if ``data`` is not such a mapping.
         """
         keys = {"name", "preset", "env", "wrapper"}
-        if (not isinstance(data, dict) or set(data) != keys
-                or not all(isinstance(data[k], dict) for k in ("env", "wrapper"))):
+        if (not isinstance(data, dict) or not keys <= set(data) <= keys | {"actor_keys"}
+                or not all(isinstance(data[k], dict) for k in ("env", "wrapper"))
+                or not isinstance(data.get("actor_keys", []), list)):
             raise ConfigError(
                 f"a training configuration must be a mapping with keys {sorted(keys)} (env and "
-                f"wrapper mappings), got {data!r}"
+                f"wrapper mappings) and optionally actor_keys (a list), got {data!r}"
             )
         env, wrapper = ({k: tuple(v) if isinstance(v, list) else v for k, v in data[part].items()}
                         for part in ("env", "wrapper"))
-        return cls(str(data["name"]), env, wrapper, str(data["preset"]))
+        actor_keys = tuple(str(k) for k in data.get("actor_keys", ()))
+        return cls(str(data["name"]), env, wrapper, str(data["preset"]), actor_keys)
 
 
 _STATE_ENV = {
@@ -118,6 +133,11 @@ TRAIN_CONFIGS: dict[str, TrainConfig] = {
     "pixels": TrainConfig(
         "pixels", env=dict(_IMAGE_ENV),
         wrapper={**_IMAGE_WRAPPER, "drop_keys": ("pose", "pose_std", "localized", "layout")},
+    ),
+    # image's env, reward and observation; the policy reads pixels' keys, the value function all
+    "pixels_critic": TrainConfig(
+        "pixels_critic", env=dict(_IMAGE_ENV), wrapper=dict(_IMAGE_WRAPPER),
+        actor_keys=("image", "gnss", "attitude"),
     ),
 }
 

@@ -1,0 +1,100 @@
+"""An actor-critic whose critic sees more than its actor: a policy from pixels, a value from the state.
+
+A viewpoint policy from the camera (``TRAIN_CONFIGS["pixels_critic"]``) must decide from what a
+UAV has before any localization: the image, GNSS and attitude. Its value function is only needed
+while training, where the simulator knows more: the localized pose, its standard deviations and
+the layout features the ``state`` policies learn from. Giving them to the critic alone (an
+asymmetric actor-critic, Pinto et al., "Asymmetric Actor Critic for Image-Based Robot Learning",
+RSS 2018) leaves the trained policy what it was -- a function of ``actor_keys`` only -- while the
+advantages it is trained on come from a value that can see why a viewpoint localizes well.
+
+:class:`AsymmetricActorCriticPolicy` is SB3's ``MultiInputPolicy`` with separate feature
+extractors (``share_features_extractor=False``): the actor's over the observation's
+``actor_keys``, the critic's over every key, each followed by its own MLP of ``net_arch``.
+``predict`` (what evaluation and deployment call) runs the actor's side only; a test holds its
+actions unchanged when every other key changes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from gymnasium import spaces
+from stable_baselines3.common.policies import MultiInputActorCriticPolicy
+from stable_baselines3.common.torch_layers import MlpExtractor
+from torch import nn
+
+__all__ = ["AsymmetricActorCriticPolicy", "SplitMlpExtractor"]
+
+
+class SplitMlpExtractor(nn.Module):
+    """The policy's and the value's MLPs (``net_arch``) on features of different widths.
+
+    SB3's :class:`~stable_baselines3.common.torch_layers.MlpExtractor` takes one input width for
+    both; here the actor's features (``pi_dim``) and the critic's (``vf_dim``) differ.
+    """
+
+    def __init__(self, pi_dim: int, vf_dim: int, net_arch: Any, activation_fn: type[nn.Module],
+                 device: Any = "auto") -> None:
+        super().__init__()
+        policy = MlpExtractor(pi_dim, net_arch, activation_fn, device)
+        value = MlpExtractor(vf_dim, net_arch, activation_fn, device)
+        self.policy_net, self.latent_dim_pi = policy.policy_net, policy.latent_dim_pi
+        self.value_net, self.latent_dim_vf = value.value_net, value.latent_dim_vf
+
+    def forward(self, features: Any) -> Any:
+        """Not used: the extractors are never shared (features come as an (actor, critic) pair)."""
+        pi_features, vf_features = features
+        return self.forward_actor(pi_features), self.forward_critic(vf_features)
+
+    def forward_actor(self, features: Any) -> Any:
+        """The actor's latent from its features."""
+        return self.policy_net(features)
+
+    def forward_critic(self, features: Any) -> Any:
+        """The critic's latent from its features."""
+        return self.value_net(features)
+
+
+class AsymmetricActorCriticPolicy(MultiInputActorCriticPolicy):
+    """SB3's dict-observation actor-critic, its actor limited to ``actor_keys`` (module docstring).
+
+    Args:
+        observation_space: the env's ``spaces.Dict`` (the critic's input: every key).
+        action_space, lr_schedule: as :class:`~stable_baselines3.common.policies.MultiInputActorCriticPolicy`.
+        actor_keys: the observation keys the actor (the trained policy) reads.
+        **kwargs: :class:`~stable_baselines3.common.policies.MultiInputActorCriticPolicy`'s;
+            ``share_features_extractor`` is always False.
+
+    Raises:
+        ValueError: if ``actor_keys`` is empty, names a key the observation lacks, or names every
+            key (then the critic would see nothing more: use ``MultiInputPolicy``).
+    """
+
+    def __init__(self, observation_space: spaces.Dict, action_space: spaces.Space, lr_schedule: Any,
+                 actor_keys: Sequence[str] = (), **kwargs: Any) -> None:
+        keys = tuple(actor_keys)
+        have = set(observation_space.spaces)
+        if not keys or not set(keys) <= have or set(keys) == have:
+            raise ValueError(
+                f"actor_keys must name some but not all of the observation's keys {sorted(have)}, "
+                f"got {list(keys)}"
+            )
+        self.actor_keys = keys
+        kwargs["share_features_extractor"] = False
+        super().__init__(observation_space, action_space, lr_schedule, **kwargs)
+
+    def _build_mlp_extractor(self) -> None:
+        """The actor's extractor over ``actor_keys``, then the two MLPs on their own widths."""
+        actor_space = spaces.Dict({k: self.observation_space.spaces[k] for k in self.actor_keys})
+        extractor = self.features_extractor_class(actor_space, **self.features_extractor_kwargs)
+        self.pi_features_extractor = extractor
+        self.features_extractor = self.pi_features_extractor
+        self.mlp_extractor = SplitMlpExtractor(
+            self.pi_features_extractor.features_dim, self.vf_features_extractor.features_dim,
+            self.net_arch, self.activation_fn, self.device,
+        )
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        return {**super()._get_constructor_parameters(), "actor_keys": self.actor_keys}
