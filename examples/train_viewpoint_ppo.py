@@ -528,11 +528,12 @@ def _build(opt: dict[str, Any], out: Path, stop: _StopRequest):
     vec = VecNormalize(vec, norm_obs=True, norm_reward=True, gamma=opt["gamma"], norm_obs_keys=vectors)
     policy, policy_kwargs = "MultiInputPolicy", {"net_arch": list(opt["net_arch"]),
                                                  "log_std_init": opt["log_std_init"]}
-    actor_keys = TRAIN_CONFIGS[opt["config"]].actor_keys
-    if actor_keys:  # the policy reads these keys, the value function every key
+    config = TRAIN_CONFIGS[opt["config"]]
+    if config.actor_keys:  # the policy reads these keys, the value function critic_keys (or all)
         from uav_struct_env.training.asymmetric import AsymmetricActorCriticPolicy
 
-        policy, policy_kwargs = AsymmetricActorCriticPolicy, {**policy_kwargs, "actor_keys": list(actor_keys)}
+        policy = AsymmetricActorCriticPolicy
+        policy_kwargs.update(actor_keys=list(config.actor_keys), critic_keys=list(config.critic_keys))
     model = PPO(policy, vec, n_steps=opt["n_steps"], batch_size=opt["batch_size"],
                 n_epochs=opt["n_epochs"], learning_rate=opt["learning_rate"], gamma=opt["gamma"],
                 ent_coef=opt["ent_coef"], tensorboard_log=tb, device="cpu", verbose=0,
@@ -650,7 +651,7 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
                    help="train into an --out folder that already holds files (else refused)")
     p.add_argument("--config", default=DEFAULTS["config"],
                    help="TRAIN_CONFIGS name: state | image | pixels | pixels_critic (the policy reads "
-                        "pixels' keys, its value function every key)")
+                        "pixels' keys, its value function state's)")
     p.add_argument("--total-timesteps", type=int, default=DEFAULTS["total_timesteps"])
     p.add_argument("--minutes", type=float, default=None, help="stop after this wall-clock time")
     p.add_argument(

@@ -53,10 +53,23 @@ def test_actions_ignore_the_critics_keys_and_values_read_them(rng):
     assert set(policy.pi_features_extractor.extractors) == {"image", "gnss", "attitude"}
 
 
-@pytest.mark.parametrize("keys", [(), ("image", "speed"), tuple(SPACE.spaces)])
-def test_actor_keys_must_name_some_but_not_all_keys(keys):
-    with pytest.raises(ValueError, match=r"actor_keys must name some but not all of the observation's keys"):
-        AsymmetricActorCriticPolicy(SPACE, ACTIONS, lambda _: 3e-4, actor_keys=keys)
+def test_a_critic_without_the_image_is_an_mlp_of_the_keys_it_names(rng):
+    policy = _policy(critic_keys=("gnss", "pose", "layout"))
+    assert set(policy.vf_features_extractor.extractors) == {"gnss", "pose", "layout"}
+    assert policy.vf_features_extractor.features_dim == 3 + 6 + 8
+    cnns = [m for m in policy.modules() if isinstance(m, torch.nn.Conv2d)]
+    assert len(cnns) == 3  # NatureCNN's three layers, the actor's only
+    obs = _batch(rng)
+    with torch.no_grad():
+        image = {**obs, "image": 255 - obs["image"]}  # the critic does not read it
+        assert torch.equal(policy.predict_values(obs), policy.predict_values(image))
+
+
+@pytest.mark.parametrize("actor, critic", [((), ()), (("image", "speed"), ()), (tuple(SPACE.spaces), ()),
+                                           (("image", "gnss"), ("gnss",)), (("image",), ("pose", "speed"))])
+def test_the_critic_must_see_what_the_actor_does_not_and_keys_must_exist(actor, critic):
+    with pytest.raises(ValueError, match=r"actor_keys and critic_keys must name keys of the observation"):
+        AsymmetricActorCriticPolicy(SPACE, ACTIONS, lambda _: 3e-4, actor_keys=actor, critic_keys=critic)
 
 
 def test_a_tiny_pixels_critic_run_trains_loads_and_evaluates(load_script, tmp_path):
@@ -74,6 +87,7 @@ def test_a_tiny_pixels_critic_run_trains_loads_and_evaluates(load_script, tmp_pa
         model = load_ppo(out / "model.zip", env.observation_space("uav_0"), env.action_space("uav_0"))
         assert isinstance(model.policy, AsymmetricActorCriticPolicy)
         assert model.policy.actor_keys == TRAIN_CONFIGS["pixels_critic"].actor_keys
+        assert model.policy.critic_keys == TRAIN_CONFIGS["pixels_critic"].critic_keys
     finally:
         env.close()
     summary = load_script(EXAMPLES / "evaluate_policy.py").main(model=str(out), policies=("ppo",), episodes=1,

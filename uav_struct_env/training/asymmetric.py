@@ -10,9 +10,11 @@ advantages it is trained on come from a value that can see why a viewpoint local
 
 :class:`AsymmetricActorCriticPolicy` is SB3's ``MultiInputPolicy`` with separate feature
 extractors (``share_features_extractor=False``): the actor's over the observation's
-``actor_keys``, the critic's over every key, each followed by its own MLP of ``net_arch``.
+``actor_keys``, the critic's over ``critic_keys`` (every key by default), each followed by its
+own MLP of ``net_arch``.
 ``predict`` (what evaluation and deployment call) runs the actor's side only; a test holds its
-actions unchanged when every other key changes.
+actions unchanged when every other key changes. The critic may read a subset too
+(``critic_keys``): without the image it is an MLP, and the update trains one CNN, not two.
 """
 
 from __future__ import annotations
@@ -64,37 +66,45 @@ class AsymmetricActorCriticPolicy(MultiInputActorCriticPolicy):
         observation_space: the env's ``spaces.Dict`` (the critic's input: every key).
         action_space, lr_schedule: as :class:`~stable_baselines3.common.policies.MultiInputActorCriticPolicy`.
         actor_keys: the observation keys the actor (the trained policy) reads.
+        critic_keys: the observation keys the critic (the value function) reads; empty: every key.
         **kwargs: :class:`~stable_baselines3.common.policies.MultiInputActorCriticPolicy`'s;
             ``share_features_extractor`` is always False.
 
     Raises:
-        ValueError: if ``actor_keys`` is empty, names a key the observation lacks, or names every
-            key (then the critic would see nothing more: use ``MultiInputPolicy``).
+        ValueError: if ``actor_keys`` is empty, either names a key the observation lacks, or the
+            critic would see nothing the actor does not (then use ``MultiInputPolicy``).
     """
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Space, lr_schedule: Any,
-                 actor_keys: Sequence[str] = (), **kwargs: Any) -> None:
-        keys = tuple(actor_keys)
-        have = set(observation_space.spaces)
-        if not keys or not set(keys) <= have or set(keys) == have:
+                 actor_keys: Sequence[str] = (), critic_keys: Sequence[str] = (), **kwargs: Any) -> None:
+        have = tuple(observation_space.spaces)
+        actor, critic = tuple(actor_keys), tuple(critic_keys) or have
+        known = set(actor) <= set(have) and set(critic) <= set(have)
+        if not actor or not known or set(critic) <= set(actor):
             raise ValueError(
-                f"actor_keys must name some but not all of the observation's keys {sorted(have)}, "
-                f"got {list(keys)}"
+                f"actor_keys and critic_keys must name keys of the observation {sorted(have)}, the "
+                f"critic's some the actor lacks; got actor_keys {list(actor)}, "
+                f"critic_keys {list(critic_keys)}"
             )
-        self.actor_keys = keys
+        self.actor_keys, self.critic_keys = actor, critic
         kwargs["share_features_extractor"] = False
         super().__init__(observation_space, action_space, lr_schedule, **kwargs)
 
     def _build_mlp_extractor(self) -> None:
-        """The actor's extractor over ``actor_keys``, then the two MLPs on their own widths."""
-        actor_space = spaces.Dict({k: self.observation_space.spaces[k] for k in self.actor_keys})
-        extractor = self.features_extractor_class(actor_space, **self.features_extractor_kwargs)
-        self.pi_features_extractor = extractor
+        """The extractors over ``actor_keys`` and ``critic_keys``, then the two MLPs on their widths."""
+        self.pi_features_extractor = self._extractor(self.actor_keys)
+        self.vf_features_extractor = self._extractor(self.critic_keys)
         self.features_extractor = self.pi_features_extractor
         self.mlp_extractor = SplitMlpExtractor(
             self.pi_features_extractor.features_dim, self.vf_features_extractor.features_dim,
             self.net_arch, self.activation_fn, self.device,
         )
 
+    def _extractor(self, keys: tuple[str, ...]) -> nn.Module:
+        """The policy's features extractor class over the observation's ``keys``."""
+        space = spaces.Dict({k: self.observation_space.spaces[k] for k in keys})
+        return self.features_extractor_class(space, **self.features_extractor_kwargs)
+
     def _get_constructor_parameters(self) -> dict[str, Any]:
-        return {**super()._get_constructor_parameters(), "actor_keys": self.actor_keys}
+        return {**super()._get_constructor_parameters(), "actor_keys": self.actor_keys,
+                "critic_keys": self.critic_keys}

@@ -21,7 +21,8 @@ on 2 CPU cores (docs/training.md):
   simulator's landmark truth). A viewpoint policy from the camera (issue 41, item 4).
 * ``"pixels_critic"``: the ``image`` configuration's env, reward and observation, of which the
   policy reads only the ``pixels`` keys (``actor_keys``: ``image``, ``gnss``, ``attitude``); the
-  value function, used only in training, reads every key
+  value function, used only in training, reads the ``state`` configuration's keys
+  (``critic_keys``: an MLP, so the update trains one CNN)
   (:class:`uav_struct_env.training.asymmetric.AsymmetricActorCriticPolicy`, an asymmetric
   actor-critic). The trained policy is a policy from pixels as ``pixels``' is.
 """
@@ -41,13 +42,18 @@ from uav_struct_env.wrappers.localization import LocalizationWrapper
 __all__ = ["TRAIN_CONFIGS", "TrainConfig", "make_localization_env", "make_train_env"]
 
 
+#: TrainConfig's fields that name observation keys for the policy's two sides.
+_POLICY_KEYS = ("actor_keys", "critic_keys")
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """An environment configuration for training: env overrides + wrapper options.
 
     ``wrapper`` holds :class:`~uav_struct_env.wrappers.LocalizationWrapper` keyword arguments;
-    ``actor_keys``, when given, the observation keys the trained policy reads (the others feed its
-    value function only, in training: an asymmetric actor-critic); a
+    ``actor_keys``, when given, the observation keys the trained policy reads, and
+    ``critic_keys`` (empty: every key) those its value function reads, in training only (an
+    asymmetric actor-critic); a
     ``"mode"`` key (the former name of ``"association"``, as saved configurations may hold it) is
     read as ``"association"`` with a FutureWarning, for one release.
     """
@@ -57,9 +63,11 @@ class TrainConfig:
     wrapper: dict[str, Any] = field(default_factory=dict)
     preset: str = "train"
     actor_keys: tuple[str, ...] = ()
+    critic_keys: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "actor_keys", tuple(self.actor_keys))
+        object.__setattr__(self, "critic_keys", tuple(self.critic_keys))
         if "mode" in self.wrapper:  # the former name of association=, for one release
             warnings.warn(
                 "the wrapper option 'mode' is renamed 'association' (as in StackSpec and Localizer); "
@@ -79,11 +87,11 @@ class TrainConfig:
     def as_dict(self) -> dict[str, Any]:
         """The configuration as JSON-ready data (tuples as lists); :meth:`from_dict` reads it.
 
-        ``actor_keys`` only where given (a configuration without them reads as before).
+        ``actor_keys`` and ``critic_keys`` only where given (a configuration without them reads as
+        before).
         """
         data = {"name": self.name, "preset": self.preset, "env": self.env, "wrapper": self.wrapper}
-        if self.actor_keys:
-            data["actor_keys"] = self.actor_keys
+        data.update({k: getattr(self, k) for k in _POLICY_KEYS if getattr(self, k)})
         return json.loads(json.dumps(data))
 
     @classmethod
@@ -94,17 +102,17 @@ class TrainConfig:
             ConfigError: if ``data`` is not such a mapping.
         """
         keys = {"name", "preset", "env", "wrapper"}
-        if (not isinstance(data, dict) or not keys <= set(data) <= keys | {"actor_keys"}
+        if (not isinstance(data, dict) or not keys <= set(data) <= keys | set(_POLICY_KEYS)
                 or not all(isinstance(data[k], dict) for k in ("env", "wrapper"))
-                or not isinstance(data.get("actor_keys", []), list)):
+                or not all(isinstance(data.get(k, []), list) for k in _POLICY_KEYS)):
             raise ConfigError(
                 f"a training configuration must be a mapping with keys {sorted(keys)} (env and "
-                f"wrapper mappings) and optionally actor_keys (a list), got {data!r}"
+                f"wrapper mappings) and optionally {' and '.join(_POLICY_KEYS)} (lists), got {data!r}"
             )
         env, wrapper = ({k: tuple(v) if isinstance(v, list) else v for k, v in data[part].items()}
                         for part in ("env", "wrapper"))
-        actor_keys = tuple(str(k) for k in data.get("actor_keys", ()))
-        return cls(str(data["name"]), env, wrapper, str(data["preset"]), actor_keys)
+        policy = {k: tuple(str(x) for x in data.get(k, ())) for k in _POLICY_KEYS}
+        return cls(str(data["name"]), env, wrapper, str(data["preset"]), **policy)
 
 
 _STATE_ENV = {
@@ -134,10 +142,11 @@ TRAIN_CONFIGS: dict[str, TrainConfig] = {
         "pixels", env=dict(_IMAGE_ENV),
         wrapper={**_IMAGE_WRAPPER, "drop_keys": ("pose", "pose_std", "localized", "layout")},
     ),
-    # image's env, reward and observation; the policy reads pixels' keys, the value function all
+    # image's env, reward and observation; the policy reads pixels' keys, the value function state's
     "pixels_critic": TrainConfig(
         "pixels_critic", env=dict(_IMAGE_ENV), wrapper=dict(_IMAGE_WRAPPER),
         actor_keys=("image", "gnss", "attitude"),
+        critic_keys=("gnss", "attitude", "pose", "pose_std", "localized", "layout"),
     ),
 }
 
