@@ -116,6 +116,12 @@ def check_options(opt: dict[str, Any]) -> None:
 
     if opt["config"] not in TRAIN_CONFIGS:
         raise ConfigError(f"config must be one of {sorted(TRAIN_CONFIGS)}, got {opt['config']!r}")
+    if TRAIN_CONFIGS[opt["config"]].actor_keys:  # RLlib's default module would read every key
+        raise ConfigError(
+            f"config {opt['config']!r} is an asymmetric actor-critic (the policy reads "
+            f"{list(TRAIN_CONFIGS[opt['config']].actor_keys)}): train it with "
+            "examples/train_viewpoint_ppo.py; here use state, image or pixels"
+        )
     for name, lo in (("total_timesteps", 1), ("num_env_runners", 0), ("train_batch_size", 2),
                      ("minibatch_size", 2), ("num_epochs", 1), ("checkpoint_every", 1), ("seed", 0)):
         check_option(name, opt[name], lo, integer=True)
@@ -219,7 +225,8 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--out", default=DEFAULTS["out"], help="output folder")
     p.add_argument("--overwrite", action="store_true",
                    help="train into an --out folder that already holds files (else refused)")
-    p.add_argument("--config", default=DEFAULTS["config"], help="TRAIN_CONFIGS name: state | image | pixels")
+    p.add_argument("--config", default=DEFAULTS["config"], help="TRAIN_CONFIGS name: state | image | pixels "
+                   "(not pixels_critic: SB3 only)")
     p.add_argument("--total-timesteps", type=int, default=DEFAULTS["total_timesteps"],
                    help="stop after this many agent-steps")
     p.add_argument("--minutes", type=float, default=None, help="stop after this wall-clock time")

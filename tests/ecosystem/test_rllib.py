@@ -119,6 +119,9 @@ def test_train_rllib_refuses_bad_options_before_starting_ray(train_rllib, tmp_pa
         train_rllib.main(out=str(tmp_path / "b"), train_batch_size=256, minibatch_size=512)
     with pytest.raises(ValueError, match=r"unknown options \['n_envs'\]"):
         train_rllib.main(out=str(tmp_path / "c"), n_envs=2)
+    with pytest.raises(ConfigError, match=r"config 'pixels_critic' is an asymmetric actor-critic .* "
+                                          r"train it with examples/train_viewpoint_ppo.py"):
+        train_rllib.main(out=str(tmp_path / "d"), config="pixels_critic")
     assert not any(tmp_path.iterdir())
 
 
