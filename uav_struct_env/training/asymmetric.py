@@ -63,7 +63,7 @@ class AsymmetricActorCriticPolicy(MultiInputActorCriticPolicy):
     """SB3's dict-observation actor-critic, its actor limited to ``actor_keys`` (module docstring).
 
     Args:
-        observation_space: the env's ``spaces.Dict`` (the critic's input: every key).
+        observation_space: the env's ``spaces.Dict``.
         action_space, lr_schedule: as :class:`~stable_baselines3.common.policies.MultiInputActorCriticPolicy`.
         actor_keys: the observation keys the actor (the trained policy) reads.
         critic_keys: the observation keys the critic (the value function) reads; empty: every key.

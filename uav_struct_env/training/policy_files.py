@@ -244,7 +244,7 @@ def load_ppo(path: str | Path, observation_space: Any, action_space: Any, *, dev
     if isinstance(data.get("policy_kwargs"), dict) and "actor_keys" in data["policy_kwargs"]:
         from uav_struct_env.training.asymmetric import AsymmetricActorCriticPolicy
 
-        policy = AsymmetricActorCriticPolicy  # its actor reads actor_keys, its critic every key
+        policy = AsymmetricActorCriticPolicy  # its actor reads actor_keys, its critic critic_keys
     if isinstance(observation_space, spaces.Dict):
         channel_last = {k for k, s in observation_space.spaces.items()
                         if is_image_space(s) and not is_image_space_channels_first(s)}
