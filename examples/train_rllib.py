@@ -226,7 +226,7 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--overwrite", action="store_true",
                    help="train into an --out folder that already holds files (else refused)")
     p.add_argument("--config", default=DEFAULTS["config"], help="TRAIN_CONFIGS name: state | image | pixels "
-                   "(not pixels_critic: SB3 only)")
+                   "(not pixels_critic or pixels_keypoints: SB3 only)")
     p.add_argument("--total-timesteps", type=int, default=DEFAULTS["total_timesteps"],
                    help="stop after this many agent-steps")
     p.add_argument("--minutes", type=float, default=None, help="stop after this wall-clock time")

@@ -533,7 +533,8 @@ def _build(opt: dict[str, Any], out: Path, stop: _StopRequest):
         from uav_struct_env.training.asymmetric import AsymmetricActorCriticPolicy
 
         policy = AsymmetricActorCriticPolicy
-        policy_kwargs.update(actor_keys=list(config.actor_keys), critic_keys=list(config.critic_keys))
+        policy_kwargs.update(actor_keys=list(config.actor_keys), critic_keys=list(config.critic_keys),
+                             image_net=config.image_net)
     model = PPO(policy, vec, n_steps=opt["n_steps"], batch_size=opt["batch_size"],
                 n_epochs=opt["n_epochs"], learning_rate=opt["learning_rate"], gamma=opt["gamma"],
                 ent_coef=opt["ent_coef"], tensorboard_log=tb, device="cpu", verbose=0,
@@ -651,7 +652,8 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
                    help="train into an --out folder that already holds files (else refused)")
     p.add_argument("--config", default=DEFAULTS["config"],
                    help="TRAIN_CONFIGS name: state | image | pixels | pixels_critic (the policy reads "
-                        "pixels' keys, its value function state's)")
+                        "pixels' keys, its value function state's) | pixels_keypoints (the same, its image "
+                        "CNN read out as keypoints)")
     p.add_argument("--total-timesteps", type=int, default=DEFAULTS["total_timesteps"])
     p.add_argument("--minutes", type=float, default=None, help="stop after this wall-clock time")
     p.add_argument(

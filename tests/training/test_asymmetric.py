@@ -72,22 +72,28 @@ def test_the_critic_must_see_what_the_actor_does_not_and_keys_must_exist(actor, 
         AsymmetricActorCriticPolicy(SPACE, ACTIONS, lambda _: 3e-4, actor_keys=actor, critic_keys=critic)
 
 
-def test_a_tiny_pixels_critic_run_trains_loads_and_evaluates(load_script, tmp_path):
+@pytest.mark.parametrize("config, net", [("pixels_critic", "nature"), ("pixels_keypoints", "keypoints")])
+def test_a_tiny_asymmetric_run_trains_loads_and_evaluates(load_script, tmp_path, config, net):
+    from uav_struct_env.training.image_features import KeypointCNN
     from uav_struct_env.training.policy_files import load_ppo
     from uav_struct_env.wrappers import TRAIN_CONFIGS, make_train_env
 
     train = load_script(EXAMPLES / "train_viewpoint_ppo.py")
     out = tmp_path / "run"
-    train.main(out=str(out), config="pixels_critic", total_timesteps=64, n_envs=1, num_cpus=0, n_steps=16,
+    train.main(out=str(out), config=config, total_timesteps=64, n_envs=1, num_cpus=0, n_steps=16,
                batch_size=32, n_epochs=1, max_cycles=4, checkpoint_every=64, progress_bar=False, seed=5)
     record = json.loads((out / "train.json").read_text())
     assert record["train_config"]["actor_keys"] == ["image", "gnss", "attitude"]
-    env = make_train_env("pixels_critic", max_cycles=4)
+    assert record["train_config"].get("image_net", "nature") == net
+    env = make_train_env(config, max_cycles=4)
     try:
         model = load_ppo(out / "model.zip", env.observation_space("uav_0"), env.action_space("uav_0"))
         assert isinstance(model.policy, AsymmetricActorCriticPolicy)
-        assert model.policy.actor_keys == TRAIN_CONFIGS["pixels_critic"].actor_keys
-        assert model.policy.critic_keys == TRAIN_CONFIGS["pixels_critic"].critic_keys
+        assert model.policy.actor_keys == TRAIN_CONFIGS[config].actor_keys
+        assert model.policy.critic_keys == TRAIN_CONFIGS[config].critic_keys
+        assert model.policy.image_net == net
+        image = model.policy.pi_features_extractor.extractors["image"]
+        assert isinstance(image, KeypointCNN) == (net == "keypoints")
     finally:
         env.close()
     summary = load_script(EXAMPLES / "evaluate_policy.py").main(model=str(out), policies=("ppo",), episodes=1,

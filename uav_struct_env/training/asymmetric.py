@@ -15,6 +15,8 @@ own MLP of ``net_arch``.
 ``predict`` (what evaluation and deployment call) runs the actor's side only; a test holds its
 actions unchanged when every other key changes. The critic may read a subset too
 (``critic_keys``): without the image it is an MLP, and the update trains one CNN, not two.
+``image_net`` chooses the image network: SB3's NatureCNN (``"nature"``), or the small-frame CNN
+read out as keypoints (``"keypoints"``, :mod:`uav_struct_env.training.image_features`).
 """
 
 from __future__ import annotations
@@ -26,6 +28,9 @@ from gymnasium import spaces
 from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 from stable_baselines3.common.torch_layers import MlpExtractor
 from torch import nn
+
+from uav_struct_env.training.image_features import KeypointExtractor
+from uav_struct_env.wrappers.configs import IMAGE_NETS
 
 __all__ = ["AsymmetricActorCriticPolicy", "SplitMlpExtractor"]
 
@@ -67,16 +72,23 @@ class AsymmetricActorCriticPolicy(MultiInputActorCriticPolicy):
         action_space, lr_schedule: as :class:`~stable_baselines3.common.policies.MultiInputActorCriticPolicy`.
         actor_keys: the observation keys the actor (the trained policy) reads.
         critic_keys: the observation keys the critic (the value function) reads; empty: every key.
+        image_net: the image network, one of :data:`~uav_struct_env.wrappers.configs.IMAGE_NETS`
+            (``"nature"``: the ``features_extractor_class`` SB3 gives, NatureCNN for images).
         **kwargs: :class:`~stable_baselines3.common.policies.MultiInputActorCriticPolicy`'s;
             ``share_features_extractor`` is always False.
 
     Raises:
         ValueError: if ``actor_keys`` is empty, either names a key the observation lacks, or the
-            critic would see nothing the actor does not (then use ``MultiInputPolicy``).
+            critic would see nothing the actor does not (then use ``MultiInputPolicy``); for an
+            unknown ``image_net``.
     """
 
     def __init__(self, observation_space: spaces.Dict, action_space: spaces.Space, lr_schedule: Any,
-                 actor_keys: Sequence[str] = (), critic_keys: Sequence[str] = (), **kwargs: Any) -> None:
+                 actor_keys: Sequence[str] = (), critic_keys: Sequence[str] = (), image_net: str = "nature",
+                 **kwargs: Any) -> None:
+        if image_net not in IMAGE_NETS:
+            raise ValueError(f"image_net must be one of {list(IMAGE_NETS)}, got {image_net!r}")
+        self.image_net = image_net
         have = tuple(observation_space.spaces)
         actor, critic = tuple(actor_keys), tuple(critic_keys) or have
         known = set(actor) <= set(have) and set(critic) <= set(have)
@@ -103,8 +115,10 @@ class AsymmetricActorCriticPolicy(MultiInputActorCriticPolicy):
     def _extractor(self, keys: tuple[str, ...]) -> nn.Module:
         """The policy's features extractor class over the observation's ``keys``."""
         space = spaces.Dict({k: self.observation_space.spaces[k] for k in keys})
+        if self.image_net == "keypoints":
+            return KeypointExtractor(space)
         return self.features_extractor_class(space, **self.features_extractor_kwargs)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         return {**super()._get_constructor_parameters(), "actor_keys": self.actor_keys,
-                "critic_keys": self.critic_keys}
+                "critic_keys": self.critic_keys, "image_net": self.image_net}

@@ -25,6 +25,9 @@ on 2 CPU cores (docs/training.md):
   (``critic_keys``: an MLP, so the update trains one CNN)
   (:class:`uav_struct_env.training.asymmetric.AsymmetricActorCriticPolicy`, an asymmetric
   actor-critic). The trained policy is a policy from pixels as ``pixels``' is.
+* ``"pixels_keypoints"``: ``pixels_critic`` with a small-frame CNN read out as keypoints (a
+  spatial softmax) in place of NatureCNN, whose strides leave a 64 x 36 frame a 1 x 4 map
+  (``image_net="keypoints"``, :mod:`uav_struct_env.training.image_features`).
 """
 
 from __future__ import annotations
@@ -39,11 +42,15 @@ from typing import Any
 from uav_struct_env.errors import ConfigError
 from uav_struct_env.wrappers.localization import LocalizationWrapper
 
-__all__ = ["TRAIN_CONFIGS", "TrainConfig", "make_localization_env", "make_train_env"]
+__all__ = ["IMAGE_NETS", "TRAIN_CONFIGS", "TrainConfig", "make_localization_env", "make_train_env"]
 
 
 #: TrainConfig's fields that name observation keys for the policy's two sides.
 _POLICY_KEYS = ("actor_keys", "critic_keys")
+
+#: The image networks a configuration's policy may use (``TrainConfig.image_net``): SB3's NatureCNN,
+#: or the small-frame CNN read out as keypoints (:mod:`uav_struct_env.training.image_features`).
+IMAGE_NETS = ("nature", "keypoints")
 
 
 @dataclass(frozen=True)
@@ -53,7 +60,8 @@ class TrainConfig:
     ``wrapper`` holds :class:`~uav_struct_env.wrappers.LocalizationWrapper` keyword arguments;
     ``actor_keys``, when given, the observation keys the trained policy reads, and
     ``critic_keys`` (empty: every key) those its value function reads, in training only (an
-    asymmetric actor-critic); a
+    asymmetric actor-critic); ``image_net`` the policy's image network (one of
+    :data:`IMAGE_NETS`; other than ``"nature"`` only with ``actor_keys``); a
     ``"mode"`` key (the former name of ``"association"``, as saved configurations may hold it) is
     read as ``"association"`` with a FutureWarning, for one release.
     """
@@ -64,10 +72,14 @@ class TrainConfig:
     preset: str = "train"
     actor_keys: tuple[str, ...] = ()
     critic_keys: tuple[str, ...] = ()
+    image_net: str = "nature"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "actor_keys", tuple(self.actor_keys))
         object.__setattr__(self, "critic_keys", tuple(self.critic_keys))
+        if self.image_net not in IMAGE_NETS or (self.image_net != "nature" and not self.actor_keys):
+            raise ConfigError(f"image_net must be one of {list(IMAGE_NETS)} (other than 'nature' only with "
+                              f"actor_keys), got {self.image_net!r} with actor_keys {list(self.actor_keys)}")
         if "mode" in self.wrapper:  # the former name of association=, for one release
             warnings.warn(
                 "the wrapper option 'mode' is renamed 'association' (as in StackSpec and Localizer); "
@@ -87,11 +99,13 @@ class TrainConfig:
     def as_dict(self) -> dict[str, Any]:
         """The configuration as JSON-ready data (tuples as lists); :meth:`from_dict` reads it.
 
-        ``actor_keys`` and ``critic_keys`` only where given (a configuration without them reads as
-        before).
+        ``actor_keys``, ``critic_keys`` and ``image_net`` only where given (a configuration without
+        them reads as before).
         """
         data = {"name": self.name, "preset": self.preset, "env": self.env, "wrapper": self.wrapper}
         data.update({k: getattr(self, k) for k in _POLICY_KEYS if getattr(self, k)})
+        if self.image_net != "nature":
+            data["image_net"] = self.image_net
         return json.loads(json.dumps(data))
 
     @classmethod
@@ -102,17 +116,20 @@ class TrainConfig:
             ConfigError: if ``data`` is not such a mapping.
         """
         keys = {"name", "preset", "env", "wrapper"}
-        if (not isinstance(data, dict) or not keys <= set(data) <= keys | set(_POLICY_KEYS)
+        if (not isinstance(data, dict) or not keys <= set(data) <= keys | set(_POLICY_KEYS) | {"image_net"}
                 or not all(isinstance(data[k], dict) for k in ("env", "wrapper"))
-                or not all(isinstance(data.get(k, []), list) for k in _POLICY_KEYS)):
+                or not all(isinstance(data.get(k, []), list) for k in _POLICY_KEYS)
+                or not isinstance(data.get("image_net", "nature"), str)):
             raise ConfigError(
                 f"a training configuration must be a mapping with keys {sorted(keys)} (env and "
-                f"wrapper mappings) and optionally {' and '.join(_POLICY_KEYS)} (lists), got {data!r}"
+                f"wrapper mappings) and optionally {' and '.join(_POLICY_KEYS)} (lists) and image_net "
+                f"(a name), got {data!r}"
             )
         env, wrapper = ({k: tuple(v) if isinstance(v, list) else v for k, v in data[part].items()}
                         for part in ("env", "wrapper"))
         policy = {k: tuple(str(x) for x in data.get(k, ())) for k in _POLICY_KEYS}
-        return cls(str(data["name"]), env, wrapper, str(data["preset"]), **policy)
+        return cls(str(data["name"]), env, wrapper, str(data["preset"]), **policy,
+                   image_net=data.get("image_net", "nature"))
 
 
 _STATE_ENV = {
@@ -147,6 +164,13 @@ TRAIN_CONFIGS: dict[str, TrainConfig] = {
         "pixels_critic", env=dict(_IMAGE_ENV), wrapper=dict(_IMAGE_WRAPPER),
         actor_keys=("image", "gnss", "attitude"),
         critic_keys=("gnss", "attitude", "pose", "pose_std", "localized", "layout"),
+    ),
+    # pixels_critic with the small-frame CNN read out as keypoints in place of NatureCNN
+    "pixels_keypoints": TrainConfig(
+        "pixels_keypoints", env=dict(_IMAGE_ENV), wrapper=dict(_IMAGE_WRAPPER),
+        actor_keys=("image", "gnss", "attitude"),
+        critic_keys=("gnss", "attitude", "pose", "pose_std", "localized", "layout"),
+        image_net="keypoints",
     ),
 }
 
