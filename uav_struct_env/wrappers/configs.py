@@ -149,6 +149,13 @@ _WRAPPER = {
 _IMAGE_ENV = {**_STATE_ENV, "image_size": (64, 36), "renderer": "batch"}
 _IMAGE_WRAPPER = {**_WRAPPER, "drop_image": False}
 
+# image's env, reward and observation; the policy reads pixels' keys, the value function state's
+_PIXELS_CRITIC = TrainConfig(
+    "pixels_critic", env=dict(_IMAGE_ENV), wrapper=dict(_IMAGE_WRAPPER),
+    actor_keys=("image", "gnss", "attitude"),
+    critic_keys=("gnss", "attitude", "pose", "pose_std", "localized", "layout"),
+)
+
 TRAIN_CONFIGS: dict[str, TrainConfig] = {
     "state": TrainConfig(
         "state", env={**_STATE_ENV, "observe_image": False}, wrapper={**_WRAPPER, "drop_image": True}
@@ -159,17 +166,10 @@ TRAIN_CONFIGS: dict[str, TrainConfig] = {
         "pixels", env=dict(_IMAGE_ENV),
         wrapper={**_IMAGE_WRAPPER, "drop_keys": ("pose", "pose_std", "localized", "layout")},
     ),
-    # image's env, reward and observation; the policy reads pixels' keys, the value function state's
-    "pixels_critic": TrainConfig(
-        "pixels_critic", env=dict(_IMAGE_ENV), wrapper=dict(_IMAGE_WRAPPER),
-        actor_keys=("image", "gnss", "attitude"),
-        critic_keys=("gnss", "attitude", "pose", "pose_std", "localized", "layout"),
-    ),
+    "pixels_critic": _PIXELS_CRITIC,
     # pixels_critic with the small-frame CNN read out as keypoints in place of NatureCNN
-    "pixels_keypoints": TrainConfig(
-        "pixels_keypoints", env=dict(_IMAGE_ENV), wrapper=dict(_IMAGE_WRAPPER),
-        actor_keys=("image", "gnss", "attitude"),
-        critic_keys=("gnss", "attitude", "pose", "pose_std", "localized", "layout"),
+    "pixels_keypoints": dataclasses.replace(
+        _PIXELS_CRITIC, name="pixels_keypoints", env=dict(_IMAGE_ENV), wrapper=dict(_IMAGE_WRAPPER),
         image_net="keypoints",
     ),
 }
