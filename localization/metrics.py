@@ -35,7 +35,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from localization.geometry.kernels import center
+from localization.geometry.kernels import center, kernel_array
 from localization.geometry.transforms import (
     as_points,
     camera_center,
@@ -93,7 +93,7 @@ def pose_errors(est_cam_from_world: ArrayLike, gt_cam_from_world: ArrayLike) -> 
     gt = check_transform("gt_cam_from_world", gt_cam_from_world)
     # compiled: the centres' distance and rotation_angle_deg's angle in one call (every agent,
     # every step of a wrapped env)
-    t_err, r_err = pose_error(np.ascontiguousarray(est), np.ascontiguousarray(gt))
+    t_err, r_err = pose_error(kernel_array(est), kernel_array(gt))
     return float(t_err), float(r_err)
 
 
@@ -300,8 +300,8 @@ def association_scores(
         true_ids: (N,) true landmark id per detection or -1 (false positive).
         model_ids: (M,) landmark id of each model index; default the index itself.
     """
-    a = np.ascontiguousarray(np.asarray(assignment).astype(np.int64, copy=False).reshape(-1))
-    t = np.ascontiguousarray(np.asarray(true_ids).astype(np.int64, copy=False).reshape(-1))
+    a = kernel_array(np.asarray(assignment).astype(np.int64, copy=False).reshape(-1))
+    t = kernel_array(np.asarray(true_ids).astype(np.int64, copy=False).reshape(-1))
     if a.shape != t.shape:
         raise ValueError(
             f"assignment and true_ids must have equal lengths, got {a.shape} and {t.shape}"
@@ -310,7 +310,7 @@ def association_scores(
     if model_ids is None:
         ids = np.arange(top + 1, dtype=np.int64)  # each index its own id
     else:
-        ids = np.ascontiguousarray(np.asarray(model_ids).astype(np.int64, copy=False).reshape(-1))
+        ids = kernel_array(np.asarray(model_ids).astype(np.int64, copy=False).reshape(-1))
         if top >= ids.size:
             raise ValueError(f"assignment index {top} out of range for {ids.size} model_ids")
     correct, assigned, true_det = association_counts(a, t, ids)  # compiled: one loop

@@ -114,7 +114,7 @@ from localization.associate.ambiguity import AMBIGUITY_MARGIN
 from localization.associate.assign_kernels import assign_rounds, refine_reassign
 from localization.associate.hypothesis_kernels import check_many, missed_many
 from localization.failure import FailureCode
-from localization.geometry.kernels import center
+from localization.geometry.kernels import center, kernel_array
 from localization.geometry.transforms import project
 from localization.pose.batch import refine_many, to_transforms
 from localization.pose.covariance import (
@@ -334,15 +334,15 @@ class VerifyInputs:
     @cached_property
     def arrays(self) -> _FrameArrays:
         """The frame's arrays as the compiled kernels take them, made once per pose."""
-        det = np.ascontiguousarray(self.detections_uv, dtype=np.float64)
+        det = kernel_array(self.detections_uv, dtype=np.float64)
         P = np.asarray(self.prior_cam_from_world, dtype=np.float64)
         uv, predicted = _predictions(self.K, self.cam_from_world, self.landmarks_xyz, self.image_size)
         return _FrameArrays(
-            K=np.ascontiguousarray(self.K, dtype=np.float64),
-            landmarks_xyz=np.ascontiguousarray(self.landmarks_xyz, dtype=np.float64),
+            K=kernel_array(self.K, dtype=np.float64),
+            landmarks_xyz=kernel_array(self.landmarks_xyz, dtype=np.float64),
             detections_uv=det,
             good=np.flatnonzero(np.isfinite(det).all(axis=1)).astype(np.int64),
-            prior_R=np.ascontiguousarray(P[:3, :3]),
+            prior_R=kernel_array(P[:3, :3]),
             prior_C=center(P),
             prior_sigmas=self.prior_sigmas.as_array(),
             centre=center(np.asarray(self.cam_from_world, dtype=np.float64)),
@@ -395,9 +395,9 @@ def _predictions(
     """:func:`localization.verify_kernels.predictions` (compiled): ``(uv (M, 2), predicted (M,))``."""
     T = np.asarray(cam_from_world, dtype=np.float64)
     w, h = image_size
-    return predictions(np.ascontiguousarray(K, dtype=np.float64), np.ascontiguousarray(T[:3, :3]),
-                       np.ascontiguousarray(T[:3, 3]),
-                       np.ascontiguousarray(landmarks_xyz, dtype=np.float64).reshape(-1, 3), int(w), int(h))
+    return predictions(kernel_array(K, dtype=np.float64), kernel_array(T[:3, :3]),
+                       kernel_array(T[:3, 3]),
+                       kernel_array(landmarks_xyz, dtype=np.float64).reshape(-1, 3), int(w), int(h))
 
 
 def chance_support(
@@ -497,9 +497,9 @@ def _leave_one_out(
     """``(q px^2, shift m)`` of :func:`localization.verify_kernels.leave_one_out` (compiled)."""
     T = np.asarray(cam_from_world, dtype=np.float64)
     q, shift, _ = leave_one_out(
-        np.ascontiguousarray(K, dtype=np.float64), np.ascontiguousarray(T[:3, :3]), center(T),
-        np.ascontiguousarray(landmarks_xyz, dtype=np.float64).reshape(-1, 3),
-        np.ascontiguousarray(detections_uv, dtype=np.float64).reshape(-1, 2),
+        kernel_array(K, dtype=np.float64), kernel_array(T[:3, :3]), center(T),
+        kernel_array(landmarks_xyz, dtype=np.float64).reshape(-1, 3),
+        kernel_array(detections_uv, dtype=np.float64).reshape(-1, 2),
     )
     return q, shift
 
@@ -660,8 +660,8 @@ def _offset_votes(
     outvotes the copy's own offset: the cells are ranked again by the pairs that agree.)
     Compiled: :func:`localization.verify_kernels.offset_votes`.
     """
-    return offset_votes(np.ascontiguousarray(pair_uv, dtype=np.float64),
-                        np.ascontiguousarray(free_uv, dtype=np.float64), float(tol), float(radius),
+    return offset_votes(kernel_array(pair_uv, dtype=np.float64),
+                        kernel_array(free_uv, dtype=np.float64), float(tol), float(radius),
                         _VOTE_CELLS, 3)
 
 
@@ -771,7 +771,7 @@ def _scores(
     """
     if not hypotheses:
         return np.zeros(0)
-    a = np.ascontiguousarray(np.stack([b for b, _ in hypotheses]), dtype=np.int64)
+    a = kernel_array(np.stack([b for b, _ in hypotheses]), dtype=np.int64)
     T = np.stack([T for _, T in hypotheses])
     chi, missed, prior_sq, far = _terms(inputs, a, T)
     n_free = np.count_nonzero(a[:, inputs.arrays.good] < 0, axis=1)
@@ -791,7 +791,7 @@ def _terms(
     """
     f = inputs.arrays
     w, h = inputs.image_size
-    R, t = np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
+    R, t = kernel_array(T[:, :3, :3]), kernel_array(T[:, :3, 3])
     prior_sq, chi, far = check_many(f.K, f.landmarks_xyz, f.detections_uv, a, R, t, f.prior_R, f.prior_C,
                                     f.prior_sigmas)
     return chi, missed_many(f.K, f.landmarks_xyz, a, R, t, int(w), int(h)), prior_sq, far
@@ -818,12 +818,12 @@ def reassociated(
     if not hypotheses:
         return []
     f = inputs.arrays
-    a0 = np.ascontiguousarray(np.stack([b for b, _, _ in hypotheses]), dtype=np.int64)
+    a0 = kernel_array(np.stack([b for b, _, _ in hypotheses]), dtype=np.int64)
     T0 = np.stack([T for _, T, _ in hypotheses])
     w, h = inputs.image_size
     a, R, t, alive = refine_reassign(
-        f.K, f.landmarks_xyz, f.detections_uv, f.good, a0, np.ascontiguousarray(T0[:, :3, :3]),
-        np.ascontiguousarray(T0[:, :3, 3]),
+        f.K, f.landmarks_xyz, f.detections_uv, f.good, a0, kernel_array(T0[:, :3, :3]),
+        kernel_array(T0[:, :3, 3]),
         int(w), int(h), 0.0, float(inputs.gate_px), float(4.0 * inputs.gate_px), _REASSOCIATE_ROUNDS,
         int(inputs.need), True,
     )
@@ -831,7 +831,7 @@ def reassociated(
     if changed.size == 0:
         return []
     Ts = to_transforms(R[changed], t[changed])
-    chi = _terms(inputs, np.ascontiguousarray(a[changed]), Ts)[0] / inputs.pixel_sigma**2
+    chi = _terms(inputs, kernel_array(a[changed]), Ts)[0] / inputs.pixel_sigma**2
     return [(int(k), a[k].copy(), T, float(c)) for k, T, c in zip(changed, Ts, chi, strict=True)]
 
 
@@ -871,7 +871,7 @@ def _same_centres(inputs: VerifyInputs, Ts: list[NDArray[np.float64]]) -> NDArra
     cov = inputs.covariance[:3, :3]
     if not Ts or not np.all(np.isfinite(cov)):
         return np.zeros(len(Ts), dtype=bool)
-    dc = np.stack([center(np.ascontiguousarray(T)) for T in Ts]) - inputs.arrays.centre
+    dc = np.stack([center(kernel_array(T)) for T in Ts]) - inputs.arrays.centre
     try:
         x = np.linalg.solve(cov, dc.T)
     except np.linalg.LinAlgError:  # singular: the least-squares solution
@@ -985,7 +985,7 @@ def lattice_rivals(
     rows = np.flatnonzero(a >= 0)
     if rows.size == 0:
         return []
-    X = np.ascontiguousarray(inputs.landmarks_xyz, dtype=np.float64)
+    X = kernel_array(inputs.landmarks_xyz, dtype=np.float64)
     P = X[a[rows]]
     least = rows.size if share >= 1.0 else max(int(math.ceil(share * rows.size)), inputs.need)
     kept, hit, j = lattice_hits(X, P, min(anchors, rows.size), float(tol_m), int(least),

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from localization.associate.hypothesis_kernels import rival_translations
+from localization.geometry.kernels import kernel_array
 from localization.geometry.transforms import camera_center
 from localization.pose.covariance import pose_covariance
 
@@ -88,10 +89,10 @@ def translation_hypotheses(
         return []
     f64 = np.float64
     t, uv, depth, centre = rival_translations(  # compiled: the translations, gated, scored, ranked
-        np.ascontiguousarray(det[good], dtype=f64), np.ascontiguousarray(landmarks_xyz, dtype=f64),
-        np.ascontiguousarray(K, dtype=f64), np.ascontiguousarray(cam_from_world, dtype=f64),
-        np.ascontiguousarray(anchors, dtype=np.int64), camera_center(prior_cam_from_world),
-        np.ascontiguousarray(prior_position_sigma_m, dtype=f64),
+        kernel_array(det[good], dtype=f64), kernel_array(landmarks_xyz, dtype=f64),
+        kernel_array(K, dtype=f64), kernel_array(cam_from_world, dtype=f64),
+        kernel_array(anchors, dtype=np.int64), camera_center(prior_cam_from_world),
+        kernel_array(prior_position_sigma_m, dtype=f64),
         np.inf if max_prior_position_sq is None else float(max_prior_position_sq), float(gate_px) ** 2,
         int(need), int(limit),
     )

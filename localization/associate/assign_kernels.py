@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from localization.geometry.kernels import MIN_DEPTH, camera_point
+from localization.geometry.kernels import MIN_DEPTH, camera_point, kernel_array
 from localization.pose.lm import lm_one
 
 __all__ = [
@@ -231,7 +231,7 @@ def refine_reassign(
             if not np.isfinite(cost):
                 alive[k] = False
             project_into(K, R[k], t[k], L, width, height, margin, proj)
-            assign_one(dg, proj, step_gate * step_gate, 3, local)
+            assign_one(dg, proj, step_gate * step_gate, np.int64(3), local)
             stable = step_gate == gate
             new_pairs = np.full(n, -1, dtype=np.int64)
             for i in range(good.size):
@@ -244,7 +244,7 @@ def refine_reassign(
                 moving = False
         if alive[k] and moving:  # not yet refined on its final pairs
             _pairs(a[k], L, det, X, uv, w0)
-            if not np.isfinite(lm_one(K, R[k], t[k], X, uv, w0, 3, 0.0, 1e-6)):
+            if not np.isfinite(lm_one(K, R[k], t[k], X, uv, w0, np.int64(3), 0.0, 1e-6)):
                 alive[k] = False
     return a, R, t, alive
 
@@ -327,7 +327,7 @@ def assign_many(
     marks an unassigned detection.
     """
     f64 = np.float64
-    det, proj = np.ascontiguousarray(det, dtype=f64), np.ascontiguousarray(proj, dtype=f64)
+    det, proj = kernel_array(det, dtype=f64), kernel_array(proj, dtype=f64)
     if det.ndim != 2 or det.shape[1] != 2 or proj.ndim != 3 or proj.shape[2] != 2:
         raise ValueError(f"assign_many needs det (N, 2) and proj (H, M, 2); got {det.shape} and {proj.shape}")
     return assign_rounds(det, proj, float(gate_px), int(rounds))

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from localization.associate.assign_kernels import assign_many
 from localization.associate.hypothesis_kernels import anchor_pairs, shift_votes, upright_starts
 from localization.associate.upright import score_samples, score_upright_poses
-from localization.geometry.kernels import residuals
+from localization.geometry.kernels import kernel_array, residuals
 from localization.geometry.transforms import camera_center, inverse_intrinsics
 from localization.pose.batch import project_many, rotation_between, to_transforms
 from localization.pose.covariance import PriorSigmas, prior_mahalanobis_sq
@@ -65,7 +65,7 @@ def layout_shift_votes(
     layout's best first.
     """
     f64 = np.float64
-    det, proj = np.ascontiguousarray(det, dtype=f64), np.ascontiguousarray(proj, dtype=f64)
+    det, proj = kernel_array(det, dtype=f64), kernel_array(proj, dtype=f64)
     return shift_votes(det, proj, float(vote_px), int(k))
 
 
@@ -178,9 +178,9 @@ def exhaustive_hypotheses(
     count = math.comb(n_good, k) * math.perm(m, k)
     if count > limit:
         return None
-    K = np.ascontiguousarray(K, dtype=np.float64)
-    det = np.ascontiguousarray(det, dtype=np.float64)
-    landmarks_xyz = np.ascontiguousarray(landmarks_xyz, dtype=np.float64)
+    K = kernel_array(K, dtype=np.float64)
+    det = kernel_array(det, dtype=np.float64)
+    landmarks_xyz = kernel_array(landmarks_xyz, dtype=np.float64)
     candidates = _CandidatePoses(landmarks_xyz[idx], K, is_coplanar(landmarks_xyz[idx]))
     unused_cost = (n_good - k) * (gate_px / pixel_sigma) ** 2
     scored: list[tuple[float, NDArray, NDArray]] = []
@@ -248,7 +248,7 @@ def spread_anchor_pairs(det: NDArray, k: int = 4, log_odds: NDArray | None = Non
     know better: its ``k`` likeliest detections anchor too. Compiled (the spread-out part):
     :func:`localization.associate.hypothesis_kernels.anchor_pairs`.
     """
-    pairs = anchor_pairs(np.ascontiguousarray(det, dtype=np.float64), int(k))
+    pairs = anchor_pairs(kernel_array(det, dtype=np.float64), int(k))
     if log_odds is None or det.shape[0] <= k:  # with at most k detections every pair is there
         return pairs
     top = np.sort(np.argsort(-np.asarray(log_odds), kind="stable")[:k])
@@ -292,10 +292,10 @@ def upright_hypotheses(
     i1, i2 = pairs[:, 0].copy(), pairs[:, 1].copy()
     f64 = np.float64
     scored = score_upright_poses(
-        np.ascontiguousarray(det, dtype=f64), _rays(det, K, prior[:3, :3]), i1, i2,
-        np.ascontiguousarray(idx, dtype=np.int64), np.ascontiguousarray(proj, dtype=f64),
-        np.ascontiguousarray(landmarks_xyz, dtype=f64), np.ascontiguousarray(K, dtype=f64),
-        np.ascontiguousarray(prior[:3, :3]), camera_center(prior), np.asarray(sig.position_m, dtype=f64),
+        kernel_array(det, dtype=f64), _rays(det, K, prior[:3, :3]), i1, i2,
+        kernel_array(idx, dtype=np.int64), kernel_array(proj, dtype=f64),
+        kernel_array(landmarks_xyz, dtype=f64), kernel_array(K, dtype=f64),
+        kernel_array(prior[:3, :3]), camera_center(prior), np.asarray(sig.position_m, dtype=f64),
         float(sig.rotation_rad[2]), np.inf if max_prior_sq is None else float(max_prior_sq),
         float(gate_px) ** 2,
     )
@@ -306,7 +306,7 @@ def _rays(det: NDArray, K: NDArray, R_cw: NDArray) -> NDArray[np.float64]:
     """(N, 3) world directions of detections ``det`` (N, 2) under the attitude ``R_cw`` (cam_from_world)."""
     h = np.ones((det.shape[0], 3))  # homogeneous pixels
     h[:, :2] = det
-    return np.ascontiguousarray(h @ inverse_intrinsics(K).T @ R_cw)
+    return kernel_array(h @ inverse_intrinsics(K).T @ R_cw)
 
 
 def _gated_starts(
@@ -324,7 +324,7 @@ def _gated_starts(
     if prior_sq.size == 0:
         return []
     a, chosen = upright_starts(
-        np.ascontiguousarray(det, dtype=np.float64), np.ascontiguousarray(idx, dtype=np.int64), uv, prior_sq,
+        kernel_array(det, dtype=np.float64), kernel_array(idx, dtype=np.int64), uv, prior_sq,
         explained, misfit, float(gate_px), int(min_pairs), int(keep), int(n_distinct),
     )
     T = to_transforms(R[chosen], t[chosen])
@@ -364,14 +364,14 @@ def regrowth_hypotheses(
     if pairs.shape[0] < 2 or idx.size < 2:
         return []
     f64 = np.float64
-    det = np.ascontiguousarray(det, dtype=f64)
-    chosen = anchor_pairs(np.ascontiguousarray(det[pairs[:, 0]]), REGROWTH_PAIRS)
+    det = kernel_array(det, dtype=f64)
+    chosen = anchor_pairs(kernel_array(det[pairs[:, 0]]), REGROWTH_PAIRS)
     s1, s2 = pairs[chosen[:, 0], 0].copy(), pairs[chosen[:, 1], 0].copy()
     t1, t2 = pairs[chosen[:, 0], 1].copy(), pairs[chosen[:, 1], 1].copy()
-    R0 = np.ascontiguousarray(cam_from_world[:3, :3], dtype=f64)
+    R0 = kernel_array(cam_from_world[:3, :3], dtype=f64)
     scored = score_samples(
-        det, _rays(det, K, R0), s1, s2, t1, t2, np.ascontiguousarray(idx, dtype=np.int64),
-        np.ascontiguousarray(landmarks_xyz, dtype=f64), np.ascontiguousarray(K, dtype=f64), R0,
+        det, _rays(det, K, R0), s1, s2, t1, t2, kernel_array(idx, dtype=np.int64),
+        kernel_array(landmarks_xyz, dtype=f64), kernel_array(K, dtype=f64), R0,
         camera_center(prior), np.asarray(sig.position_m, dtype=f64), float(sig.rotation_rad[2]), np.inf,
         float(gate_px) ** 2,
     )

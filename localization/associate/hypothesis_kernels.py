@@ -164,7 +164,7 @@ def shift_votes(det: NDArray, proj: NDArray, vote_px: float, k: int) -> tuple[ND
     cx = np.empty(n * m, dtype=np.int64)
     cy = np.empty(n * m, dtype=np.int64)
     for lay in range(nl):
-        p = 0
+        p = np.int64(0)
         for i in range(n):
             for j in range(m):
                 u = det[i, 0] - proj[lay, j, 0]
@@ -250,7 +250,7 @@ def upright_starts(
         if found == n_distinct:
             break
         s = order[q]
-        assign_one(det, uv[s], gate_sq, 3, local)
+        assign_one(det, uv[s], gate_sq, np.int64(3), local)
         pairs = 0
         for i in range(n):
             a[i] = idx[local[i]] if local[i] >= 0 else -1
@@ -687,7 +687,7 @@ def warm_hypothesis(
     for i in range(good.size):
         dg[i] = det[good[i]]
     local = np.empty(good.size, dtype=np.int64)
-    assign_one(dg, proj, (coarse_gate / 4.0) ** 2, 3, local)
+    assign_one(dg, proj, (coarse_gate / 4.0) ** 2, np.int64(3), local)
     a0 = np.full((1, n), -1, dtype=np.int64)
     for i in range(good.size):
         a0[0, good[i]] = local[i]
@@ -696,7 +696,8 @@ def warm_hypothesis(
     t1 = np.empty((1, 3))
     t1[0] = t0
     a, R, t, alive = refine_reassign(
-        K, L, det, good, a0, R1, t1, width, height, margin, gate, coarse_gate, max_iterations, need, False
+        K, L, det, good, a0, R1, t1, width, height, margin, gate, coarse_gate, max_iterations, need,
+        np.bool_(False),  # typed as the Python callers' bool, not as a literal: one compilation
     )
     prior_sq, chi, far = check_many(K, L, det, a, R, t, prior_R, prior_C, sigmas)
     missed = missed_many(K, L, a, R, t, width, height)

@@ -18,6 +18,7 @@ from scipy.optimize import linear_sum_assignment
 
 from localization.associate.assign_kernels import assignment_costs, assignment_rows, candidates
 from localization.failure import FailureCode
+from localization.geometry.kernels import kernel_array
 from localization.geometry.transforms import project
 
 __all__ = ["Association", "assign", "associate_paper", "candidate_landmarks"]
@@ -70,8 +71,8 @@ def candidate_landmarks(
     w, h = image_size
     f64 = np.float64
     return candidates(  # compiled: :func:`localization.geometry.transforms.project` and the bounds, one loop
-        np.ascontiguousarray(K, dtype=f64), np.ascontiguousarray(cam_from_world, dtype=f64),
-        np.ascontiguousarray(landmarks_xyz, dtype=f64), int(w), int(h), float(margin_px),
+        kernel_array(K, dtype=f64), kernel_array(cam_from_world, dtype=f64),
+        kernel_array(landmarks_xyz, dtype=f64), int(w), int(h), float(margin_px),
     )
 
 
@@ -99,7 +100,7 @@ def assign(
     gated = gate_px is not None
     f64 = np.float64
     cost = assignment_costs(
-        np.ascontiguousarray(det_uv, dtype=f64), np.ascontiguousarray(model_uv, dtype=f64),
+        kernel_array(det_uv, dtype=f64), kernel_array(model_uv, dtype=f64),
         float(gate_px) ** 2 if gated else 0.0, gated,
     )
     rows, cols = linear_sum_assignment(cost)

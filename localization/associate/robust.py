@@ -110,6 +110,7 @@ from localization.associate.hypothesis_kernels import check_many, missed_many, w
 from localization.associate.paper import Association, assign, candidate_landmarks, no_candidates
 from localization.budget import Deadline, OutOfTime
 from localization.failure import FailureCode
+from localization.geometry.kernels import kernel_array
 from localization.geometry.transforms import camera_center, make_transform, project
 from localization.pose.batch import to_transforms
 from localization.pose.covariance import PriorSigmas, prior_mahalanobis_sq
@@ -217,10 +218,10 @@ class KernelArrays:
     ) -> KernelArrays:
         """Contiguous float64 copies (or the arrays themselves when they already are)."""
         f64 = np.float64
-        prior = np.ascontiguousarray(prior, dtype=f64)
+        prior = kernel_array(prior, dtype=f64)
         return cls(
-            np.ascontiguousarray(det, dtype=f64), np.ascontiguousarray(landmarks_xyz, dtype=f64),
-            np.ascontiguousarray(K, dtype=f64), prior, np.ascontiguousarray(prior[:3, :3]),
+            kernel_array(det, dtype=f64), kernel_array(landmarks_xyz, dtype=f64),
+            kernel_array(K, dtype=f64), prior, kernel_array(prior[:3, :3]),
             camera_center(prior), sigmas.as_array(),
         )
 
@@ -349,9 +350,9 @@ class RobustSearch:
         if self.good.size <= s.need:
             return None
         w, h = self.image_size
-        start = np.ascontiguousarray(start, dtype=np.float64)
+        start = kernel_array(start, dtype=np.float64)
         a, R, t, alive, prior_sq, far, chi, missed = warm_hypothesis(
-            c.K, c.landmarks_xyz, c.det, np.ascontiguousarray(self.good, dtype=np.int64), start[:3, :3],
+            c.K, c.landmarks_xyz, c.det, kernel_array(self.good, dtype=np.int64), start[:3, :3],
             start[:3, 3], int(w), int(h), float(self.margin_px), float(s.gate_px), float(s.coarse_gate_px),
             int(s.max_iterations), int(s.need), c.prior_R, c.prior_C, c.sigmas,
         )
@@ -510,9 +511,9 @@ class RobustSearch:
         s, c = self.settings, self.arrays
         w, h = self.image_size
         a, R, t, alive = refine_reassign(
-            c.K, c.landmarks_xyz, c.det, np.ascontiguousarray(self.good, dtype=np.int64),
-            np.ascontiguousarray(a, dtype=np.int64),
-            np.ascontiguousarray(starts[:, :3, :3]), np.ascontiguousarray(starts[:, :3, 3]),
+            c.K, c.landmarks_xyz, c.det, kernel_array(self.good, dtype=np.int64),
+            kernel_array(a, dtype=np.int64),
+            kernel_array(starts[:, :3, :3]), kernel_array(starts[:, :3, 3]),
             int(w), int(h), float(self.margin_px), float(s.gate_px), float(s.coarse_gate_px),
             int(s.max_iterations), int(s.need), bool(first_robust),
         )
@@ -545,9 +546,9 @@ class RobustSearch:
         (:func:`localization.associate.hypothesis_kernels.check_many`).
         """
         c = self.arrays
-        R, t = np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3])
+        R, t = kernel_array(T[:, :3, :3]), kernel_array(T[:, :3, 3])
         prior_sq, chi, far = check_many(
-            c.K, c.landmarks_xyz, c.det, np.ascontiguousarray(a, dtype=np.int64), R, t,
+            c.K, c.landmarks_xyz, c.det, kernel_array(a, dtype=np.int64), R, t,
             c.prior_R, c.prior_C, c.sigmas,
         )
         for h in np.flatnonzero(far):  # rotations near pi from the prior's: the exact logarithm
@@ -559,8 +560,8 @@ class RobustSearch:
         c = self.arrays
         w, h = self.image_size
         return missed_many(
-            c.K, c.landmarks_xyz, np.ascontiguousarray(a, dtype=np.int64),
-            np.ascontiguousarray(T[:, :3, :3]), np.ascontiguousarray(T[:, :3, 3]), int(w), int(h),
+            c.K, c.landmarks_xyz, kernel_array(a, dtype=np.int64),
+            kernel_array(T[:, :3, :3]), kernel_array(T[:, :3, 3]), int(w), int(h),
         )
 
     def nll(

@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from localization.geometry.kernels import MIN_DEPTH
+from localization.geometry.kernels import MIN_DEPTH, kernel_array
 
 __all__ = ["score_samples", "score_upright_poses", "upright_two_point"]
 
@@ -100,7 +100,7 @@ def upright_two_point(
         positive, both directions horizontal, or the two points at one place).
     """
     f64 = np.float64
-    d1, d2, X1, X2 = (np.ascontiguousarray(v, dtype=f64).reshape(-1, 3) for v in (d1, d2, X1, X2))
+    d1, d2, X1, X2 = (kernel_array(v, dtype=f64).reshape(-1, 3) for v in (d1, d2, X1, X2))
     return _solve_many(d1, d2, X1, X2)
 
 

@@ -18,7 +18,21 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["camera_point", "center", "inverse", "minor_spread", "quat_wxyz", "residuals", "transform_fault"]
+__all__ = ["camera_point", "center", "inverse", "kernel_array", "minor_spread", "quat_wxyz", "residuals",
+           "transform_fault"]
+
+
+def kernel_array(values, dtype=None) -> NDArray:
+    """``values`` as every compiled kernel of the package takes an array: C-contiguous and writable.
+
+    ``np.ascontiguousarray`` with the writable flag added: numba compiles a kernel once per
+    argument type, and a read-only array (a site's landmarks are read-only) is another type than
+    a writable one, so passed as it is it would compile every kernel it reaches a second time
+    (seconds each, in a user's first frames). Copied only when it is not C-contiguous, of
+    ``dtype`` (when given) and writable already.
+    """
+    out = np.ascontiguousarray(values, dtype=dtype)
+    return out if out.flags.writeable else out.copy()
 
 
 #: A point at or in front of this depth (m) counts as behind the camera.

@@ -24,6 +24,7 @@ from localization.geometry.kernels import (
     TRANSFORM_NOT_ROTATION,
     center,
     inverse,
+    kernel_array,
     quat_wxyz,
     transform_fault,
 )
@@ -83,7 +84,7 @@ def check_transform(name: str, transform: ArrayLike) -> NDArray[np.float64]:
         raise TypeError(f"{name} must be a numeric 4x4 array, got dtype {arr.dtype}")
     if arr.shape != (4, 4):
         raise ValueError(f"{name} must have shape (4, 4), got {arr.shape}")
-    arr = arr.astype(np.float64, copy=False)
+    arr = kernel_array(arr, dtype=np.float64)
     # One compiled pass: this check runs on every transform the pipeline and the metrics touch,
     # several times per agent and env step, where numpy's per-call overhead would dominate
     fault = transform_fault(arr)
@@ -173,7 +174,7 @@ def _rigid_rows(name: str, T: ArrayLike) -> NDArray[np.float64]:
     out = np.asarray(T, dtype=np.float64)
     if out.ndim != 2 or out.shape[0] < 3 or out.shape[1] < 4:
         raise ValueError(f"{name} must be a (4, 4) rigid transform, got shape {out.shape}")
-    return out
+    return kernel_array(out)
 
 
 def invert(b_from_a: ArrayLike) -> NDArray[np.float64]:
@@ -274,7 +275,7 @@ def quat_wxyz_from_matrix(R: ArrayLike) -> NDArray[np.float64]:
     Shepperd's method, from the largest of 4 w^2, 4 x^2, 4 y^2, 4 z^2 (the best conditioned);
     compiled (:func:`localization.geometry.kernels.quat_wxyz`: every agent's pose, every step).
     """
-    m = np.ascontiguousarray(np.asarray(R, dtype=np.float64)[:3, :3])
+    m = kernel_array(np.asarray(R, dtype=np.float64)[:3, :3])
     return quat_wxyz(m)
 
 

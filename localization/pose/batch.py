@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from localization.geometry.kernels import kernel_array
 from localization.geometry.transforms import so3_log
 from localization.pose.lm import lm_many
 
@@ -117,12 +118,12 @@ def refine_many(
         )
     f64 = np.float64
     return lm_many(
-        np.ascontiguousarray(K, dtype=f64),
-        np.ascontiguousarray(R, dtype=f64),
-        np.ascontiguousarray(t, dtype=f64),
-        np.ascontiguousarray(X, dtype=f64),
-        np.ascontiguousarray(uv, dtype=f64),
-        np.ascontiguousarray(mask, dtype=np.bool_),
+        kernel_array(K, dtype=f64),
+        kernel_array(R, dtype=f64),
+        kernel_array(t, dtype=f64),
+        kernel_array(X, dtype=f64),
+        kernel_array(uv, dtype=f64),
+        kernel_array(mask, dtype=np.bool_),
         int(iterations),
         0.0 if robust_px is None else float(robust_px),
         float(tol),

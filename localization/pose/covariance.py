@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from localization.geometry.kernels import kernel_array
 from localization.geometry.transforms import camera_center, so3_log
 
 __all__ = [
@@ -204,9 +205,9 @@ def pose_covariance(
     three points, or a degenerate layout).
     """
     T = np.asarray(cam_from_world, dtype=np.float64)
-    X = np.ascontiguousarray(np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3))
+    X = kernel_array(np.asarray(points_xyz, dtype=np.float64).reshape(-1, 3))
     return covariance(  # compiled: the information matrix point by point (pose_jacobian's rows)
-        np.ascontiguousarray(K, dtype=np.float64), np.ascontiguousarray(T[:3, :3]), camera_center(T), X,
+        kernel_array(K, dtype=np.float64), kernel_array(T[:3, :3]), camera_center(T), X,
         float(pixel_sigma),
     )
 
@@ -235,7 +236,7 @@ def prior_mahalanobis_sq(
     T = np.asarray(cam_from_world, dtype=np.float64)
     P = np.asarray(prior_cam_from_world, dtype=np.float64)
     q, far = prior_distance_sq(  # compiled; near pi from the prior's rotation the exact logarithm
-        np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]), np.ascontiguousarray(P[:3, :3]),
+        kernel_array(T[:3, :3]), kernel_array(T[:3, 3]), kernel_array(P[:3, :3]),
         camera_center(P), sig,
     )
     if far:

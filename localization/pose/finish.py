@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from localization.geometry.kernels import center, minor_spread, residuals
+from localization.geometry.kernels import center, kernel_array, minor_spread, residuals
 from localization.geometry.transforms import camera_center
 from localization.pose.covariance import PriorSigmas, covariance, prior_distance_sq, prior_mahalanobis_sq
 from localization.pose.lm import lm_one
@@ -107,7 +107,7 @@ def finish_pose(inputs: FinishInputs) -> FinishedPose:
     prior = inputs.prior_cam_from_world
     T, rmse, in_front, cov, q, far, spread = finish_kernel(
         inputs.K, inputs.start_cam_from_world, inputs.landmarks_xyz, inputs.detections_uv,
-        inputs.assignment, inputs.pixel_sigma, np.ascontiguousarray(prior[:3, :3]), camera_center(prior),
+        inputs.assignment, inputs.pixel_sigma, kernel_array(prior[:3, :3]), camera_center(prior),
         inputs.prior_sigmas.as_array(), inputs.iterations, inputs.tol,
     )
     if far:

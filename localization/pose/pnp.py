@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from localization.failure import FailureCode
-from localization.geometry.kernels import residuals
+from localization.geometry.kernels import kernel_array, residuals
 from localization.geometry.transforms import (
     as_points,
     camera_center,
@@ -120,9 +120,9 @@ def reprojection_residuals(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(residuals (N, 2) = projected - observed, depth (N,))`` of correspondences."""
     f64 = np.float64
-    K, T = np.ascontiguousarray(K, dtype=f64), np.ascontiguousarray(cam_from_world, dtype=f64)
-    X = np.ascontiguousarray(np.asarray(points_xyz, dtype=f64).reshape(-1, 3))
-    u = np.ascontiguousarray(np.asarray(uv, dtype=f64).reshape(-1, 2))
+    K, T = kernel_array(K, dtype=f64), kernel_array(cam_from_world, dtype=f64)
+    X = kernel_array(np.asarray(points_xyz, dtype=f64).reshape(-1, 3))
+    u = kernel_array(np.asarray(uv, dtype=f64).reshape(-1, 2))
     if K.shape != (3, 3) or T.shape != (4, 4) or X.shape[0] != u.shape[0]:
         raise ValueError(
             f"reprojection_residuals needs a 3x3 K, a 4x4 pose and as many points as pixels; got K "
@@ -132,7 +132,7 @@ def reprojection_residuals(
 
 
 def _as_cv(points: NDArray) -> NDArray:
-    return np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 1, points.shape[1])
+    return kernel_array(points, dtype=np.float64).reshape(-1, 1, points.shape[1])
 
 
 def pose_from_rt(rvec: NDArray, tvec: NDArray) -> NDArray:

@@ -53,14 +53,33 @@ for association in ("robust", "paper"):
     loc = Localizer(tops, PAPER_K, association=association, image_size=PAPER_IMAGE_SIZE)
     assert loc.localize(uv, paper_prior(truth, 0)).success
     assert loc.localize(uv, paper_prior(truth, 1), warm_start=truth).success
+# the public stages a script calls with a site's arrays directly, each of them read-only
+from localization.associate.paper import associate_paper
+from localization.associate.robust import associate_robust
+from localization.metrics import association_scores
+from localization.pose.batch import refine_many
+
+def read_only(a):
+    a = np.array(a)
+    a.flags.writeable = False
+    return a
+
+prior = read_only(paper_prior(truth, 2))
+for associate in (associate_robust, associate_paper):
+    a = associate(read_only(uv), tops, read_only(PAPER_K), prior, PAPER_IMAGE_SIZE, 40.0).assignment
+    assert association_scores(a, read_only(np.arange(len(uv))), read_only(np.arange(len(tops)))).f1 == 1.0
+R, t, cost = refine_many(read_only(PAPER_K), read_only(truth[None, :3, :3]), read_only(truth[None, :3, 3]),
+                         read_only(tops[None]), read_only(uv[None]), read_only(np.ones((1, len(tops)), bool)))
+assert cost[0] < 1e-6
 print(sorted(name(k) for k in compiled_kernels() if len(k.signatures) > before[name(k)]))
 """
 
 
 def test_a_read_only_landmark_set_compiles_nothing_the_warm_up_did_not():
     """numba compiles a kernel once per argument type, and a read-only array is another type: the
-    localizer keeps its own writable copy of the landmarks, so a site's (read-only) set runs the
-    kernels the warm-up compiled instead of compiling others in its first, timed frames."""
+    localizer, and each public stage below it, hands the kernels writable arrays
+    (``kernel_array``), so a site's (read-only) set runs the kernels the warm-up compiled instead of
+    compiling others (seconds each) in its first, timed frames."""
     proc = subprocess.run([sys.executable, "-c", _READ_ONLY_RUN], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert proc.stdout.strip() == "[]"

@@ -41,3 +41,17 @@ def test_scaled_intrinsics_moves_projections_as_the_pixel_edges_scale():
         small, _ = project(scaled_intrinsics(PAPER_K, sx, sy), np.eye(4), points)
         np.testing.assert_allclose(small, (uv + 0.5) * [sx, sy] - 0.5, atol=1e-9)
     assert scaled_intrinsics(PAPER_K, 0.5, 0.5)[2].tolist() == [0.0, 0.0, 1.0]
+
+
+def test_kernel_array_is_c_contiguous_and_writable_and_copies_only_when_it_must():
+    from localization.geometry.kernels import kernel_array
+
+    mine = np.arange(12.0).reshape(3, 4)
+    assert kernel_array(mine) is mine and kernel_array(mine, dtype=np.float64) is mine
+    frozen = mine.copy()
+    frozen.flags.writeable = False  # as a site's landmarks are
+    for odd in (frozen, np.asfortranarray(mine), mine[:, ::2], np.arange(12).reshape(3, 4)):
+        out = kernel_array(odd, dtype=np.float64)
+        assert out.flags.c_contiguous and out.flags.writeable and out.dtype == np.float64
+        np.testing.assert_array_equal(out, odd)
+    assert frozen.flags.writeable is False and not np.shares_memory(kernel_array(frozen), frozen)
