@@ -653,7 +653,8 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     p.add_argument("--config", default=DEFAULTS["config"],
                    help="TRAIN_CONFIGS name: state | image | pixels | pixels_critic (the policy reads "
                         "pixels' keys, its value function state's) | pixels_keypoints (the same, its image "
-                        "CNN read out as keypoints)")
+                        "CNN read out as keypoints) | pixels_precise (pixels_critic with the "
+                        "log_error reward)")
     p.add_argument("--total-timesteps", type=int, default=DEFAULTS["total_timesteps"])
     p.add_argument("--minutes", type=float, default=None, help="stop after this wall-clock time")
     p.add_argument(

@@ -21,6 +21,7 @@ from uav_struct_env.wrappers import (
     make_localization_env,
     make_train_env,
 )
+from uav_struct_env.wrappers.rewards import LogErrorReward
 
 SMALL = {"max_cycles": 8}
 HOLD = np.zeros(5, np.float32)
@@ -93,7 +94,7 @@ def test_failed_localization_falls_back_to_the_prior():
     env.close()
 
 
-@pytest.mark.parametrize("reward", ["error", "uncertainty"])
+@pytest.mark.parametrize("reward", ["error", "log_error", "uncertainty"])
 def test_reward_terms_sum_to_the_reward_including_crashes(reward):
     env = make_train_env("state", max_cycles=12)
     env = LocalizationWrapper(env.unwrapped, reward=reward, association="paper", drop_image=True)
@@ -114,10 +115,37 @@ def test_reward_terms_sum_to_the_reward_including_crashes(reward):
             else:  # flying on, or terminated by a teammate's crash (on_crash="all"): no penalty
                 assert "crash" not in terms
             if infos[a]["localization"]["success"]:
-                assert ("translation" in terms) == (reward == "error")
+                assert ("translation" in terms) == (reward in ("error", "log_error"))
                 assert ("uncertainty" in terms) == (reward == "uncertainty")
     assert seen_crash
     env.close()
+
+
+def test_log_error_terms_are_the_errors_on_a_log_scale_with_the_linear_endpoints():
+    env = make_train_env("state", max_cycles=6)
+    env = LocalizationWrapper(env.unwrapped, reward="log_error", drop_image=True, warm_start=True)
+    env.reset(seed=5)
+    cap, s = env.error_cap, env.scale_m
+    assert (cap, s) == (1.0, 0.01)
+    seen = []
+    while env.agents:
+        _, rew, _, _, infos = env.step(hold(env))
+        for a in rew:
+            loc, terms = infos[a]["localization"], infos[a]["reward_terms"]
+            if loc["success"]:
+                for key, x in (("translation", loc["translation_error_m"]),
+                               ("rotation", 0.1 * loc["rotation_error_deg"])):
+                    expected = -min(np.log1p(x / s) / np.log1p(cap / s), 1.0)
+                    assert terms[key] == pytest.approx(expected, abs=1e-12)
+                seen.append(loc["translation_error_m"])
+    assert len(seen) >= 10 and max(seen) < 0.5  # centimetre fixes: the steep part of the scale
+    env.close()
+    term = LocalizationWrapper(make_train_env("state").unwrapped, reward="log_error").reward._term
+    assert term(0.0) == 0.0 and term(1.0) == -1.0 and term(7.0) == -1.0
+    # near zero ~22x the linear slope: 1.5 cm -> 3 cm costs 0.10 a step (linear: 0.015)
+    assert term(0.015) - term(0.030) == pytest.approx(0.102, abs=0.001)
+    with pytest.raises(ConfigError, match="scale_m must be finite and > 0, got -1"):
+        LogErrorReward(scale_m=-1)
 
 
 def test_seeded_resets_repeat_with_a_noisy_detector():

@@ -79,8 +79,8 @@ class LocalizationWrapper(ParallelWrapper):
             the weight set ``NAME`` of :mod:`localization.detect.weights`, e.g.
             ``"learned:active"``), or any object following :class:`localization.Detector`.
         association: ``"robust"`` (default) or ``"paper"``.
-        reward: ``"error"``, ``"uncertainty"`` (:mod:`~uav_struct_env.wrappers.rewards`) or a
-            reward object with ``terms(frame, crashed)``.
+        reward: ``"error"``, ``"log_error"``, ``"uncertainty"``
+            (:mod:`~uav_struct_env.wrappers.rewards`) or a reward object with ``terms(frame, crashed)``.
         pixel_sigma: detector noise, px of the env's images; default 1 px at the paper's
             1280-px-wide camera scaled to the env's width (0.1 px at 128 x 72), so a
             low-resolution env scores poses as the paper's camera would.
