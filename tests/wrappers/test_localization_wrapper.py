@@ -140,7 +140,7 @@ def test_log_error_terms_are_the_errors_on_a_log_scale_with_the_linear_endpoints
                 seen.append(loc["translation_error_m"])
     assert len(seen) >= 10 and max(seen) < 0.5  # centimetre fixes: the steep part of the scale
     env.close()
-    term = LocalizationWrapper(make_train_env("state").unwrapped, reward="log_error").reward._term
+    term = LocalizationWrapper(make_train_env("state").unwrapped, reward="log_error").reward.error_term
     assert term(0.0) == 0.0 and term(1.0) == -1.0 and term(7.0) == -1.0
     # near zero ~22x the linear slope: 1.5 cm -> 3 cm costs 0.10 a step (linear: 0.015)
     assert term(0.015) - term(0.030) == pytest.approx(0.102, abs=0.001)

@@ -121,11 +121,15 @@ class ErrorReward(AnchorReward):
         super().__init__(**kwargs)
         self.rotation_weight = _nonneg("rotation_weight", rotation_weight)
 
+    def error_term(self, x: float) -> float:
+        """The term of an error ``x`` (m, or ``rotation_weight`` x deg): ``-min(x, error_cap)``."""
+        return -min(x, self.error_cap)
+
     def quality_terms(self, frame: FrameLocalization) -> dict[str, float]:
-        """``translation`` and ``rotation``."""
+        """``translation`` and ``rotation``, each :meth:`error_term` of its error."""
         return {
-            "translation": -min(frame.translation_error_m, self.error_cap),
-            "rotation": -min(self.rotation_weight * frame.rotation_error_deg, self.error_cap),
+            "translation": self.error_term(frame.translation_error_m),
+            "rotation": self.error_term(self.rotation_weight * frame.rotation_error_deg),
         }
 
 
@@ -149,18 +153,12 @@ class LogErrorReward(ErrorReward):
         super().__init__(**kwargs)
         self.scale_m = check_number("scale_m", scale_m, 0.0, lo_open=True, error=ConfigError)
 
-    def _term(self, x: float) -> float:
+    def error_term(self, x: float) -> float:
+        """The term of an error ``x`` on the log scale (the class docstring)."""
         if self.error_cap == 0.0:
             return 0.0
         s = self.scale_m
         return -self.error_cap * min(float(np.log1p(x / s) / np.log1p(self.error_cap / s)), 1.0)
-
-    def quality_terms(self, frame: FrameLocalization) -> dict[str, float]:
-        """``translation`` and ``rotation``, each on the log scale."""
-        return {
-            "translation": self._term(frame.translation_error_m),
-            "rotation": self._term(self.rotation_weight * frame.rotation_error_deg),
-        }
 
 
 class UncertaintyReward(AnchorReward):
