@@ -11,7 +11,9 @@
   :func:`localization.associate.paper.assign` and the assignment read back from scipy's
   ``linear_sum_assignment``.
 
-Compiled and cached like :mod:`localization.geometry.kernels`.
+Compiled and cached like :mod:`localization.geometry.kernels`. A constant handed to another
+kernel goes as ``np.int64(...)`` / ``np.bool_(...)``: a bare ``3`` or ``False`` would be typed as
+a literal and compile that kernel a second time beside its Python callers' ``int64`` / ``bool``.
 """
 
 from __future__ import annotations
