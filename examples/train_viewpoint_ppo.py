@@ -87,6 +87,7 @@ DEFAULTS: dict[str, Any] = {
     "progress_bar": True,
     "bootstrap_time_limit": True,
     "resume": None,
+    "sites": None,
 }
 
 #: The options ``--resume`` takes from its command line; every other one is the run's recorded one.
@@ -94,29 +95,54 @@ RESUME_OPTIONS = ("total_timesteps", "minutes", "progress_bar")
 
 
 def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles: int | None = None,
-                 bootstrap_time_limit: bool = True):
+                 bootstrap_time_limit: bool = True, sites: tuple[str, ...] | None = None):
     """SuperSuit vector env over ``n_envs`` copies of the wrapped env (4 agent slots each).
 
     Copy ``k`` is seeded ``seed + k``, every copy its own seed however the copies are spread over
-    the ``num_cpus`` subprocesses (:func:`_seed_copies`). Infos carry ``localization`` of each
+    the ``num_cpus`` subprocesses (:func:`_seed_copies`). With ``sites`` (names as
+    :func:`site_overrides` reads them) copy ``k`` stands on ``sites[k % len(sites)]``; without,
+    every copy on the configuration's site. Infos carry ``localization`` of each
     step only (:class:`~uav_struct_env.wrappers.StepInfos`): what the progress reads at an
     episode's end is then its final step's, not the next episode's reset, which SuperSuit merges
     over it; and the exchange with the subprocesses carries no landmark truth. With
     ``bootstrap_time_limit`` the infos also say where an episode ended at its time limit, so SB3
     bootstraps the value there instead of treating the limit as a terminal state.
     """
-    import supersuit as ss
+    from functools import partial
+
     from stable_baselines3.common.vec_env import VecMonitor
+    from supersuit.vector import MakeCPUAsyncConstructor
+    from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
+
+    overrides = {} if max_cycles is None else {"max_cycles": max_cycles}
+    per_copy = [site_overrides(sites[k % len(sites)]) if sites else {} for k in range(n_envs)]
+    fns = [partial(_copy_env, config, {**overrides, **o}, bootstrap_time_limit) for o in per_copy]
+    first = fns[0]()  # the spaces every copy shares (SuperSuit's concat_vec_envs_v1 does the same)
+    spaces = first.observation_space, first.action_space
+    first.close()
+    vec = SB3VecEnvWrapper(MakeCPUAsyncConstructor(min(num_cpus, n_envs))(fns, *spaces))
+    _seed_copies(vec.venv, seed, n_envs)  # SB3's PPO(seed=...) would call vec.seed(), which SuperSuit lacks
+    return VecMonitor(vec)
+
+
+def _copy_env(config: str, overrides: dict[str, Any], bootstrap_time_limit: bool):
+    """One env copy as SuperSuit's vector env of its four agent slots."""
+    import supersuit as ss
 
     from uav_struct_env.wrappers import StepInfos, make_train_env
 
-    overrides = {} if max_cycles is None else {"max_cycles": max_cycles}
     env = StepInfos(make_train_env(config, **overrides), keys=("localization",),
                     time_limit=bootstrap_time_limit)
-    vec = ss.pettingzoo_env_to_vec_env_v1(env)
-    vec = ss.concat_vec_envs_v1(vec, n_envs, num_cpus=num_cpus, base_class="stable_baselines3")
-    _seed_copies(vec.venv, seed, n_envs)  # SB3's PPO(seed=...) would call vec.seed(), which SuperSuit lacks
-    return VecMonitor(vec)
+    return ss.pettingzoo_env_to_vec_env_v1(env)
+
+
+def site_overrides(site: str) -> dict[str, Any]:
+    """The env overrides of a ``--sites`` item: ``paper`` (the configuration's textures), ``random:N``
+    (the building ``evaluate_policy.py --site random --site-seed N`` evaluates on: ``site="random"``
+    drawn from ``texture_seed`` N) or a site / IFC file."""
+    if site.startswith("random:"):
+        return {"site": "random", "texture_seed": int(site[len("random:"):])}
+    return {"site": site}
 
 
 def _seed_copies(venv, seed: int, n_envs: int) -> None:
@@ -436,9 +462,29 @@ def check_options(opt: dict[str, Any]) -> None:
         raise ConfigError(f"bootstrap_time_limit must be True or False, got {opt['bootstrap_time_limit']!r}")
     for k, width in enumerate(opt["net_arch"]):
         check_option(f"net_arch[{k}]", width, 1, integer=True)
+    if opt["sites"] is not None:
+        check_sites(opt["sites"], opt["n_envs"])
     if opt["resume"] is not None:
         last_checkpoint(opt["resume"])
     check_output_dir(opt["out"], overwrite=opt["overwrite"] or opt["resume"] is not None)
+
+
+def check_sites(sites: Any, n_envs: int) -> None:
+    """``--sites``: distinct ``paper``, ``random:N`` or site / IFC files, at most one per env copy.
+
+    Raises:
+        ConfigError: naming the bad item, or more sites than ``n_envs`` (a site without a copy).
+    """
+    from uav_struct_env.errors import ConfigError
+    from uav_struct_env.study.sweep import parse_sites
+
+    if not isinstance(sites, (list, tuple)) or not sites or not all(isinstance(s, str) for s in sites):
+        raise ConfigError(f"sites must be a non-empty list of site names, got {sites!r}")
+    if tuple(parse_sites(",".join(sites))) != tuple(sites):
+        raise ConfigError(f"sites must be single sites (paper, random:N or a file), got {list(sites)}")
+    if len(sites) > n_envs:
+        raise ConfigError(f"--sites names {len(sites)} sites but --n-envs is {n_envs}: each site "
+                          "needs at least one env copy")
 
 
 def last_checkpoint(run: str | Path) -> Path:
@@ -514,7 +560,7 @@ def _build(opt: dict[str, Any], out: Path, stop: _StopRequest):
 
     with stop.children():
         vec = make_vec_env(opt["config"], opt["n_envs"], opt["num_cpus"], opt["seed"],
-                           opt["max_cycles"], opt["bootstrap_time_limit"])
+                           opt["max_cycles"], opt["bootstrap_time_limit"], opt["sites"])
     tb = str(real_folder(out / "tb"))  # written inside --out, never through a link
     if opt["resume"] is not None:
         ckpt = last_checkpoint(opt["resume"])
@@ -688,12 +734,25 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
                    help="bootstrap the value where an episode ends at its time limit (SB3's "
                         "TimeLimit.truncated; on by default); --no-bootstrap-time-limit: the limit "
                         "counts as a terminal state, as before 2026-11-27")
+    p.add_argument("--sites", default=None, metavar="LIST",
+                   help="train on several buildings: comma-separated paper, random:N, random:A-B "
+                        "(the buildings evaluate_policy.py --site random --site-seed N draws), site or "
+                        "IFC files; env copy k stands on the (k mod count)-th (default: the "
+                        "configuration's site, the paper's)")
     p.add_argument("--resume", default=None, metavar="RUN",
                    help="continue the run in folder RUN from its last checkpoint, with its recorded "
                    "options and seed stream (only --total-timesteps, --minutes and "
                    "--no-progress-bar may be given anew)")
     args = vars(p.parse_args(argv))
     args["net_arch"] = tuple(args["net_arch"])
+    if args["sites"] is not None:  # "paper,random:100-102" -> its sites (a bad list: refused in check_sites)
+        from uav_struct_env.errors import ConfigError
+        from uav_struct_env.study.sweep import parse_sites
+
+        try:
+            args["sites"] = parse_sites(args["sites"])
+        except ConfigError as err:
+            p.error(f"--sites: {err}")
     if args["resume"] is not None:  # the run's own options, but for those given here
         return {"resume": args["resume"],
                 **{k: args[k] for k in RESUME_OPTIONS if args[k] != DEFAULTS[k]}}
