@@ -57,6 +57,7 @@ holds only SB3's ``vecnormalize.pkl``; it is read only with ``--trust-pickle``.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import pickle
 import sys
@@ -496,7 +497,26 @@ def env_config(opt: dict[str, Any]) -> tuple[Any, str]:
     if opt["site_seed"] is not None:
         config = config.replace(env={"texture_seed": opt["site_seed"]})
         source += f"; --site-seed {opt['site_seed']}"
+    if opt["site"] is not None and _site_name(config.env) in _training_sites(opt):
+        source += " (a building these runs trained on: train.json's --sites)"
     return config, source
+
+
+def _site_name(env: dict[str, Any]) -> str:
+    """The ``--sites`` name of an env configuration's building: ``paper``, ``random:N`` or a file."""
+    site = env.get("site", "paper")
+    return f"random:{env.get('texture_seed', 0)}" if site == "random" else str(site)
+
+
+def _training_sites(opt: dict[str, Any]) -> set[str]:
+    """The buildings the evaluated runs trained on with ``--sites`` (their ``train.json`` options)."""
+    runs = list(opt["checkpoints"] or ()) or model_folders(opt["model"] if "ppo" in opt["policies"] else None)
+    sites: set[str] = set()
+    for run in map(Path, runs):
+        path = run.parent.parent / "train.json" if run.parent.name == "checkpoints" else run / "train.json"
+        with contextlib.suppress(OSError, ValueError, AttributeError, TypeError):
+            sites.update(json.loads(path.read_text()).get("options", {}).get("sites") or ())
+    return sites
 
 
 def run_settings(opt: dict[str, Any], config: Any) -> str:

@@ -426,3 +426,45 @@ def test_a_policy_from_pixels_trains_and_the_evaluator_reads_it_back(example, tm
                                       sb3.predict(batch, deterministic=True)[0])
     finally:
         env.close()
+
+
+def test_sites_put_each_env_copy_on_its_building_and_the_evaluator_names_a_training_building(
+        example, trained, tmp_path):
+    # copy k stands on sites[k mod 2] and plays the episodes of a single env there seeded 7 + k
+    from uav_struct_env.wrappers import make_train_env
+
+    train = example("train_viewpoint_ppo")
+    sites = ("paper", "random:100")
+    assert train._parse(["--sites", "paper,random:100-101"])["sites"] == ("paper", "random:100", "random:101")
+    assert train.site_overrides("random:100") == {"site": "random", "texture_seed": 100}
+    vec = train.make_vec_env("state", n_envs=3, num_cpus=0, seed=7, sites=sites)
+    try:
+        gnss = vec.reset()["gnss"].reshape(3, -1)
+    finally:
+        vec.close()
+    for k, site in enumerate(("paper", "random:100", "paper")):
+        single = make_train_env("state", **train.site_overrides(site))
+        single.reset(seed=7 + k)
+        obs, _ = single.reset()  # the copy's second episode, from its seeded generator
+        single.close()
+        np.testing.assert_array_equal(
+            gnss[k], np.concatenate([obs[a]["gnss"] for a in single.possible_agents]), err_msg=f"copy {k}")
+    assert not np.array_equal(gnss[0], gnss[1])  # the starts are placed around another building
+    with pytest.raises(ConfigError, match=r"--sites names 2 sites but --n-envs is 1"):
+        train.check_sites(list(sites), 1)
+    with pytest.raises(ConfigError, match=r"each site must be paper, random:N.*got 'moon'"):
+        train.check_sites(["paper", "moon"], 4)
+    # a run that trained on random:100: evaluated there, the evaluation says so
+    out, _ = trained
+    record = json.loads((out / "train.json").read_text())
+    run = tmp_path / "run"
+    shutil.copytree(out, run)
+    record["options"]["sites"] = list(sites)
+    (run / "train.json").write_text(json.dumps(record))
+    evaluate = example("evaluate_policy")
+    config, source = evaluate.env_config({**evaluate.DEFAULTS, "model": str(run), "policies": ("ppo",),
+                                          "site": "random", "site_seed": 100})
+    assert source.endswith("(a building these runs trained on: train.json's --sites)")
+    _, source = evaluate.env_config({**evaluate.DEFAULTS, "model": str(run), "policies": ("ppo",),
+                                     "site": "random", "site_seed": 3})
+    assert "trained on" not in source
