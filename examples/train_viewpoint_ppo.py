@@ -115,8 +115,8 @@ def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles:
     from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
 
     overrides = {} if max_cycles is None else {"max_cycles": max_cycles}
-    per_copy = [site_overrides(sites[k % len(sites)]) if sites else {} for k in range(n_envs)]
-    fns = [partial(_copy_env, config, {**overrides, **o}, bootstrap_time_limit) for o in per_copy]
+    fns = [partial(_copy_env, config, {**overrides, **o}, bootstrap_time_limit)
+           for o in copy_sites(sites, n_envs)]
     first = fns[0]()  # the spaces every copy shares (SuperSuit's concat_vec_envs_v1 does the same)
     spaces = first.observation_space, first.action_space
     first.close()
@@ -134,6 +134,11 @@ def _copy_env(config: str, overrides: dict[str, Any], bootstrap_time_limit: bool
     env = StepInfos(make_train_env(config, **overrides), keys=("localization",),
                     time_limit=bootstrap_time_limit)
     return ss.pettingzoo_env_to_vec_env_v1(env)
+
+
+def copy_sites(sites: tuple[str, ...] | None, n_envs: int) -> list[dict[str, Any]]:
+    """Per env copy, its site's env overrides: copy ``k`` on ``sites[k % len(sites)]`` (none: ``{}``)."""
+    return [site_overrides(sites[k % len(sites)]) if sites else {} for k in range(n_envs)]
 
 
 def site_overrides(site: str) -> dict[str, Any]:

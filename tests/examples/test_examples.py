@@ -430,19 +430,21 @@ def test_a_policy_from_pixels_trains_and_the_evaluator_reads_it_back(example, tm
 
 def test_sites_put_each_env_copy_on_its_building_and_the_evaluator_names_a_training_building(
         example, trained, tmp_path):
-    # copy k stands on sites[k mod 2] and plays the episodes of a single env there seeded 7 + k
+    # copy k stands on sites[k] and plays the episodes of a single env there seeded 7 + k
     from uav_struct_env.wrappers import make_train_env
 
     train = example("train_viewpoint_ppo")
     sites = ("paper", "random:100")
     assert train._parse(["--sites", "paper,random:100-101"])["sites"] == ("paper", "random:100", "random:101")
-    assert train.site_overrides("random:100") == {"site": "random", "texture_seed": 100}
-    vec = train.make_vec_env("state", n_envs=3, num_cpus=0, seed=7, sites=sites)
+    assert train.copy_sites(sites, 3) == [{"site": "paper"}, {"site": "random", "texture_seed": 100},
+                                          {"site": "paper"}]
+    assert train.copy_sites(None, 2) == [{}, {}]
+    vec = train.make_vec_env("state", n_envs=2, num_cpus=0, seed=7, sites=sites)
     try:
-        gnss = vec.reset()["gnss"].reshape(3, -1)
+        gnss = vec.reset()["gnss"].reshape(2, -1)
     finally:
         vec.close()
-    for k, site in enumerate(("paper", "random:100", "paper")):
+    for k, site in enumerate(sites):
         single = make_train_env("state", **train.site_overrides(site))
         single.reset(seed=7 + k)
         obs, _ = single.reset()  # the copy's second episode, from its seeded generator
