@@ -505,7 +505,10 @@ def write_obj(element: SiteElement, directory: str | Path, stem: str) -> Path:
 
 
 def _rows(row: str, values: NDArray) -> str:
-    """``row`` formatted with each row of ``values`` (one ``%`` for the whole array: an OBJ of a few
-    thousand vertices is written several times faster than line by line, to the same bytes)."""
+    """``row`` formatted with each row of ``values``.
+
+    One ``%`` for the whole array: an OBJ of a few thousand vertices is written several times
+    faster than line by line, to the same bytes.
+    """
     values = np.asarray(values)
     return (row * len(values)) % tuple(values.ravel().tolist())
