@@ -1,7 +1,7 @@
 """Load a site's textured meshes into a pybullet client, once.
 
-Each :class:`~uav_struct_env.site.mesh.SiteElement` is written as OBJ + MTL + PNG into a
-directory owned by the caller and loaded as a static visual-only body
+Each :class:`~uav_struct_env.site.mesh.SiteElement` is written as OBJ + MTL + BMP
+(:func:`~uav_struct_env.site.mesh.obj_files`) and loaded as a static visual-only body
 (``createVisualShape(GEOM_MESH, fileName=...)``, no collision shape). The texture reaches both
 renderers through the MTL's ``map_Kd``: passing vertices directly to ``createVisualShape`` works
 with TinyRenderer but crashes the EGL plugin, which only loads meshes from files.
@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from uav_struct_env.sim.client import p  # imported quietly there
-from uav_struct_env.site.mesh import SiteElement, write_obj
+from uav_struct_env.site.mesh import SiteElement, obj_files
 
 __all__ = ["LoadedScene", "load_elements"]
 
@@ -48,15 +48,12 @@ class LoadedScene:
         return [b for name, b in self.body_ids.items() if self.kinds[name] == kind]
 
 
-def load_elements(
-    client_id: int, elements: Sequence[SiteElement], directory: str | Path
-) -> LoadedScene:
-    """Write ``elements`` to ``directory`` and create one static body per element.
+def load_elements(client_id: int, elements: Sequence[SiteElement]) -> LoadedScene:
+    """Create one static body per element, from its files (:func:`_content_dir`).
 
     Returns:
         The body id of every element.
     """
-    directory = Path(directory)
     body_ids: dict[str, int] = {}
     kinds: dict[str, str] = {}
     names = [e.name for e in elements]
@@ -67,11 +64,8 @@ def load_elements(
         root = _load_root()
         try:
             for k, element in enumerate(elements):
-                scratch = directory / f"e{k:03d}"
-                scratch.mkdir(parents=True, exist_ok=True)
                 stem = f"e{k:03d}_{element.kind}"
-                write_obj(element, scratch, stem)
-                path = _content_dir(scratch, root) / f"{stem}.obj"
+                path = _content_dir(obj_files(element, stem), root) / f"{stem}.obj"
                 shape = p.createVisualShape(
                     p.GEOM_MESH, fileName=str(path), rgbaColor=[1, 1, 1, 1],
                     physicsClientId=client_id,
@@ -103,13 +97,17 @@ def _load_root() -> Path:
     return root
 
 
-def _content_dir(scratch: Path, root: Path) -> Path:
-    """Move the files of ``scratch`` into ``root/<digest of their names and bytes>/``."""
+def _content_dir(files: dict[str, bytes], root: Path) -> Path:
+    """Write ``files`` (bytes by file name) into ``root/<digest of their names and bytes>/``.
+
+    The folder's name is a function of what it holds, so a path always holds the same bytes.
+    """
     digest = hashlib.sha256()
-    files = sorted(scratch.iterdir())
-    for f in files:
-        digest.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    for name in sorted(files):
+        digest.update(name.encode() + b"\0" + files[name] + b"\0")
     target = root / digest.hexdigest()[:32]
     if not target.exists():
-        os.replace(scratch, target)
+        target.mkdir()
+        for name, data in files.items():
+            (target / name).write_bytes(data)
     return target

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import functools
 import math
-import tempfile
 import time
 import warnings
 import weakref
@@ -166,8 +165,7 @@ class SiteWorld:
                 site, np.random.default_rng(0) if rng is None else rng, texture_size=texture_size
             )
             client.activate()
-            with tempfile.TemporaryDirectory(prefix="uav_struct_env_site_") as directory:
-                self.scene: LoadedScene = load_elements(client.client_id, elements, directory)
+            self.scene: LoadedScene = load_elements(client.client_id, elements)
         except BaseException:
             self.close()
             raise

@@ -49,6 +49,7 @@ __all__ = [
     "column_element",
     "ground_elements",
     "marker_element",
+    "obj_files",
     "site_elements",
     "slab_element",
     "solid_element",
@@ -482,26 +483,35 @@ def site_elements(
 def write_obj(element: SiteElement, directory: str | Path, stem: str) -> Path:
     """Write ``element`` as ``stem.obj`` + ``stem.mtl`` + ``stem.bmp`` in ``directory``.
 
-    The OBJ has positions, UVs and normals and one material whose ``map_Kd`` is the texture
-    image, which both pybullet renderers load. Returns the OBJ path.
+    The files of :func:`obj_files`. Returns the OBJ path.
     """
+    directory = Path(directory)
+    for name, data in obj_files(element, stem).items():
+        (directory / name).write_bytes(data)
+    return directory / f"{stem}.obj"
+
+
+def obj_files(element: SiteElement, stem: str) -> dict[str, bytes]:
+    """``element`` as the bytes of ``stem.bmp``, ``stem.mtl`` and ``stem.obj``, by file name.
+
+    The OBJ has positions, UVs and normals and one material whose ``map_Kd`` is the texture
+    image, which both pybullet renderers load.
+    """
+    import io
+
     from PIL import Image
 
-    directory = Path(directory)
     # BMP: both renderers read it (stb_image) and it is written 15x faster than even a
     # store-only PNG; the files live only as long as the world.
-    Image.fromarray(element.texture).save(directory / f"{stem}.bmp")
-    (directory / f"{stem}.mtl").write_text(
-        f"newmtl {stem}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nmap_Kd {stem}.bmp\n"
-    )
+    bmp = io.BytesIO()
+    Image.fromarray(element.texture).save(bmp, format="BMP")
+    mtl = f"newmtl {stem}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nmap_Kd {stem}.bmp\n"
     m = element.mesh
     f = np.repeat(np.asarray(m.faces, dtype=np.int64) + 1, 3, axis=1)  # a/a/a b/b/b c/c/c
-    text = (f"mtllib {stem}.mtl\no {stem}\nusemtl {stem}\n"
-            + _rows("v %.6f %.6f %.6f\n", m.vertices) + _rows("vt %.6f %.6f\n", element.uv)
-            + _rows("vn %.6f %.6f %.6f\n", m.vertex_normals) + _rows("f %d/%d/%d %d/%d/%d %d/%d/%d\n", f))
-    path = directory / f"{stem}.obj"
-    path.write_text(text)
-    return path
+    obj = (f"mtllib {stem}.mtl\no {stem}\nusemtl {stem}\n"
+           + _rows("v %.6f %.6f %.6f\n", m.vertices) + _rows("vt %.6f %.6f\n", element.uv)
+           + _rows("vn %.6f %.6f %.6f\n", m.vertex_normals) + _rows("f %d/%d/%d %d/%d/%d %d/%d/%d\n", f))
+    return {f"{stem}.bmp": bmp.getvalue(), f"{stem}.mtl": mtl.encode(), f"{stem}.obj": obj.encode()}
 
 
 def _rows(row: str, values: NDArray) -> str:
