@@ -108,7 +108,9 @@ def test_render_replaces_a_planted_link_instead_of_writing_through_it(tmp_path):
     out = tmp_path / "renders"
     out.mkdir()
     (out / "slab_uav_0_viewpoint0.png").symlink_to(outside)
-    argv = ["--out", str(out), "--stage", "slab", "--renderer", "tiny", "--overwrite"]
+    # 160 x 90 views: the size has nothing to do with the link
+    argv = ["--out", str(out), "--stage", "slab", "--renderer", "tiny", "--overwrite",
+            "--image-size", "160x90"]
     assert render_main(argv) == 0
     target = out / "slab_uav_0_viewpoint0.png"
     assert not target.is_symlink() and target.read_bytes()[:4] == b"\x89PNG"
@@ -208,3 +210,19 @@ def test_pybullet_and_egl_print_nothing(tmp_path):
     done = _run("-c", code)
     assert done.returncode == 0, done.stderr
     assert done.stdout == "" and done.stderr == ""
+
+
+def test_image_size_options_read_width_x_height_and_refuse_what_the_env_cannot_render():
+    import argparse
+
+    from uav_struct_env.validate import image_size_argument
+
+    assert image_size_argument("320x180") == (320, 180) and image_size_argument("64X36") == (64, 36)
+    for bad, why in (("320", "WIDTHxHEIGHT"), ("320x", "WIDTHxHEIGHT"), ("-3x5", "WIDTHxHEIGHT"),
+                     ("8x8", "16-8192 px"), ("8193x100", "16-8192 px"), ("8000x8000", "at most")):
+        with pytest.raises(argparse.ArgumentTypeError, match=why):
+            image_size_argument(bad)
+    # on the command line: one line naming the option, status 2, before any work
+    with pytest.raises(SystemExit) as stop:
+        render_main(["--image-size", "8x8"])
+    assert stop.value.code == 2

@@ -30,7 +30,8 @@ def _earlier_run(out, name):
 def test_render_refuses_an_earlier_run_and_replaces_it_with_overwrite(tmp_path, capsys):
     out = tmp_path / "renders"
     before = _earlier_run(out, "slab_uav_0_viewpoint0.png")
-    argv = ["--out", str(out), "--stage", "slab", "--renderer", "tiny"]
+    # 160 x 90 views: which files it writes, refuses or replaces does not depend on the size
+    argv = ["--out", str(out), "--stage", "slab", "--renderer", "tiny", "--image-size", "160x90"]
     assert render_main(argv) == 2
     assert "--overwrite" in capsys.readouterr().err
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before

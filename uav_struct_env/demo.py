@@ -19,6 +19,7 @@ from uav_struct_env.validate import (
     check_option,
     check_output_dir,
     check_site,
+    image_size_argument,
     refuse,
 )
 
@@ -88,6 +89,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--viewpoint", type=int, default=0,
                    help=f"scripted viewpoint index, 0 to {n_viewpoints - 1}")
     p.add_argument("--renderer", default="auto", choices=("auto", "tiny", "egl"))
+    p.add_argument("--image-size", type=image_size_argument, default=PAPER_IMAGE_SIZE, metavar="WxH",
+                   help="the views' size, the paper's camera scaled to it (default: the paper's 1280x720)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace the images of an earlier run in --out (otherwise refused)")
     args = p.parse_args(argv)
@@ -108,7 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         with staged:
             for stage in stages:
                 render_views(staged.stage, stage=stage, seed=args.seed, viewpoint=args.viewpoint,
-                             renderer=args.renderer, site=args.site)
+                             renderer=args.renderer, image_size=args.image_size, site=args.site)
     except (OSError, RendererUnavailableError) as err:
         return refuse(p.prog, f"{err}; nothing written to {args.out}", status=1)
     if args.stage == "both" and len(stages) == 1:

@@ -167,6 +167,25 @@ def check_option(option: str, value: Any, lo: float | None = None, hi: float | N
     return check_number(option, value, lo, hi, error=UsageError, type_error=UsageError, **kwargs)
 
 
+def image_size_argument(text: str) -> tuple[int, int]:
+    """``--image-size WxH`` (``320x180``) as ``(W, H)``, within the env's limits.
+
+    Raises:
+        argparse.ArgumentTypeError: not two integers joined by ``x``, a side outside 16-8192 px, or
+            more pixels than the env renders (a 20 MP still).
+    """
+    from uav_struct_env.envs.config import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE
+
+    parts = str(text).lower().split("x")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT in pixels (e.g. 320x180), got {text!r}")
+    w, h = int(parts[0]), int(parts[1])
+    if not (16 <= w <= MAX_IMAGE_SIDE and 16 <= h <= MAX_IMAGE_SIDE) or w * h > MAX_IMAGE_PIXELS:
+        raise argparse.ArgumentTypeError(f"each side must be 16-{MAX_IMAGE_SIDE} px and the image at most "
+                                         f"{MAX_IMAGE_PIXELS} px, got {text!r}")
+    return w, h
+
+
 class CommandParser(argparse.ArgumentParser):
     """An ``ArgumentParser`` whose ``--help`` shows every option's default and that has ``--version``.
 

@@ -108,8 +108,11 @@ def _rows(runs):
 
 def test_the_command_writes_one_table_and_refuses_study_only_options(tmp_path, capsys):
     out = tmp_path / "sw"
+    # TINY's small images (a sixteenth of the paper's pixels): what is checked does not depend on them
+    size = "{}x{}".format(*TINY.image_size)
     code = main(["--sites", "random:2", "--seeds", "3", "--detector", "projection", "--quick",
-                 "--no-progress", "--out", str(out), "--association", "paper", "--methods", "column_tops"])
+                 "--image-size", size, "--no-progress", "--out", str(out), "--association", "paper",
+                 "--methods", "column_tops"])
     assert code == 0
     results = json.loads((out / "results.json").read_text())
     assert results["config"]["sites"] == ["random:2"] and results["config"]["seeds"] == [3]
@@ -122,6 +125,7 @@ def test_the_command_writes_one_table_and_refuses_study_only_options(tmp_path, c
     line = results["settings"]
     assert made == f"# Settings: {line}" and table.startswith(f"Settings: {line}\n")
     assert "site random:2" in made and "seed 3" in made and "paper association" in made
+    assert "320x180 px" in made  # the small images were the ones rendered
     assert header.startswith("site,seed,method,uav,viewpoint")
     assert first.startswith("random:2,3,")  # each row names the run it came from
     assert main(["--sites", "paper", "--site", "paper", "--out", str(tmp_path / "x")]) == 2

@@ -45,6 +45,9 @@ def _running(pid: int) -> bool:
         return False
 
 
+SMALL = (320, 180)  # a quarter of the paper's image width and height, for runs whose images are not checked
+
+
 def _study(out: Path, workers: int, *extra: str, progress: bool = False) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "uav_struct_env.cli", "study", "--out", str(out), "--workers",
            str(workers), *([] if progress else ["--no-progress"]), "--no-figures", "--detector",
@@ -144,29 +147,38 @@ def test_a_killed_worker_fails_the_study_naming_it(tmp_path):
     assert list(out.iterdir()) == []
 
 
-def test_an_output_folder_with_results_is_refused_naming_overwrite(tmp_path):
+def test_an_output_folder_with_results_is_refused_naming_overwrite(tmp_path, capsys):
+    # No signal and no worker: the command's own function, in this process, gives the exit status.
+    from uav_struct_env.study.study import main
+
     out = tmp_path / "out"
     before = _previous_run(out)
-    proc = _study(out, 1, "--quick")
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 2
+    assert main(["--out", str(out), "--workers", "1", "--no-progress", "--no-figures", "--detector",
+                 "projection", "--quick"]) == 2
+    err = capsys.readouterr().err
     assert "already holds results" in err and "--overwrite" in err
     assert "Traceback" not in err
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
-def test_overwrite_replaces_the_earlier_study_and_removes_its_stale_files(tmp_path):
+def test_overwrite_replaces_the_earlier_study_and_removes_its_stale_files(tmp_path, capsys):
+    # No signal and no worker: the command's own function, in this process (its kernels warm), on
+    # small images (what is checked is the files the run leaves, not what it renders).
+    from uav_struct_env.study import study as study_cli
+
     out = tmp_path / "out"
     _previous_run(out)
     (out / "fig2_associations.png").write_bytes(b"an earlier figure")
-    proc = _study(out, 1, "--quick", "--overwrite", "--methods", "column_tops")  # one scene: quickest
-    _, err = proc.communicate(timeout=300)
-    assert proc.returncode == 0, err[-2000:]
+    status = study_cli.main(["--out", str(out), "--workers", "1", "--no-progress", "--no-figures",
+                             "--detector", "projection", "--quick", "--overwrite", "--image-size", "320x180",
+                             "--methods", "column_tops"])  # one scene: quickest
+    assert status == 0, capsys.readouterr().err[-2000:]
     names = sorted(p.name for p in out.iterdir())
     # --no-figures: the earlier figure is not left beside the new results; the user's file stays
     assert names == ["detections.csv", "notes.txt", "per_image.csv", "results.json", "table1.md", "table2.md"]
     assert b"earlier" not in (out / "results.json").read_bytes()
-    assert list(json.loads((out / "results.json").read_text())["methods"]) == ["column_tops"]
+    results = json.loads((out / "results.json").read_text())
+    assert list(results["methods"]) == ["column_tops"] and results["config"]["image_size"] == list(SMALL)
 
 
 def test_sigterm_ends_the_study_like_ctrl_c_with_status_143(tmp_path):
@@ -188,7 +200,9 @@ def test_sigterm_ends_the_study_like_ctrl_c_with_status_143(tmp_path):
 
 def test_two_studies_into_one_new_folder_one_writes_the_other_is_refused(tmp_path):
     out = tmp_path / "new"
-    procs = [_study(out, 1, "--quick", "--methods", "column_tops") for _ in range(2)]
+    # two real processes (on small images: the race for the folder does not depend on them)
+    procs = [_study(out, 1, "--quick", "--methods", "column_tops", "--image-size", "320x180")
+             for _ in range(2)]
     done = [p.communicate(timeout=600) for p in procs]
     codes = sorted(p.returncode for p in procs)
     assert codes == [0, 2], [err[-2000:] for _, err in done]
@@ -198,6 +212,7 @@ def test_two_studies_into_one_new_folder_one_writes_the_other_is_refused(tmp_pat
     why = ("being written by another run", "already holds results")
     assert len(ours) == 1 and any(w in ours[0] for w in why), refused[-2000:]
     assert (out / "results.json").is_file() and not [p for p in out.iterdir() if p.name.startswith(".")]
+    assert json.loads((out / "results.json").read_text())["config"]["image_size"] == list(SMALL)
 
 
 def test_a_corrupt_detector_model_is_one_line_and_status_2(tmp_path, capsys):

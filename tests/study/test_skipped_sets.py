@@ -62,8 +62,10 @@ def test_results_and_tables_name_what_was_left_out_and_keep_the_paper_to_its_sit
 
 
 def test_the_cli_notes_each_skip_and_evaluates_the_rest(messy, tmp_path, capsys):
+    # the skips do not depend on the image size: a quarter of the paper's width and height
     status = study_cli.main(["--site", messy, "--stage", "L1/slab", "--detector", "projection",
-                             "--quick", "--out", str(tmp_path / "r"), "--no-progress", "--no-figures"])
+                             "--quick", "--image-size", "320x180", "--out", str(tmp_path / "r"),
+                             "--no-progress", "--no-figures"])
     err = capsys.readouterr().err
     assert status == 0
     assert "note: opening_corners left out: stage 'L1/slab' exposes 0 opening_corners" in err
@@ -71,3 +73,4 @@ def test_the_cli_notes_each_skip_and_evaluates_the_rest(messy, tmp_path, capsys)
     results = json.loads((tmp_path / "r" / "results.json").read_text())
     assert "opening_corners" not in results["methods"] and "slab_corners" in results["methods"]
     assert results["methods"]["column_tops"]["total"] == 8
+    assert results["config"]["image_size"] == [320, 180]  # the smaller images were the ones rendered

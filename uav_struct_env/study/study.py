@@ -11,6 +11,7 @@ import numpy as np
 from tqdm import tqdm
 
 from localization.detect.weights import WEIGHT_NAMES, WeightSet, adapted_weights
+from localization.geometry.camera import PAPER_IMAGE_SIZE
 from uav_struct_env.envs.config import LIGHTINGS
 from uav_struct_env.outputs import OutputExistsError, StagedOutput
 from uav_struct_env.processes import WorkerDied
@@ -39,7 +40,14 @@ from uav_struct_env.study.report import (
 from uav_struct_env.study.run import StudyInterrupted, run_units_tracked, warm_kernels
 from uav_struct_env.study.tracking import tracking_markdown, tracking_summary
 from uav_struct_env.tracking_sim import DEFAULT_WORKER_SIGMA_PX
-from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_output_dir, check_site, refuse
+from uav_struct_env.validate import (
+    INPUT_ERRORS,
+    CommandParser,
+    check_output_dir,
+    check_site,
+    image_size_argument,
+    refuse,
+)
 
 __all__ = ["main", "run_study"]
 
@@ -186,6 +194,14 @@ def _parser() -> CommandParser:
         help="factor on every --as-built tolerance (default 1; 0 is the design)",
     )
     p.add_argument("--workers", type=int, default=1, help="parallel processes (default 1)")
+    p.add_argument(
+        "--image-size",
+        type=image_size_argument,
+        default=PAPER_IMAGE_SIZE,
+        metavar="WxH",
+        help="the rendered images' size, the paper's camera scaled to it (default: the paper's 1280x720, "
+        "at which the learned detectors were trained; smaller for quick smoke runs)",
+    )
     p.add_argument("--pixel-sigma", type=float, default=1.0, help="projection detector noise, px")
     p.add_argument("--miss-rate", type=float, default=0.0, help="projection detector miss rate")
     p.add_argument("--false-positives", type=float, default=0.0, help="mean false detections per image")
@@ -273,6 +289,7 @@ def study_config(args, **overrides) -> StudyConfig:
         detector_model=args.detector_model,
         refiner_model=args.refiner_model,
         workers=args.workers,
+        image_size=args.image_size,
         stage=args.stage,
         as_built=args.as_built,
         as_built_scale=args.as_built_scale,

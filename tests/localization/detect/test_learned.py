@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -171,8 +173,10 @@ def test_bad_image():
         LearnedDetector("column_tops").detect(np.zeros((10, 10)), {})
 
 
-def _paper_column_tops_render():
-    """A 1280 x 720 render of the paper site's columns stage and its column-top truth."""
+@pytest.fixture(scope="module")
+def _shared_column_tops_render():
+    """A 1280 x 720 render of the paper site's columns stage and its column-top truth, made once
+    for the module (1.4 s of CPU a render)."""
     pytest.importorskip("pybullet")
     from localization.geometry.transforms import look_at
     from uav_struct_env.sim.world import SiteWorld
@@ -185,12 +189,18 @@ def _paper_column_tops_render():
         return res, world.landmark_truth("column_tops", cam_from_world, None, res)
 
 
+@pytest.fixture
+def paper_column_tops_render(_shared_column_tops_render):
+    """The shared render and truth, copied: each test gets arrays no other test has touched."""
+    return copy.deepcopy(_shared_column_tops_render)
+
+
 @needs_model
 @pytest.mark.parametrize("refiner", [True, False], ids=["refined", "network-only"])
-def test_real_render_column_tops(refiner):
+def test_real_render_column_tops(refiner, paper_column_tops_render):
     """On a paper-site render the detector finds the visible column tops within 3 px, with or
     without the full-resolution refiner."""
-    res, truth = _paper_column_tops_render()
+    res, truth = paper_column_tops_render
     det = LearnedDetector("column_tops", refiner=refiner).detect(
         res.rgb, {"landmarks": {"column_tops": truth}, "image_size": (1280, 720)}
     )
@@ -203,9 +213,9 @@ def test_real_render_column_tops(refiner):
 
 
 @needs_model
-def test_candidates_are_the_network_output_that_the_refiner_then_places():
+def test_candidates_are_the_network_output_that_the_refiner_then_places(paper_column_tops_render):
     """``candidates`` is ``detect_all`` without refinement; the refiner moves them onto the truth."""
-    res, truth = _paper_column_tops_render()
+    res, truth = paper_column_tops_render
     raw = LearnedDetector("column_tops", refiner=False, corner_window=0)
     cand = raw.candidates(res.rgb)
     for a, b in zip(cand, raw.detect_all(res.rgb), strict=True):
