@@ -109,13 +109,15 @@ def test_several_worlds_in_one_process(backend_name, egl_ok):
 
 
 def test_worlds_in_subprocesses(egl_ok):
+    # The smallest textures: what runs in the fresh process (the backend "auto" picks, a lit image,
+    # the silenced banner) does not depend on them, and drawing 512 px ones cost a second of CPU.
     code = (
         "import numpy as np\n"
         "from uav_struct_env.sim.world import SiteWorld\n"
         "from uav_struct_env.site import paper_site\n"
         "from localization.geometry import look_at\n"
         "for size in ((128, 72), (640, 360)):\n"
-        "    with SiteWorld(paper_site(), image_size=size) as w:\n"
+        "    with SiteWorld(paper_site(), image_size=size, texture_size=16) as w:\n"
         "        r = w.render(look_at([0, -25, 15], w.site.center))\n"
         "        print('RESULT', w.backend, r.rgb.shape, int(r.rgb.std() > 5))\n"
     )
