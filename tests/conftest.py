@@ -166,6 +166,23 @@ def quick_projection_study(shared_output) -> tuple[Path, str]:
     return shared_output("quick-projection-study", _quick_projection_study)[1]
 
 
+#: The tiny landmark dataset's arguments: one random site, two views, a quarter of 1280 x 720.
+TINY_DATASET = ["--layouts", "1", "--views", "2", "--seed", "7", "--scale", "0.25"]
+
+
+def _tiny_landmark_dataset(folder: Path) -> Path:
+    from uav_struct_env.datasets.__main__ import main as make_dataset
+
+    assert make_dataset([str(folder / "data"), *TINY_DATASET]) == 0
+    return folder / "data"
+
+
+@pytest.fixture(scope="session")
+def tiny_landmark_dataset(shared_output) -> Path:
+    """``python -m uav_struct_env.datasets DIR`` + :data:`TINY_DATASET`, once a session (read only)."""
+    return shared_output("tiny-landmark-dataset", _tiny_landmark_dataset)[1]
+
+
 def _tiny_ppo_run(folder: Path, load_script) -> tuple[Path, dict]:
     train = load_script(Path(__file__).resolve().parents[1] / "examples" / "train_viewpoint_ppo.py")
     out = folder / "ppo"

@@ -15,10 +15,9 @@ from uav_struct_env.errors import ConfigError
 
 
 @pytest.fixture(scope="module")
-def tiny_dataset(tmp_path_factory):
-    out = tmp_path_factory.mktemp("lm")
-    cli_main([str(out), "--layouts", "1", "--views", "2", "--seed", "7", "--scale", "0.25"])
-    return out
+def tiny_dataset(tiny_landmark_dataset):
+    """``--layouts 1 --views 2 --seed 7 --scale 0.25`` (tests/conftest.py; read only)."""
+    return tiny_landmark_dataset
 
 
 def _layout_landmarks(seed: int, layout: int) -> dict[int, np.ndarray]:
@@ -89,10 +88,12 @@ def test_an_ifc_building_dataset_labels_its_own_landmarks(tmp_path):
 
     duplex = Path(__file__).resolve().parents[1] / "data" / "ifc" / "duplex.ifc"
     out = tmp_path / "duplex"
-    assert cli_main([str(out), "--site", str(duplex), "--layouts", "2", "--views", "2",
-                     "--seed", "3", "--scale", "0.25", "--renderer", "tiny"]) == 0
+    # seed 2: layout 0 at Roof/slab, layout 1 at Level 2/slab (both stages), 128 px textures (cheap)
+    assert cli_main([str(out), "--site", str(duplex), "--layouts", "2", "--views", "1",
+                     "--seed", "2", "--scale", "0.25", "--renderer", "tiny"]) == 0
     data = load_labels(out)
     assert data["config"]["site"] == str(duplex)
+    assert sorted({rec["stage"] for rec in data["images"]}) == sorted(ifc_stages(duplex))
     n = 0
     for rec in data["images"]:
         assert rec["stage"] in ifc_stages(duplex)
@@ -114,13 +115,15 @@ def test_stages_limit_the_layouts_to_those_stages(tmp_path, capsys):
     from uav_struct_env.site import ifc_stages
 
     duplex = Path(__file__).resolve().parents[1] / "data" / "ifc" / "duplex.ifc"
-    top = ifc_stages(duplex)[-1]
-    out = tmp_path / "top"
-    assert cli_main([str(out), "--site", str(duplex), "--stages", top, "--layouts", "2", "--views", "1",
-                     "--scale", "0.25", "--renderer", "tiny"]) == 0
+    first, top = ifc_stages(duplex)[0], ifc_stages(duplex)[-1]
+    out = tmp_path / "first"
+    # seed 8: without --stages both layouts would be at the top stage (the check can fail); with it,
+    # 128 px textures (cheap)
+    assert cli_main([str(out), "--site", str(duplex), "--stages", first, "--layouts", "2", "--views", "1",
+                     "--seed", "8", "--scale", "0.25", "--renderer", "tiny"]) == 0
     data = load_labels(out)
-    assert {rec["stage"] for rec in data["images"]} == {top}
-    assert data["config"]["stages"] == [top] and f"stages {top}" in data["settings"]
+    assert first != top and {rec["stage"] for rec in data["images"]} == {first}
+    assert data["config"]["stages"] == [first] and f"stages {first}" in data["settings"]
     with pytest.raises(ConfigError, match=r"DatasetConfig.stages: \['Level 9/slab'\] not stages of duplex"):
         DatasetConfig(site=str(duplex), stages=("Level 9/slab",))
     with pytest.raises(ConfigError, match="applies to a building file"):
@@ -178,11 +181,13 @@ def test_mixed_activity_cycles_the_presets_over_the_layouts(tmp_path):
 
 @pytest.fixture(scope="module")
 def camera_datasets(tmp_path_factory):
-    """The tiny dataset's views through ``--camera mavic2pro`` and ``--camera mixed``."""
+    """The tiny dataset's views through ``--camera mavic2pro`` and ``--camera mixed``; the mixed
+    one has two views more (views 0 and 1 are those of a two-view dataset: each view continues the
+    layout's draws), the ideal dataset the ``--imaging`` test compares with."""
     out = {}
-    for camera in ("mavic2pro", "mixed"):
+    for camera, views in (("mavic2pro", "2"), ("mixed", "4")):
         out[camera] = tmp_path_factory.mktemp(camera)
-        assert cli_main([str(out[camera]), "--layouts", "1", "--views", "2", "--seed", "7",
+        assert cli_main([str(out[camera]), "--layouts", "1", "--views", views, "--seed", "7",
                          "--scale", "0.25", "--camera", camera]) == 0
     return out
 
@@ -231,8 +236,8 @@ def test_mixed_is_every_other_image_of_the_paper_and_mavic_datasets(tiny_dataset
     assert "camera" not in raw["config"]  # a paper dataset is written as before cameras existed
     assert all("camera" not in rec for rec in raw["images"])
     assert paper["config"]["camera"] == "paper"  # ... and read with the defaults filled in
-    assert [r["camera"] for r in mixed["images"]] == ["paper", "mavic2pro"]
-    for rec in mixed["images"]:
+    assert [r["camera"] for r in mixed["images"]] == ["paper", "mavic2pro"] * 2
+    for rec in mixed["images"][:2]:  # the views the two-view paper and mavic2pro datasets have
         twins = paper if rec["camera"] == "paper" else mavic
         twin = twins["images"][rec["view"]]
         assert rec == twin
@@ -293,21 +298,24 @@ def test_a_bad_camera_is_refused_in_one_line(tmp_path, capsys):
 # ---------------------------------------------------------------- --imaging
 
 
-def test_camera_imaging_degrades_every_other_pair_of_images_and_nothing_else(tmp_path, capsys):
+def test_camera_imaging_degrades_every_other_pair_of_images_and_nothing_else(tmp_path, camera_datasets):
     """--imaging mixed: views 2 and 3 of 4 get the camera imaging (noise, blur, JPEG); labels,
     poses and the other images are those of the ideal dataset; the noise is seeded."""
     args = ["--layouts", "1", "--views", "4", "--seed", "7", "--scale", "0.25", "--camera", "mixed"]
-    for name, extra in (("ideal", []), ("mixed", ["--imaging", "mixed"]), ("again", ["--imaging", "mixed"])):
-        assert cli_main([str(tmp_path / name), *args, *extra]) == 0
-    ideal, mixed = load_labels(tmp_path / "ideal"), load_labels(tmp_path / "mixed")
-    assert "imaging" not in json.loads((tmp_path / "ideal" / "labels.json").read_text())["config"]
+    for name in ("mixed", "again"):
+        assert cli_main([str(tmp_path / name), *args, "--imaging", "mixed"]) == 0
+    ideal_dir = camera_datasets["mixed"]  # the same arguments without --imaging
+    ideal, mixed = load_labels(ideal_dir), load_labels(tmp_path / "mixed")
+    assert ideal["config"]["n_layouts"] == 1 and ideal["config"]["views_per_layout"] == 4
+    assert (ideal["config"]["seed"], ideal["config"]["scale"]) == (7, 0.25)
+    assert "imaging" not in json.loads((ideal_dir / "labels.json").read_text())["config"]
     assert ideal["config"]["imaging"] == "ideal" and mixed["config"]["imaging"] == "mixed"
     assert [r["imaging"] for r in mixed["images"]] == ["ideal", "ideal", "camera", "camera"]
     assert [r["camera"] for r in mixed["images"]] == ["paper", "mavic2pro"] * 2
     for a, b in zip(ideal["images"], mixed["images"], strict=True):
         b_without = {k: v for k, v in b.items() if k != "imaging"}
         assert {k: v for k, v in a.items() if k != "imaging"} == b_without
-        img_a = cv2.imread(str(tmp_path / "ideal" / a["file"])).astype(np.float64)
+        img_a = cv2.imread(str(ideal_dir / a["file"])).astype(np.float64)
         img_b = cv2.imread(str(tmp_path / "mixed" / b["file"])).astype(np.float64)
         diff = float(np.abs(img_a - img_b).mean())
         if b["imaging"] == "ideal":

@@ -96,7 +96,7 @@ def test_evaluate_compares_all_policies_on_the_same_seeds(example, trained, tmp_
     summary = evaluate.main(
         model=str(out),
         episodes=2,
-        max_cycles=6,
+        max_cycles=2,
         plot=str(tmp_path / "eval.png"),
         json_out=str(tmp_path / "eval.json"),
     )
@@ -131,7 +131,7 @@ def test_evaluate_builds_the_env_each_run_recorded(example, trained, tmp_path):
     assert over["env_config"]["env"]["max_cycles"] == 2
     # a checkpoint folder finds its run's train.json two levels up
     step = sorted((old / "checkpoints").glob("step_*"))[0]
-    from_step = evaluate.main(model=str(step), policies=("ppo",), episodes=1)
+    from_step = evaluate.main(model=str(step), policies=("ppo",), episodes=1, max_cycles=2)
     assert from_step["env_config"]["wrapper"]["association"] == "paper"
     with pytest.raises(UsageError, match="trained in different configurations.*evaluate them separately"):
         evaluate.main(model=[str(out), str(old)], policies=("ppo",), episodes=1)
@@ -319,15 +319,16 @@ def test_checkpoints_evaluate_into_a_learning_curve_with_a_band_over_runs(exampl
     out, _ = trained
     second = tmp_path / "seed4"
     example("train_viewpoint_ppo").main(out=str(second), total_timesteps=128, n_envs=1, num_cpus=0,
-                                     n_steps=64, batch_size=64, n_epochs=1, max_cycles=8,
-                                     checkpoint_every=128, progress_bar=False, seed=4)
+                                     n_steps=32, batch_size=64, n_epochs=1, max_cycles=8,
+                                     checkpoint_every=64, progress_bar=False, seed=4)
     evaluate = example("evaluate_policy")
     summary = evaluate.main(checkpoints=(str(out), str(second)), episodes=1, max_cycles=4,
                             plot=str(tmp_path / "curve.png"), json_out=str(tmp_path / "curve.json"))
     curves = summary["learning_curve"]
     assert [p["agent_steps"] for p in curves[str(out)]] == [128, 256]
-    # one rollout of 4 x 64: checkpoints are taken at rollout boundaries, so only its end
-    assert [p["agent_steps"] for p in curves[str(second)]] == [256]
+    # one rollout of 4 x 32 (checkpoint every 64): checkpoints are taken at rollout boundaries, so
+    # only its end
+    assert [p["agent_steps"] for p in curves[str(second)]] == [128]
     for points in curves.values():
         for p in points:
             assert 0.0 <= p["final_success_rate"] <= 1.0 and np.isfinite(p["mean_return"])

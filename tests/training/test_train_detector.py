@@ -23,11 +23,8 @@ def test_targets_decode_round_trip():
     assert np.allclose(uv[order], kps[:, :2], atol=1e-5)
 
 
-def test_tiny_training_run_exports_a_working_model(tmp_path):
-    from uav_struct_env.datasets.__main__ import main as make_dataset
-
-    data = tmp_path / "data"
-    make_dataset([str(data), "--layouts", "1", "--views", "2", "--seed", "3", "--scale", "0.25"])
+def test_tiny_training_run_exports_a_working_model(tiny_landmark_dataset, tmp_path):
+    data = tiny_landmark_dataset  # one random site, two views, quarter scale (tests/conftest.py)
     out = tmp_path / "run"
     summary = main(["--data", str(data), "--val", str(data), "--out", str(out),
                     "--max-steps", "3", "--batch", "2", "--crop", "64", "64", "--workers", "0",
@@ -40,24 +37,24 @@ def test_tiny_training_run_exports_a_working_model(tmp_path):
     assert uv.shape[1] == 2 and len(scores) == len(kinds)
 
 
-def test_several_datasets_are_pooled_with_their_own_folders(tmp_path):
+def test_several_datasets_are_pooled_with_their_own_folders(tiny_landmark_dataset, tmp_path):
     from uav_struct_env.datasets import load_labels
     from uav_struct_env.datasets.__main__ import main as make_dataset
 
-    for name, seed in (("a", "3"), ("b", "4")):
-        make_dataset([str(tmp_path / name), "--layouts", "1", "--views", "1", "--seed", seed,
-                      "--scale", "0.25"])
-    pooled = pool_labels([tmp_path / "a", str(tmp_path / "b" / "labels.json")])
-    a, b = load_labels(tmp_path / "a"), load_labels(tmp_path / "b")
-    assert len(pooled["images"]) == len(a["images"]) + len(b["images"]) == 2
-    for rec, (src, orig) in zip(pooled["images"], ((a, a["images"][0]), (b, b["images"][0])), strict=True):
+    # a: the tiny dataset (two views); b: another seed's single view, in a folder of its own
+    make_dataset([str(tmp_path / "b"), "--layouts", "1", "--views", "1", "--seed", "4", "--scale", "0.25"])
+    pooled = pool_labels([tiny_landmark_dataset, str(tmp_path / "b" / "labels.json")])
+    a, b = load_labels(tiny_landmark_dataset), load_labels(tmp_path / "b")
+    assert len(pooled["images"]) == len(a["images"]) + len(b["images"]) == 3
+    sources = [(a, a["images"][0]), (a, a["images"][1]), (b, b["images"][0])]
+    for rec, (src, orig) in zip(pooled["images"], sources, strict=True):
         assert rec["keypoints"] == orig["keypoints"]
         image = (Path(pooled["root"]) / rec["file"]).read_bytes()
         assert image == (Path(src["root"]) / orig["file"]).read_bytes()
     out = tmp_path / "run"
-    summary = main(["--data", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(out),
+    summary = main(["--data", str(tiny_landmark_dataset), str(tmp_path / "b"), "--out", str(out),
                     "--max-steps", "1", "--batch", "2", "--crop", "64", "64", "--workers", "0",
                     "--threads", "1", "--width", "8"])
-    assert summary["train_images"] == 2
+    assert summary["train_images"] == 3
     with pytest.raises(ValueError, match="at least one dataset"):
         pool_labels([])

@@ -66,13 +66,11 @@ def test_tiny_training_run_exports_a_working_refiner(full_res_dataset, tmp_path)
     assert uv.shape == (2, 2) and np.all(np.isfinite(uv)) and np.all((scores >= 0) & (scores <= 1))
 
 
-def test_mine_rejects_half_resolution_data(tmp_path):
-    from uav_struct_env.datasets.__main__ import main as make_dataset
-
-    data = tmp_path / "half"
-    make_dataset([str(data), "--layouts", "1", "--views", "1", "--seed", "5", "--scale", "0.25"])
+def test_mine_rejects_half_resolution_data(tiny_landmark_dataset, tmp_path):
+    data = tiny_landmark_dataset  # a quarter of 1280 x 720 (tests/conftest.py)
     with pytest.raises(ValueError, match="full-resolution renders"):
         mine(str(data), str(tmp_path / "w.npz"))
+    assert not (tmp_path / "w.npz").exists()
 
 
 def test_missing_keypoint_network_is_a_usage_error(tmp_path, capsys):

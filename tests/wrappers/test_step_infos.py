@@ -11,7 +11,7 @@ from uav_struct_env.wrappers import StepInfos, make_train_env
 ss = pytest.importorskip("supersuit")
 
 
-def _episode_ends(env, steps=40):
+def _episode_ends(env, steps=20):
     """(terminal observation's ``localized``, info's ``localization.success``) at every episode end
     of copy 0 of a SuperSuit vector env over two copies of ``env``, random actions."""
     vec = ss.concat_vec_envs_v1(ss.pettingzoo_env_to_vec_env_v1(env), 2, num_cpus=0,
@@ -30,9 +30,10 @@ def _episode_ends(env, steps=40):
 
 def test_at_an_episode_end_the_info_is_the_final_steps_not_the_next_resets():
     ends = _episode_ends(StepInfos(make_train_env("state", max_cycles=5)))
-    assert len(ends) >= 8 * 8  # 8 episode ends of 8 agent slots
+    assert len(ends) >= 4 * 8  # 4 episode ends of 8 agent slots
     assert all(localized == success for localized, success in ends)
-    # Why: without it SuperSuit merges the next episode's reset infos over the final step's.
+    # Why: without it SuperSuit merges the next episode's reset infos over the final step's
+    # (measured: 18-21 of the 32 ends differ, so the check above can fail)
     plain = _episode_ends(make_train_env("state", max_cycles=5))
     assert any(localized != success for localized, success in plain)
 

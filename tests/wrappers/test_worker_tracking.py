@@ -62,11 +62,12 @@ def test_info_numbers_from_estimated_poses_and_reward_terms_sum():
 
 def test_truth_poses_are_the_floor_and_the_prior_is_far_worse():
     medians = {}
+    env = _env()  # one env, the same seeded scene seen through both pose sources
     for poses in ("truth", "prior"):
-        wenv = WorkerTracking(_env(), poses=poses)
+        wenv = WorkerTracking(env, poses=poses)
         _, infos = wenv.reset(seed=3, options={"viewpoint": 2})
         medians[poses] = infos["uav_0"]["worker_tracking"]["median_error_m"]
-        wenv.close()
+    env.close()
     assert 0 < medians["truth"] < 0.2
     # a 3 m / 2-5 deg prior: metres, or nothing consistent at all
     assert medians["prior"] == -1.0 or medians["prior"] > 5 * medians["truth"]
