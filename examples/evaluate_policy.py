@@ -510,10 +510,11 @@ def _site_name(env: dict[str, Any]) -> str:
 
 def _training_sites(opt: dict[str, Any]) -> set[str]:
     """The buildings the evaluated runs trained on with ``--sites`` (their ``train.json`` options)."""
+    from uav_struct_env.training.policy_files import train_json
+
     runs = list(opt["checkpoints"] or ()) or model_folders(opt["model"] if "ppo" in opt["policies"] else None)
     sites: set[str] = set()
-    for run in map(Path, runs):
-        path = run.parent.parent / "train.json" if run.parent.name == "checkpoints" else run / "train.json"
+    for path in filter(None, map(train_json, runs)):
         with contextlib.suppress(OSError, ValueError, AttributeError, TypeError):
             sites.update(json.loads(path.read_text()).get("options", {}).get("sites") or ())
     return sites

@@ -42,6 +42,7 @@ __all__ = [
     "restore_rng_state",
     "save_normalization",
     "save_rng_state",
+    "train_json",
 ]
 
 #: File name of the observation statistics beside ``model.zip``.
@@ -191,26 +192,33 @@ def recorded_config(model_dir: str | Path) -> Any:
     from uav_struct_env.errors import ConfigError
     from uav_struct_env.wrappers.configs import TrainConfig
 
+    path = train_json(model_dir)
+    if path is None:
+        return None
+    try:
+        recorded = json.loads(path.read_text()).get("train_config")
+    except (json.JSONDecodeError, AttributeError) as err:
+        raise ValueError(
+            f"{str(path)!r} is not a train.json written by train_viewpoint_ppo.py: {err}"
+        ) from None
+    if recorded is None:
+        return None
+    try:
+        return TrainConfig.from_dict(recorded)
+    except ConfigError as err:
+        raise ValueError(f"{str(path)!r}: {err}") from None
+
+
+def train_json(model_dir: str | Path) -> Path | None:
+    """The ``train.json`` of a run folder or of one of its checkpoint folders, or None.
+
+    A ``checkpoints/step_<N>`` folder's run holds it two levels up.
+    """
     d = Path(model_dir)
     candidates = [d / "train.json"]
     if d.parent.name == "checkpoints":
         candidates.append(d.parent.parent / "train.json")
-    for path in candidates:
-        if not path.is_file():
-            continue
-        try:
-            recorded = json.loads(path.read_text()).get("train_config")
-        except (json.JSONDecodeError, AttributeError) as err:
-            raise ValueError(
-                f"{str(path)!r} is not a train.json written by train_viewpoint_ppo.py: {err}"
-            ) from None
-        if recorded is None:
-            return None
-        try:
-            return TrainConfig.from_dict(recorded)
-        except ConfigError as err:
-            raise ValueError(f"{str(path)!r}: {err}") from None
-    return None
+    return next((path for path in candidates if path.is_file()), None)
 
 
 def load_ppo(path: str | Path, observation_space: Any, action_space: Any, *, device: str = "cpu"):
