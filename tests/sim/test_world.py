@@ -139,6 +139,9 @@ def test_same_seed_same_textures_and_no_files_outlive_the_load(tmp_path, monkeyp
     try:
         ra, rb, rc = (w.render(pose, SMALL).rgb for w in (a, b, c))
         np.testing.assert_array_equal(ra, rb)
+        # The same seed's meshes and textures are built once in a process and shared (read-only).
+        assert all(x is y for x, y in zip(a.elements, b.elements, strict=True))
+        assert not any(x is y for x, y in zip(a.elements, c.elements, strict=True))
         assert np.abs(ra.astype(int) - rc).mean() > 1.0
         # Meshes and textures were written under tmp_path and removed once loaded: an open world
         # (or a killed process holding one) leaves nothing behind, and still renders the same.

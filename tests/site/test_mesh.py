@@ -11,9 +11,11 @@ from uav_struct_env.site.mesh import (
     box_faces,
     build_mesh,
     marker_element,
+    shared_site_elements,
     site_elements,
     write_obj,
 )
+from uav_struct_env.site import mesh as mesh_module
 
 
 @pytest.fixture(scope="module")
@@ -124,6 +126,46 @@ def test_textures_are_seeded_and_never_shared(elements):
         for b in concrete[i + 1:]:
             if a.texture.shape == b.texture.shape:
                 assert np.abs(a.texture.astype(int) - b.texture).mean() > 2.0, (a.name, b.name)
+
+
+def test_shared_elements_are_built_once_and_equal_to_a_fresh_build(monkeypatch):
+    site = paper_site("columns")
+    monkeypatch.setattr(mesh_module, "_SHARED", type(mesh_module._SHARED)())
+    a_rng, b_rng, fresh_rng = (np.random.default_rng(1) for _ in range(3))
+    a = shared_site_elements(site, a_rng, texture_size=16)
+    b = shared_site_elements(paper_site("columns"), b_rng, texture_size=16)  # an equal site
+    fresh = site_elements(site, fresh_rng, texture_size=16)
+    assert a is b and len(a) == len(fresh) == 34
+    for x, y in zip(a, fresh, strict=True):
+        assert x.name == y.name and not x.texture.flags.writeable
+        np.testing.assert_array_equal(x.texture, y.texture)
+        np.testing.assert_array_equal(x.mesh.vertices, y.mesh.vertices)
+    # Each generator is left as site_elements leaves it: the next draws agree.
+    assert a_rng.random() == b_rng.random() == fresh_rng.random()
+    # The same generator again is one step further on: other textures, built anew.
+    again = shared_site_elements(site, a_rng, texture_size=16)
+    assert again is not a and not np.array_equal(again[0].texture, a[0].texture)
+    assert shared_site_elements(site, np.random.default_rng(1), texture_size=32) is not a
+    assert shared_site_elements(paper_site("slab"), np.random.default_rng(1), texture_size=16) is not a
+
+
+def test_shared_elements_keep_the_latest_sites_only(monkeypatch):
+    monkeypatch.setattr(mesh_module, "_SHARED", type(mesh_module._SHARED)())
+    site = paper_site("columns")
+    first = shared_site_elements(site, np.random.default_rng(0), texture_size=16)
+    for seed in range(1, mesh_module.SHARED_SITES + 1):
+        shared_site_elements(site, np.random.default_rng(seed), texture_size=16)
+    assert len(mesh_module._SHARED) == mesh_module.SHARED_SITES
+    assert shared_site_elements(site, np.random.default_rng(0), texture_size=16) is not first
+
+
+def test_shared_elements_refuse_what_site_elements_refuses():
+    with pytest.raises(TypeError, match="rng must be"):
+        shared_site_elements(paper_site(), rng=0)
+    with pytest.raises(ValueError, match="texture_size"):
+        shared_site_elements(paper_site(), np.random.default_rng(0), texture_size=4)
+    with pytest.raises(ValueError, match="texture_size"):
+        shared_site_elements(paper_site(), np.random.default_rng(0), texture_size=4.5)
 
 
 def test_random_sites_build(rng):

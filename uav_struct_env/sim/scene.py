@@ -26,6 +26,7 @@ import os
 import shutil
 import tempfile
 import threading
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,7 +66,7 @@ def load_elements(client_id: int, elements: Sequence[SiteElement]) -> LoadedScen
         try:
             for k, element in enumerate(elements):
                 stem = f"e{k:03d}_{element.kind}"
-                path = _content_dir(obj_files(element, stem), root) / f"{stem}.obj"
+                path = _content_dir(*_element_files(element, stem), root) / f"{stem}.obj"
                 shape = p.createVisualShape(
                     p.GEOM_MESH, fileName=str(path), rgbaColor=[1, 1, 1, 1],
                     physicsClientId=client_id,
@@ -97,15 +98,37 @@ def _load_root() -> Path:
     return root
 
 
-def _content_dir(files: dict[str, bytes], root: Path) -> Path:
-    """Write ``files`` (bytes by file name) into ``root/<digest of their names and bytes>/``.
+#: Each element's files and their digest, by stem, for as long as the element lives: a site's
+#: elements are shared by the worlds of a process (:func:`~uav_struct_env.site.mesh.shared_site_elements`),
+#: so a world of a site loaded before writes the same bytes without formatting them again.
+_FILES: weakref.WeakKeyDictionary[SiteElement, dict[str, tuple[dict[str, bytes], str]]] = (
+    weakref.WeakKeyDictionary()
+)
 
-    The folder's name is a function of what it holds, so a path always holds the same bytes.
-    """
+
+def _element_files(element: SiteElement, stem: str) -> tuple[dict[str, bytes], str]:
+    """``element``'s files (:func:`~uav_struct_env.site.mesh.obj_files`) and their digest (under the lock)."""
+    by_stem = _FILES.setdefault(element, {})
+    if stem not in by_stem:
+        files = obj_files(element, stem)
+        by_stem[stem] = (files, _digest(files))
+    return by_stem[stem]
+
+
+def _digest(files: dict[str, bytes]) -> str:
+    """The name of the folder that holds ``files``: a digest of their names and bytes."""
     digest = hashlib.sha256()
     for name in sorted(files):
         digest.update(name.encode() + b"\0" + files[name] + b"\0")
-    target = root / digest.hexdigest()[:32]
+    return digest.hexdigest()[:32]
+
+
+def _content_dir(files: dict[str, bytes], digest: str, root: Path) -> Path:
+    """Write ``files`` (bytes by file name) into ``root/<digest>/`` (:func:`_digest`).
+
+    The folder's name is a function of what it holds, so a path always holds the same bytes.
+    """
+    target = root / digest
     if not target.exists():
         target.mkdir()
         for name, data in files.items():

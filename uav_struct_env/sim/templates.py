@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike
 from localization.detect.guided import ModelViews
 from localization.geometry.transforms import check_transform
 from uav_struct_env.site import Site
-from uav_struct_env.site.mesh import site_elements
+from uav_struct_env.site.mesh import shared_site_elements
 
 __all__ = ["SiteTemplates"]
 
@@ -72,7 +72,7 @@ class SiteTemplates:
         if not isinstance(site, Site):
             raise TypeError(f"site must be a uav_struct_env.site.Site, got {type(site).__name__}")
         # Textures are not drawn: the smallest ones keep the set-up cheap.
-        elements = site_elements(site, np.random.default_rng(0), texture_size=16)
+        elements = shared_site_elements(site, np.random.default_rng(0), texture_size=16)
         verts, normals, labels = [], [], []
         # The ground is no structure: its far border (a horizon) is not where the image's is.
         for element in (e for e in elements if e.kind != "ground"):

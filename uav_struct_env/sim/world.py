@@ -37,7 +37,7 @@ from uav_struct_env.sim.raycast import RayScene, raycast_visibility
 from uav_struct_env.sim.scene import LoadedScene, load_elements
 from uav_struct_env.sim.visibility import landmark_visibility
 from uav_struct_env.site.activity import BOX_CORNER_SIGNS
-from uav_struct_env.site.mesh import site_elements
+from uav_struct_env.site.mesh import shared_site_elements
 from uav_struct_env.site.model import Site
 
 __all__ = ["DEFAULT_LIGHT", "SKY_RGB", "RenderResult", "SiteWorld", "random_light"]
@@ -161,7 +161,7 @@ class SiteWorld:
         self.camera = Camera().scaled(*(int(x) for x in image_size))
         self.light = dict(DEFAULT_LIGHT)
         try:
-            elements = site_elements(
+            elements = shared_site_elements(
                 site, np.random.default_rng(0) if rng is None else rng, texture_size=texture_size
             )
             client.activate()

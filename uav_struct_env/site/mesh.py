@@ -21,6 +21,8 @@ UV convention (Wavefront OBJ): ``v`` points up the image, so texture row 0 is at
 from __future__ import annotations
 
 import math
+import threading
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,6 +49,7 @@ __all__ = [
     "box_faces",
     "build_mesh",
     "column_element",
+    "shared_site_elements",
     "ground_elements",
     "marker_element",
     "obj_files",
@@ -478,6 +481,59 @@ def site_elements(
     elements += ground_elements(site, next(rngs), texture_size=2 * texture_size)
     elements += [marker_element(m) for m in site.markers]
     return tuple(elements)
+
+
+#: How many sites' elements :func:`shared_site_elements` keeps (least recently used dropped first).
+SHARED_SITES = 4
+
+_SHARED: OrderedDict[tuple, tuple[SiteElement, ...]] = OrderedDict()
+_SHARED_LOCK = threading.Lock()
+
+
+def shared_site_elements(
+    site: Site,
+    rng: np.random.Generator,
+    *,
+    texel_size: float = 0.015,
+    texture_size: int = 512,
+) -> tuple[SiteElement, ...]:
+    """:func:`site_elements`, built once per process for the same arguments and then shared.
+
+    The same site, the same sizes and a generator in the same state of its seed sequence (the
+    textures depend on nothing else: they are drawn from ``rng.spawn`` children) return the same
+    element objects, whose textures are read-only; ``rng`` is advanced as :func:`site_elements`
+    advances it. Every world of one site in a process (an env's copies in a vector env, the
+    episodes of a test suite) then builds its meshes and textures once. A generator whose bit
+    generator has no :class:`numpy.random.SeedSequence` is not shared (built every time).
+    """
+    key = _shared_key(site, rng, texel_size, texture_size)
+    if key is None:
+        return site_elements(site, rng, texel_size=texel_size, texture_size=texture_size)
+    with _SHARED_LOCK:
+        elements = _SHARED.get(key)
+        if elements is not None:
+            _SHARED.move_to_end(key)
+    if elements is not None:
+        rng.spawn(len(site.built) + 1)  # as site_elements spawns
+        return elements
+    elements = site_elements(site, rng, texel_size=texel_size, texture_size=texture_size)
+    for e in elements:
+        e.texture.setflags(write=False)
+    with _SHARED_LOCK:
+        _SHARED[key] = elements
+        while len(_SHARED) > SHARED_SITES:
+            _SHARED.popitem(last=False)
+    return elements
+
+
+def _shared_key(site: Site, rng: np.random.Generator, texel_size: float, texture_size: int) -> tuple | None:
+    """What :func:`site_elements`' output depends on, or None where it cannot be told (not shared)."""
+    seeds = getattr(getattr(rng, "bit_generator", None), "seed_seq", None)
+    if (not isinstance(site, Site) or not isinstance(seeds, np.random.SeedSequence)
+            or not isinstance(texel_size, (int, float)) or not isinstance(texture_size, int)):
+        return None  # site_elements builds (or refuses) it
+    return (site, type(rng.bit_generator).__name__, repr(seeds.entropy), seeds.spawn_key,
+            seeds.n_children_spawned, seeds.pool_size, float(texel_size), texture_size)
 
 
 def write_obj(element: SiteElement, directory: str | Path, stem: str) -> Path:
