@@ -68,7 +68,8 @@ def main(worlds: int = 8, texture_size: int = 512, share: bool = True) -> list[d
     """Each mode in a fresh process (so that the memory of one does not serve the other)."""
     modes = (("shared", mesh.SHARED_SITES), ("not shared", 0)) if share else (("not shared", 0),)
     print(f"{worlds + 1} worlds of each site held open, texture size {texture_size} px, TinyRenderer")
-    print("| site | elements | first world: cpu / wall ms | next worlds (median): cpu / wall ms | MB per world |")
+    print("| site | elements | first world: cpu / wall ms | next worlds (median): cpu / wall ms "
+          "| MB per world |")
     print("|---|---:|---:|---:|---:|")
     rows = []
     for mode, keep in modes:
@@ -76,8 +77,9 @@ def main(worlds: int = 8, texture_size: int = 512, share: bool = True) -> list[d
             for r in pool.submit(run_mode, keep, worlds, texture_size).result():
                 r["site"] = f"{r['site']}, {mode}"
                 rows.append(r)
-                print(f"| {r['site']} | {r['elements']} | {r['first_cpu_ms']:.0f} / {r['first_wall_ms']:.0f} | "
-                      f"{r['next_cpu_ms']:.0f} / {r['next_wall_ms']:.0f} | {r['mb_per_world']:.1f} |")
+                print(f"| {r['site']} | {r['elements']} | {r['first_cpu_ms']:.0f} / "
+                      f"{r['first_wall_ms']:.0f} | {r['next_cpu_ms']:.0f} / {r['next_wall_ms']:.0f} | "
+                      f"{r['mb_per_world']:.1f} |")
     return rows
 
 
@@ -85,7 +87,8 @@ if __name__ == "__main__":
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--worlds", type=int, default=8, help="worlds built after the first, per site and mode")
-    p.add_argument("--texture-size", type=int, default=512, help="the worlds' texture_size (the env's default)")
+    p.add_argument("--texture-size", type=int, default=512,
+                   help="the worlds' texture_size (the env's default)")
     p.add_argument("--no-share", dest="share", action="store_false",
                    help="only the unshared build (every world its own meshes, textures and files)")
     a = p.parse_args()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from uav_struct_env.site import mesh as mesh_module
 from uav_struct_env.site import paper_site, random_site
 from uav_struct_env.site.mesh import (
     Face,
@@ -15,7 +16,6 @@ from uav_struct_env.site.mesh import (
     site_elements,
     write_obj,
 )
-from uav_struct_env.site import mesh as mesh_module
 
 
 @pytest.fixture(scope="module")
