@@ -65,7 +65,7 @@ BOX_NORMALS = np.repeat(
 _CORNERS = np.eye(3)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _clip_near(cam: NDArray, near: float, poly: NDArray, weights: NDArray) -> int:
     """Clip the camera-frame triangle ``cam`` (3, 3) to ``z >= near``; corners into ``poly``.
 
@@ -92,7 +92,7 @@ def _clip_near(cam: NDArray, near: float, poly: NDArray, weights: NDArray) -> in
     return n
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _span(a: float, inv_a: float, c: float, d: float, v: float, lo: float, hi: float) -> tuple[float, float]:
     """Narrow ``[lo, hi]`` to the ``u`` where ``a u + c v + d >= 0`` on row ``v`` (``inv_a = 1/a``)."""
     e = c * v + d
@@ -105,7 +105,7 @@ def _span(a: float, inv_a: float, c: float, d: float, v: float, lo: float, hi: f
     return lo, hi
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _scan(
     p: NDArray, w: NDArray, i0: int, i1: int, i2: int, tri: int, intr: NDArray, far: float,
     izbuf: NDArray, ids: NDArray, bary: NDArray,
@@ -166,7 +166,7 @@ def _scan(
             bary[v, u, 1] = (q0 * w[i0, 2] + q1 * w[i1, 2] + q2 * w[i2, 2]) * z
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _culled(cam: NDArray, intr: NDArray, near: float, W: int, H: int) -> bool:
     """True when the camera-frame triangle ``cam`` is beyond a frustum plane or faces away."""
     z0, z1, z2 = cam[0, 2], cam[1, 2], cam[2, 2]
@@ -192,7 +192,7 @@ def _culled(cam: NDArray, intr: NDArray, near: float, W: int, H: int) -> bool:
     return left or right or top or bottom
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _draw(
     cam: NDArray, tri: int, intr: NDArray, near: float, far: float, poly: NDArray, weights: NDArray,
     izbuf: NDArray, ids: NDArray, bary: NDArray,
@@ -209,7 +209,7 @@ def _draw(
         _scan(poly, weights, 0, k, k + 1, tri, intr, far, izbuf, ids, bary)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _walk(breaks: NDArray, lo: int, hi: int, x: float, i: int) -> int:
     """The cell ``i`` (``breaks[lo + i] <= x <= breaks[lo + i + 1]``) from the guess ``i``.
 
@@ -223,7 +223,7 @@ def _walk(breaks: NDArray, lo: int, hi: int, x: float, i: int) -> int:
     return i
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _cell_beside(gx: NDArray, gy: NDArray, g: NDArray, cells: NDArray, x: float, y: float, i: int,
                  j: int) -> tuple[int, int]:
     """An existing cell containing ``(x, y)`` among ``(i, j)`` and its neighbours; ``(-1, -1)``: none."""
