@@ -6,14 +6,20 @@ Which landmarks a stage exposes to the air:
 set                 landmarks
 ==================  ==========================================================================
 ``slab_corners``    the corners of the outline of each slab of the stage's topmost built
-                    structural floor (outline order: counter-clockwise from min y, then min x)
-``opening_corners`` the corners of every opening through those slabs, same order
+                    structural floor (outline order: counter-clockwise from min y, then min x):
+                    its vertices where it turns by at least :data:`MIN_CORNER_TURN_DEG`
+``opening_corners`` the corners of every opening through those slabs, same order and rule
 ``column_tops``     the top centre of every built column that no built slab or beam covers
                     (an element over the column's axis whose underside is at most
                     :data:`COVER_GAP` m above the column top)
 ``aruco``           each marker's four corners, OpenCV order
 ``all``             the three structural sets together
 ==================  ==========================================================================
+
+A vertex where an outline turns by less than :data:`MIN_CORNER_TURN_DEG` (a kink in one edge, a
+vertex of the polygon an exporter made of a curved edge) is no corner: along the edge a detector
+cannot place it (its along-edge precision is about ``1 / sin(turn)`` of its across-edge one, twice
+at 30 deg), and a curve has no point to place. An oval slab therefore has no slab corners.
 
 Ids: :class:`LandmarkRegistry` numbers every landmark any stage of the building can expose,
 set by set (structural sets, then markers) and element by element in the site's element order,
@@ -39,11 +45,13 @@ from uav_struct_env.site.markers import ArucoMarker
 __all__ = [
     "COVER_GAP",
     "LANDMARK_SETS",
+    "MIN_CORNER_TURN_DEG",
     "STRUCTURAL_SETS",
     "LandmarkRegistry",
     "LandmarkSet",
     "StagedSite",
     "check_landmarks",
+    "corner_vertices",
     "exposed_landmarks",
 ]
 
@@ -52,6 +60,9 @@ LANDMARK_SETS = (*STRUCTURAL_SETS, "aruco", "all")
 
 #: A slab or beam whose underside is at most this far above a column top covers that top, m.
 COVER_GAP = 0.5
+
+#: Least turn of an outline at a vertex for the vertex to be a corner landmark, deg (the module docstring).
+MIN_CORNER_TURN_DEG = 30.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,19 +83,33 @@ class LandmarkSet:
 _Point = tuple[str, str, str, str, tuple[float, float, float]]
 
 
+def corner_vertices(outline: NDArray[np.float64]) -> list[int]:
+    """Indices of a closed outline's (N, 2) vertices where it turns by >= :data:`MIN_CORNER_TURN_DEG`.
+
+    Either way (a re-entrant corner too), in outline order.
+    """
+    p = np.asarray(outline, dtype=np.float64)
+    before = p - np.roll(p, 1, axis=0)
+    after = np.roll(p, -1, axis=0) - p
+    cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
+    turn = np.degrees(np.abs(np.arctan2(cross, (before * after).sum(axis=1))))
+    return np.flatnonzero(turn >= MIN_CORNER_TURN_DEG - 1e-9).tolist()  # a turn of exactly 30 deg is one
+
+
 def _slab_corners(slab: Slab) -> list[_Point]:
+    xy = slab.outline.tolist()
     return [
-        ("slab_corners", slab.guid, f"corner {k}", f"{slab.name} corner {k}", (x, y, slab.z_top))
-        for k, (x, y) in enumerate(slab.outline.tolist())
+        ("slab_corners", slab.guid, f"corner {k}", f"{slab.name} corner {k}", (*xy[k], slab.z_top))
+        for k in corner_vertices(slab.outline)
     ]
 
 
 def _opening_corners(slab: Slab) -> list[_Point]:
     return [
         ("opening_corners", slab.guid, f"{hole.guid} corner {k}", f"{hole.name} corner {k}",
-         (x, y, slab.z_top))
+         (*hole.outline[k].tolist(), slab.z_top))
         for hole in slab.holes
-        for k, (x, y) in enumerate(hole.outline.tolist())
+        for k in corner_vertices(hole.outline)
     ]
 
 
