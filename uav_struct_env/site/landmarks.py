@@ -97,9 +97,9 @@ def corner_vertices(outline: NDArray[np.float64]) -> list[int]:
 
 
 def _slab_corners(slab: Slab) -> list[_Point]:
-    xy = slab.outline.tolist()
     return [
-        ("slab_corners", slab.guid, f"corner {k}", f"{slab.name} corner {k}", (*xy[k], slab.z_top))
+        ("slab_corners", slab.guid, f"corner {k}", f"{slab.name} corner {k}",
+         (*slab.outline[k].tolist(), slab.z_top))
         for k in corner_vertices(slab.outline)
     ]
 
