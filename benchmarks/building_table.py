@@ -66,6 +66,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("folders", nargs="+", type=Path, help="study output folders (each with per_image.csv)")
     ap.add_argument("--check", action="store_true", help="mark item 2's targets per row")
     args = ap.parse_args(argv)
+    missing = [str(f) for f in args.folders if not (f / "per_image.csv").is_file()]
+    if missing:  # before any row: a folder given by a glob that is no study's
+        ap.error(f"not a study output folder (no per_image.csv): {', '.join(missing)}")
     head = "| building | landmarks | detection | F1 | poses / views with >= 4 | median / bound (m) | wrong |"
     print(head + (" item 2 |" if args.check else ""))
     print("|---|---|---:|---:|---:|---:|---:|" + ("---|" if args.check else ""))

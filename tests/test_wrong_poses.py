@@ -43,3 +43,16 @@ def test_a_success_beyond_max_1m_and_three_bounds_is_wrong(tmp_path, capsys):
     assert entry["median_m"] == pytest.approx(1.1)
     assert "total: 4 poses, 2 wrong" in capsys.readouterr().out
     assert wrong_poses.limit_m(0.2) == 1.0 and wrong_poses.limit_m(0.5) == pytest.approx(1.5)
+
+
+def test_the_building_table_refuses_a_folder_that_is_no_study(tmp_path, capsys):
+    spec = importlib.util.spec_from_file_location("building_table", _PATH.with_name("building_table.py"))
+    building_table = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(building_table)
+    (tmp_path / "sets").mkdir()
+    with pytest.raises(SystemExit) as stop:
+        building_table.main([str(tmp_path / "sets")])
+    assert stop.value.code == 2
+    err = capsys.readouterr()
+    assert "not a study output folder (no per_image.csv)" in err.err and "sets" in err.err
+    assert err.out == ""  # refused before any row
