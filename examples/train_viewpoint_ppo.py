@@ -63,7 +63,14 @@ from uav_struct_env.outputs import (
     real_folder,
     remove_earlier_run,
 )
-from uav_struct_env.validate import INPUT_ERRORS, CommandParser, check_option, check_output_dir, refuse
+from uav_struct_env.validate import (
+    INPUT_ERRORS,
+    CommandParser,
+    check_option,
+    check_output_dir,
+    image_size_argument,
+    refuse,
+)
 
 DEFAULTS: dict[str, Any] = {
     "out": "runs/ppo_state",
@@ -90,12 +97,16 @@ DEFAULTS: dict[str, Any] = {
     "sites": None,
 }
 
+#: Env fields an option overrides (``--max-cycles``, ``--image-size``); none: the configuration's own.
+ENV_OPTIONS: dict[str, Any] = {"max_cycles": None, "image_size": None}
+
 #: The options ``--resume`` takes from its command line; every other one is the run's recorded one.
 RESUME_OPTIONS = ("total_timesteps", "minutes", "progress_bar")
 
 
 def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles: int | None = None,
-                 bootstrap_time_limit: bool = True, sites: tuple[str, ...] | None = None):
+                 bootstrap_time_limit: bool = True, sites: tuple[str, ...] | None = None,
+                 image_size: tuple[int, int] | None = None):
     """SuperSuit vector env over ``n_envs`` copies of the wrapped env (4 agent slots each).
 
     Copy ``k`` is seeded ``seed + k``, every copy its own seed however the copies are spread over
@@ -114,7 +125,7 @@ def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles:
     from supersuit.vector import MakeCPUAsyncConstructor
     from supersuit.vector.sb3_vector_wrapper import SB3VecEnvWrapper
 
-    overrides = {} if max_cycles is None else {"max_cycles": max_cycles}
+    overrides = _env_overrides(max_cycles, image_size)
     fns = [partial(_copy_env, config, {**overrides, **o}, bootstrap_time_limit)
            for o in copy_sites(sites, n_envs)]
     first = fns[0]()  # the spaces every copy shares (SuperSuit's concat_vec_envs_v1 does the same)
@@ -123,6 +134,12 @@ def make_vec_env(config: str, n_envs: int, num_cpus: int, seed: int, max_cycles:
     vec = SB3VecEnvWrapper(MakeCPUAsyncConstructor(min(num_cpus, n_envs))(fns, *spaces))
     _seed_copies(vec.venv, seed, n_envs)  # SB3's PPO(seed=...) would call vec.seed(), which SuperSuit lacks
     return VecMonitor(vec)
+
+
+def _env_overrides(max_cycles: int | None, image_size: tuple[int, int] | None) -> dict[str, Any]:
+    """The env fields ``--max-cycles`` and ``--image-size`` override (those given)."""
+    given = {"max_cycles": max_cycles, "image_size": None if image_size is None else tuple(image_size)}
+    return {k: v for k, v in given.items() if v is not None}
 
 
 def _copy_env(config: str, overrides: dict[str, Any], bootstrap_time_limit: bool):
@@ -456,6 +473,8 @@ def check_options(opt: dict[str, Any]) -> None:
         check_option(name, opt[name], lo, integer=True)
     if opt["max_cycles"] is not None:
         check_option("max_cycles", opt["max_cycles"], 1, integer=True)
+    if opt["image_size"] is not None:
+        check_image_size(opt["config"], opt["image_size"])
     if opt["minutes"] is not None:
         check_option("minutes", opt["minutes"], 0, lo_open=True)
     check_option("learning_rate", opt["learning_rate"], 0, lo_open=True)
@@ -472,6 +491,26 @@ def check_options(opt: dict[str, Any]) -> None:
     if opt["resume"] is not None:
         last_checkpoint(opt["resume"])
     check_output_dir(opt["out"], overwrite=opt["overwrite"] or opt["resume"] is not None)
+
+
+def check_image_size(config: str, image_size: Any) -> None:
+    """``--image-size``: a configuration that observes images, and a size its renderer draws.
+
+    Raises:
+        ConfigError: naming the configuration without images, or the size and the limit it breaks.
+    """
+    from uav_struct_env.envs.config import make_config
+    from uav_struct_env.errors import ConfigError
+    from uav_struct_env.wrappers import TRAIN_CONFIGS
+
+    train = TRAIN_CONFIGS[config]
+    if not train.env.get("observe_image", True) or train.wrapper.get("drop_image", False):
+        raise ConfigError(f"--image-size applies to a configuration that observes images; {config!r} has "
+                          "none (image, pixels, pixels_critic, pixels_keypoints and pixels_precise do)")
+    if (not isinstance(image_size, (list, tuple)) or len(image_size) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) for v in image_size)):
+        raise ConfigError(f"image_size must be (width, height) in pixels, got {image_size!r}")
+    make_config(train.preset, **{**train.env, "image_size": tuple(image_size)})  # the env's own limits
 
 
 def check_sites(sites: Any, n_envs: int) -> None:
@@ -519,10 +558,10 @@ def resolve_options(kwargs: dict[str, Any]) -> dict[str, Any]:
     Raises:
         ValueError: an unknown option, or a ``resume`` folder whose ``train.json`` is unreadable.
     """
-    unknown = sorted(set(kwargs) - set(DEFAULTS) - {"max_cycles"})
+    unknown = sorted(set(kwargs) - set(DEFAULTS) - set(ENV_OPTIONS))
     if unknown:
         raise ValueError(f"unknown options {unknown}; valid: {sorted(DEFAULTS)}")
-    base = {**DEFAULTS, "max_cycles": None}
+    base = {**DEFAULTS, **ENV_OPTIONS}
     if kwargs.get("resume") is None:
         return {**base, **kwargs}
     run = Path(kwargs["resume"])
@@ -532,6 +571,8 @@ def resolve_options(kwargs: dict[str, Any]) -> dict[str, Any]:
         raise ValueError(f"--resume {str(run)!r}: cannot read its train.json: {err}") from None
     recorded = {k: v for k, v in recorded.items() if k in base}
     recorded["net_arch"] = tuple(recorded.get("net_arch", base["net_arch"]))
+    if recorded.get("image_size") is not None:
+        recorded["image_size"] = tuple(recorded["image_size"])
     given = {k: v for k, v in kwargs.items() if k in RESUME_OPTIONS}
     return {**base, **recorded, **given, "out": str(run), "resume": str(run), "overwrite": False}
 
@@ -565,7 +606,7 @@ def _build(opt: dict[str, Any], out: Path, stop: _StopRequest):
 
     with stop.children():
         vec = make_vec_env(opt["config"], opt["n_envs"], opt["num_cpus"], opt["seed"],
-                           opt["max_cycles"], opt["bootstrap_time_limit"], opt["sites"])
+                           opt["max_cycles"], opt["bootstrap_time_limit"], opt["sites"], opt["image_size"])
     tb = str(real_folder(out / "tb"))  # written inside --out, never through a link
     if opt["resume"] is not None:
         ckpt = last_checkpoint(opt["resume"])
@@ -668,7 +709,7 @@ def _write_summary(out: Path, opt: dict[str, Any], made_by: Any, record: dict[st
     summary = {
         "options": {k: (list(v) if isinstance(v, tuple) else v) for k, v in opt.items()},
         **record,
-        "train_config": _resolved_config(opt["config"], opt["max_cycles"]),
+        "train_config": _resolved_config(opt["config"], opt["max_cycles"], opt["image_size"]),
         "software": made_by,
         "settings": settings_line(shown, made_by),
     }
@@ -684,8 +725,9 @@ def _trim_progress(path: Path, steps: int) -> None:
     atomic_write_text(path, "".join(f"{line}\n" for line in rows))
 
 
-def _resolved_config(name: str, max_cycles: int | None) -> dict[str, Any]:
-    """The configuration trained on (the named one with ``--max-cycles`` applied), JSON-ready.
+def _resolved_config(name: str, max_cycles: int | None,
+                     image_size: tuple[int, int] | None = None) -> dict[str, Any]:
+    """The configuration trained on (the named one with ``--max-cycles``, ``--image-size``), JSON-ready.
 
     ``evaluate_policy.py`` rebuilds the env from it, so a run keeps its meaning when the named
     configuration changes later (as ``state`` did from ``paper`` to ``robust`` association).
@@ -693,7 +735,8 @@ def _resolved_config(name: str, max_cycles: int | None) -> dict[str, Any]:
     from uav_struct_env.wrappers import TRAIN_CONFIGS
 
     c = TRAIN_CONFIGS[name]
-    return (c if max_cycles is None else c.replace(env={"max_cycles": max_cycles})).as_dict()
+    overrides = _env_overrides(max_cycles, image_size)
+    return (c.replace(env=overrides) if overrides else c).as_dict()
 
 
 def _parse(argv: list[str] | None = None) -> dict[str, Any]:
@@ -729,6 +772,9 @@ def _parse(argv: list[str] | None = None) -> dict[str, Any]:
     )
     p.add_argument("--checkpoint-every", type=int, default=DEFAULTS["checkpoint_every"])
     p.add_argument("--max-cycles", type=int, default=None, help="override the episode length")
+    p.add_argument("--image-size", type=image_size_argument, default=None, metavar="WxH",
+                   help="override the observed image's size (a configuration with images; the batched "
+                        "renderer draws up to 160x120)")
     p.add_argument("--seed", type=int, default=DEFAULTS["seed"])
     p.add_argument("--torch-threads", type=int, default=DEFAULTS["torch_threads"],
                    help="threads of the policy's updates (1 suits the state MLP; the env copies' "

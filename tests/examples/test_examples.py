@@ -202,6 +202,28 @@ def test_bad_options_are_named(example):
         example("train_viewpoint_ppo").main(torch_threads=0)
 
 
+def test_image_size_overrides_the_frame_is_recorded_and_is_refused_where_it_cannot_apply(example):
+    train = example("train_viewpoint_ppo")
+    assert train._parse(["--image-size", "96x54"])["image_size"] == (96, 54)
+    assert train._parse([])["image_size"] is None
+    vec = train.make_vec_env("pixels", n_envs=1, num_cpus=0, seed=0, max_cycles=2, image_size=(96, 54))
+    try:
+        assert vec.observation_space["image"].shape == (54, 96, 3)
+        obs = vec.reset()
+        assert obs["image"].shape == (4, 54, 96, 3)
+    finally:
+        vec.close()
+    record = train._resolved_config("pixels_precise", None, (96, 54))
+    assert record["env"]["image_size"] == [96, 54] and record["env"]["renderer"] == "batch"
+    assert train._resolved_config("pixels_precise", None)["env"]["image_size"] == [64, 36]
+    with pytest.raises(ConfigError, match="applies to a configuration that observes images; 'state'"):
+        train.main(config="state", image_size=(128, 72))
+    with pytest.raises(ConfigError, match="up to 160 x 120 px .* got image_size 320 x 180"):
+        train.main(config="pixels", image_size=(320, 180))
+    with pytest.raises(ConfigError, match=r"image_size must be \(width, height\) in pixels, got \(96.0"):
+        train.main(config="pixels", image_size=(96.0, 54))
+
+
 def test_the_trainer_marks_time_limits_for_bootstrapping_unless_told_not_to(example):
     train = example("train_viewpoint_ppo")
     assert train.DEFAULTS["bootstrap_time_limit"] is True
