@@ -560,7 +560,7 @@ def resolve_options(kwargs: dict[str, Any]) -> dict[str, Any]:
     """
     unknown = sorted(set(kwargs) - set(DEFAULTS) - set(ENV_OPTIONS))
     if unknown:
-        raise ValueError(f"unknown options {unknown}; valid: {sorted(DEFAULTS)}")
+        raise ValueError(f"unknown options {unknown}; valid: {sorted({**DEFAULTS, **ENV_OPTIONS})}")
     base = {**DEFAULTS, **ENV_OPTIONS}
     if kwargs.get("resume") is None:
         return {**base, **kwargs}
