@@ -507,10 +507,7 @@ def check_image_size(config: str, image_size: Any) -> None:
     if not train.env.get("observe_image", True) or train.wrapper.get("drop_image", False):
         raise ConfigError(f"--image-size applies to a configuration that observes images; {config!r} has "
                           "none (image, pixels, pixels_critic, pixels_keypoints and pixels_precise do)")
-    if (not isinstance(image_size, (list, tuple)) or len(image_size) != 2
-            or not all(isinstance(v, int) and not isinstance(v, bool) for v in image_size)):
-        raise ConfigError(f"image_size must be (width, height) in pixels, got {image_size!r}")
-    make_config(train.preset, **{**train.env, "image_size": tuple(image_size)})  # the env's own limits
+    make_config(train.preset, **{**train.env, "image_size": image_size})  # the env's own limits
 
 
 def check_sites(sites: Any, n_envs: int) -> None:

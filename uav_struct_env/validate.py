@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from localization.checks import check_number
-from uav_struct_env.errors import UsageError
+from uav_struct_env.errors import ConfigError, UsageError
 from uav_struct_env.outputs import OutputExistsError, check_no_earlier_run
 
 __all__ = [
@@ -174,16 +174,16 @@ def image_size_argument(text: str) -> tuple[int, int]:
         argparse.ArgumentTypeError: not two integers joined by ``x``, a side outside 16-8192 px, or
             more pixels than the env renders (a 20 MP still).
     """
-    from uav_struct_env.envs.config import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE
+    from uav_struct_env.envs.config import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, check_image_size
 
     parts = str(text).lower().split("x")
     if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
         raise argparse.ArgumentTypeError(f"must be WIDTHxHEIGHT in pixels (e.g. 320x180), got {text!r}")
-    w, h = int(parts[0]), int(parts[1])
-    if not (16 <= w <= MAX_IMAGE_SIDE and 16 <= h <= MAX_IMAGE_SIDE) or w * h > MAX_IMAGE_PIXELS:
+    try:
+        return check_image_size((int(parts[0]), int(parts[1])))
+    except ConfigError:
         raise argparse.ArgumentTypeError(f"each side must be 16-{MAX_IMAGE_SIDE} px and the image at most "
-                                         f"{MAX_IMAGE_PIXELS} px, got {text!r}")
-    return w, h
+                                         f"{MAX_IMAGE_PIXELS} px, got {text!r}") from None
 
 
 class CommandParser(argparse.ArgumentParser):

@@ -220,8 +220,11 @@ def test_image_size_overrides_the_frame_is_recorded_and_is_refused_where_it_cann
         train.main(config="state", image_size=(128, 72))
     with pytest.raises(ConfigError, match="up to 160 x 120 px .* got image_size 320 x 180"):
         train.main(config="pixels", image_size=(320, 180))
-    with pytest.raises(ConfigError, match=r"image_size must be \(width, height\) in pixels, got \(96.0"):
+    width = r"image_size\[0\] \(width\) must be an int in \[16, 8192\], got 96.0"
+    with pytest.raises(ConfigError, match=width):
         train.main(config="pixels", image_size=(96.0, 54))
+    with pytest.raises(ConfigError, match="image_size must be \\(width, height\\) in pixels, got '96x54'"):
+        train.main(config="pixels", image_size="96x54")
 
 
 def test_the_trainer_marks_time_limits_for_bootstrapping_unless_told_not_to(example):

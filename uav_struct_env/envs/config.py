@@ -37,7 +37,7 @@ from uav_struct_env.site import LANDMARK_SETS, Site, paper_site
 from uav_struct_env.site.activity import Activity, make_activity
 from uav_struct_env.site.as_built import AsBuilt, make_as_built
 
-__all__ = ["PRESETS", "RENDER_MODES", "RENDERERS", "EnvConfig", "make_config"]
+__all__ = ["PRESETS", "RENDER_MODES", "RENDERERS", "EnvConfig", "check_image_size", "make_config"]
 
 
 #: Upper bounds where memory or physics follows from a value: an image side and its pixels (a
@@ -53,6 +53,26 @@ MAX_MARKER_SIDE = 10.0
 
 def _number(name: str, value: Any, lo: float | None, hi: float | None, **kwargs: Any) -> Any:
     return check_number(name, value, lo, hi, error=ConfigError, type_error=ConfigError, **kwargs)
+
+
+def check_image_size(size: Any) -> tuple[int, int]:
+    """``(width, height)`` of an image the env renders, checked.
+
+    Two integers, each side 16 to :data:`MAX_IMAGE_SIDE` px, at most :data:`MAX_IMAGE_PIXELS` in all.
+
+    Raises:
+        ConfigError: naming the value and the limit it breaks.
+    """
+    if isinstance(size, (str, bytes)) or not isinstance(size, (tuple, list)) or len(size) != 2:
+        raise ConfigError(f"image_size must be (width, height) in pixels, got {size!r}")
+    w = _number("image_size[0] (width)", size[0], 16, MAX_IMAGE_SIDE, integer=True)
+    h = _number("image_size[1] (height)", size[1], 16, MAX_IMAGE_SIDE, integer=True)
+    if w * h > MAX_IMAGE_PIXELS:
+        raise ConfigError(
+            f"image_size {w} x {h} has {w * h} pixels, more than the {MAX_IMAGE_PIXELS} supported "
+            "(a 20 MP still; every agent renders one per step)"
+        )
+    return w, h
 
 
 def _is_site_file(site: object) -> bool:
@@ -184,16 +204,7 @@ class EnvConfig:
             raise ConfigError(f"stage must be one of {names}, got {self.stage!r}")
         if self.marker_size is not None:
             _number("marker_size", self.marker_size, 0, MAX_MARKER_SIDE, lo_open=True)
-        size = self.image_size
-        if isinstance(size, (str, bytes)) or not isinstance(size, (tuple, list)) or len(size) != 2:
-            raise ConfigError(f"image_size must be (width, height) in pixels, got {size!r}")
-        w = _number("image_size[0] (width)", size[0], 16, MAX_IMAGE_SIDE, integer=True)
-        h = _number("image_size[1] (height)", size[1], 16, MAX_IMAGE_SIDE, integer=True)
-        if w * h > MAX_IMAGE_PIXELS:
-            raise ConfigError(
-                f"image_size {w} x {h} has {w * h} pixels, more than the {MAX_IMAGE_PIXELS} supported "
-                "(a 20 MP still; every agent renders one per step)"
-            )
+        w, h = check_image_size(self.image_size)
         object.__setattr__(self, "image_size", (w, h))
         object.__setattr__(self, "noise", make_noise(self.noise))
         object.__setattr__(self, "imaging", make_imaging(self.imaging))
