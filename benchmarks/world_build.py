@@ -5,7 +5,7 @@ as OBJ + MTL + BMP files and loads them into its pybullet client. Worlds of the 
 texture size in one process (an env's copies in one process, a test suite's episodes) share the
 meshes and textures (``site.mesh.shared_site_elements``) and their formatted files. This prints,
 per site and texture size, the CPU and wall milliseconds of the first world and the median of the
-next ``--worlds`` (each kept open, as a vector env's copies are), and the resident memory they add,
+next ``--worlds`` (all of the same seed, each kept open), and the resident memory they add,
 with the sharing on and off (``--no-share`` alone: the behaviour before 2026-11-29).
 
     .venv/bin/python benchmarks/world_build.py

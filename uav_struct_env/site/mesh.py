@@ -502,8 +502,9 @@ def shared_site_elements(
     The same site, the same sizes and a generator in the same state of its seed sequence (the
     textures depend on nothing else: they are drawn from ``rng.spawn`` children) return the same
     element objects, whose textures are read-only; ``rng`` is advanced as :func:`site_elements`
-    advances it. Every world of one site in a process (an env's copies in a vector env, the
-    episodes of a test suite) then builds its meshes and textures once. A generator whose bit
+    advances it. The worlds of one site and seed in a process (envs and studies made again with
+    the same settings, a test suite's) then build its meshes and textures once; a vector env's
+    copies draw their own textures (``texture_seed + k``) and share nothing. A generator whose bit
     generator has no :class:`numpy.random.SeedSequence` is not shared (built every time).
     """
     key = _shared_key(site, rng, texel_size, texture_size)
