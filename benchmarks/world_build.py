@@ -2,7 +2,7 @@
 
 A ``SiteWorld`` builds its site's meshes and textures (``site.mesh.site_elements``), formats them
 as OBJ + MTL + BMP files and loads them into its pybullet client. Worlds of the same site, seed and
-texture size in one process (an env's copies in one process, a test suite's episodes) share the
+texture size in one process (envs made again with the same settings, a test suite's episodes) share the
 meshes and textures (``site.mesh.shared_site_elements``) and their formatted files. This prints,
 per site and texture size, the CPU and wall milliseconds of the first world and the median of the
 next ``--worlds`` (all of the same seed, each kept open), and the resident memory they add,
