@@ -2,7 +2,7 @@
 
 Issue 44 calls a success *wrong* when its camera centre lies farther than ``max(1 m, 3 x the
 view's Cramer-Rao bound)`` from the truth (``per_image.csv``'s ``translation_error_m`` and
-``crb_translation_m``). Three commands:
+``crb_translation_m``). Five commands:
 
 ``count`` prints, for every ``per_image.csv`` under the folders given, per method: the views,
 the views with at least four visible landmarks, the successes, the wrong ones and the median
@@ -36,6 +36,16 @@ on one thread) and the confirmation, alternating frame by frame, and prints both
 their ratio: the confirmation's share of a frame's latency under the machine's load of the moment.
 
     .venv/bin/python benchmarks/wrong_poses.py cost rec/paper --frames 60
+
+``diagnose`` replays the successes of recordings (detections fixed, no confirmation) and prints,
+per recording and in total, what the verification weighs: the right successes, those beyond 3 x
+the bound (and of them those resting on a wrong pair), the wrong ones, how many wrong ones an
+efficient localizer (Gaussian at the view's Cramer-Rao covariance, the study's pixel sigma) would
+show by chance, and what a bias test at the fit's a posteriori sigma (its residuals' noise, when
+larger than the detector's declared one) would refuse of each; then the successes beyond 3 x the
+bound, each with its pairs, sigmas, protection levels and tolerance.
+
+    .venv/bin/python benchmarks/wrong_poses.py diagnose rec/a rec/b --studies results/a results/b
 """
 
 from __future__ import annotations
@@ -248,6 +258,132 @@ def replay(records: Path, study: Path, show: int = 40, confirm: bool = True) -> 
     return dict(counts)
 
 
+def _rows_by_centre(study: Path) -> dict[tuple, dict]:
+    """(method, true centre rounded to 1 mm) -> the ``per_image.csv`` row, for every file under ``study``."""
+    from uav_struct_env.study.cells import read_records_csv
+
+    out = {}
+    for path in per_image_files([study]):
+        for r in read_records_csv(path):
+            out[(r["method"], *(round(float(r[k]), 3) for k in ("gt_x", "gt_y", "gt_z")))] = r
+    return out
+
+
+def chance_beyond(rec: dict, row: dict, samples: np.ndarray | None = None) -> float:
+    """P(error > the limit) for an efficient localizer: Gaussian at the view's Cramer-Rao covariance.
+
+    The covariance of the set's landmarks the true pose projects into the image, at the study's
+    pixel sigma (``crb_pixel_sigma_px``), scaled so that its RMS is the row's bound (its shape is
+    what counts); the probability by Monte Carlo over ``samples`` ((S, 3) standard normal draws).
+    """
+    from localization.pose.covariance import pose_covariance
+    from localization.verify import predicted_in_image
+
+    loc, T, bound = rec["localizer"], rec["gt"], float(row["crb_translation_m"])
+    seen = predicted_in_image(loc.K, T, loc.landmarks_xyz, loc.image_size)
+    cov = pose_covariance(loc.K, T, loc.landmarks_xyz[seen], float(row["crb_pixel_sigma_px"]))[:3, :3]
+    if not (np.all(np.isfinite(cov)) and math.isfinite(bound) and np.trace(cov) > 0):
+        return float("nan")
+    if samples is None:
+        samples = np.random.default_rng(0).standard_normal((20000, 3))
+    vals = np.linalg.eigvalsh(cov * (bound**2 / np.trace(cov)))
+    e = np.linalg.norm(samples * np.sqrt(np.clip(vals, 0.0, None)), axis=1)  # the norm is rotation-free
+    return float(np.mean(e > limit_m(bound)))
+
+
+def diagnosis(rec: dict, est: object) -> dict:
+    """What the verification weighs in one success: its pairs, its fit's sigma, its bias test.
+
+    ``pairs``, ``wrong_pairs`` (by the detections' true ids), ``sigma_px`` (the detector's declared
+    fit sigma), ``posterior_sigma_px`` (``sqrt(chi2 / (2n - 6))`` of the fit at that sigma, times it:
+    the noise its residuals show), ``tolerance_m`` (the verification's), ``level_m`` (the protection
+    level at :data:`localization.verify.BIAS_SHARE` of the declared sigma, the test the verification
+    makes) and ``posterior_level_m`` (at that share of the larger of the two sigmas).
+    """
+    from localization.geometry.transforms import project
+    from localization.verify import BIAS_SHARE, position_tolerance, protection_level
+
+    loc = rec["localizer"]
+    a = est.assignment
+    m = a >= 0
+    uv = np.asarray(rec["uv"], dtype=np.float64)
+    X = loc.landmarks_xyz[a[m]]
+    res = project(loc.K, est.cam_from_world, X)[0] - uv[m]
+    sigma = loc.fit_sigma_px if loc.fit_sigma_px is not None else loc.pixel_sigma
+    n = int(m.sum())
+    posterior = sigma * math.sqrt(float(np.sum(res**2)) / sigma**2 / max(2 * n - 6, 1))
+    tol = position_tolerance(loc.K, est.cam_from_world, loc.landmarks_xyz, loc.image_size, sigma,
+                             loc.tolerance_m if loc.tolerance_m is not None else 1.0)[0]
+    true_ids, model_ids = rec["true_ids"], np.asarray(rec["model_ids"])
+    wrong = sum(1 for i in np.flatnonzero(m) if true_ids is None or model_ids[a[i]] != true_ids[i])
+    return {"pairs": n, "wrong_pairs": int(wrong), "sigma_px": sigma, "posterior_sigma_px": posterior,
+            "tolerance_m": tol, "level_m": protection_level(loc.K, est.cam_from_world, X, BIAS_SHARE * sigma),
+            "posterior_level_m": protection_level(loc.K, est.cam_from_world, X,
+                                                  BIAS_SHARE * max(sigma, posterior))}
+
+
+def diagnose(pairs: list[tuple[Path, Path]], show: int = 40) -> dict[str, int | float]:
+    """Replay the successes of each ``(records, study)`` and print what the verification weighs.
+
+    Per folder and in total: the successes; the right ones (error at most 3 x the bound); those
+    beyond 3 x the bound, and of them those resting on a wrong pair; the wrong ones (beyond the
+    limit); the wrong ones an efficient localizer would show by chance (:func:`chance_beyond`,
+    summed); and what a bias test at the fit's a posteriori sigma would refuse of each group
+    (``posterior_level_m > tolerance_m``, :func:`diagnosis`). Then the successes beyond 3 x the
+    bound, worst first. Returns the totals.
+    """
+    from localization.geometry.transforms import camera_center
+
+    samples = np.random.default_rng(0).standard_normal((20000, 3))
+    keys = ("successes", "right", "beyond_3x", "beyond_3x_wrong_pair", "wrong", "refused_right",
+            "refused_beyond_3x", "refused_beyond_3x_wrong_pair", "refused_wrong")
+    total: dict[str, int | float] = dict.fromkeys(keys, 0) | {"chance_wrong": 0.0}
+    beyond = []
+    for records, study in pairs:
+        rows = _rows_by_centre(study)
+        c: dict[str, int | float] = dict.fromkeys(keys, 0) | {"chance_wrong": 0.0}
+        for path in sorted(records.glob("[0-9]*.pkl")):
+            rec = pickle.loads(path.read_bytes())
+            row = rows.get((rec["landmarks"], *(round(float(x), 3) for x in camera_center(rec["gt"]))))
+            if row is None:
+                continue
+            ok, err, est = _replay_one(rec)
+            if not ok:
+                continue
+            d = diagnosis(rec, est)
+            bound = float(row["crb_translation_m"])
+            refused = d["posterior_level_m"] > d["tolerance_m"]
+            groups = {"successes": True, "right": err <= FACTOR * bound, "beyond_3x": err > FACTOR * bound,
+                      "beyond_3x_wrong_pair": err > FACTOR * bound and d["wrong_pairs"] > 0,
+                      "wrong": err > limit_m(bound)}
+            for g, inside in groups.items():
+                c[g] += inside
+                if g != "successes":
+                    c[f"refused_{g}"] += inside and refused
+            p = chance_beyond(rec, row, samples)
+            c["chance_wrong"] += p if math.isfinite(p) else 0.0
+            if groups["beyond_3x"]:
+                beyond.append((err / bound, f"{path} {rec['landmarks']}: error {err:.2f} m, "
+                               f"bound {bound:.3f} m, pairs {d['pairs']} ({d['wrong_pairs']} wrong), sigma "
+                               f"{d['sigma_px']:.2f} -> {d['posterior_sigma_px']:.2f} px, level "
+                               f"{d['level_m']:.2f} -> {d['posterior_level_m']:.2f} m, tolerance "
+                               f"{d['tolerance_m']:.2f} m"))
+        for k in total:
+            total[k] += c[k]
+        _print_diagnosis(str(records), c)
+    _print_diagnosis("total", total)
+    for _, line in sorted(beyond, reverse=True)[:show]:
+        print("  beyond 3x:", line)
+    return total
+
+
+def _print_diagnosis(name: str, c: dict) -> None:
+    print(f"{name:<48} successes {c['successes']:>4}: right {c['right']} (refused {c['refused_right']}), "
+          f"beyond 3x {c['beyond_3x']} (refused {c['refused_beyond_3x']}; with a wrong pair "
+          f"{c['beyond_3x_wrong_pair']}, refused {c['refused_beyond_3x_wrong_pair']}), wrong {c['wrong']} "
+          f"(refused {c['refused_wrong']}; by chance {c['chance_wrong']:.2f})")
+
+
 def cost(records: Path, frames: int = 60) -> tuple[float, float]:
     """Median ms of the learned detector and of the confirmation over up to ``frames`` assessed frames."""
     from localization.detect.learned import LearnedDetector  # its networks run on one thread
@@ -310,6 +446,12 @@ def main(argv: list[str] | None = None) -> None:
                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     t.add_argument("records", type=Path, help="a folder of recordings (with images and sites)")
     t.add_argument("--frames", type=int, default=60, help="frames timed")
+    g = sub.add_parser("diagnose", help="what the verification weighs in each recorded success",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    g.add_argument("records", type=Path, nargs="+", help="folders of recordings")
+    g.add_argument("--studies", type=Path, nargs="+", required=True,
+                   help="each recorded run's output (its per_image.csv), in the order of the recordings")
+    g.add_argument("--show", type=int, default=40, help="successes beyond 3 x the bound printed")
     args = ap.parse_args(argv)
     if args.command == "count":
         count(args.folders)
@@ -318,6 +460,11 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(record(args.into, cmd))
     elif args.command == "cost":
         cost(args.records, args.frames)
+    elif args.command == "diagnose":
+        if len(args.records) != len(args.studies):
+            ap.error(f"diagnose needs one --studies folder per recordings folder, got {len(args.records)} "
+                     f"recordings and {len(args.studies)} studies")
+        diagnose(list(zip(args.records, args.studies, strict=True)), args.show)
     else:
         replay(args.records, args.study, args.show, confirm=not args.no_confirm)
 
