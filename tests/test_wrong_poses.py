@@ -133,4 +133,5 @@ def test_diagnose_wants_one_study_per_recording(tmp_path, capsys):
     with pytest.raises(SystemExit) as stop:
         wrong_poses.main(["diagnose", str(tmp_path / "a"), str(tmp_path / "b"), "--studies", str(tmp_path)])
     assert stop.value.code == 2
-    assert "one --studies folder per recordings folder, got 2 recordings and 1 studies" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "one --studies folder per recordings folder, got 2 recordings and 1 studies" in err
