@@ -37,7 +37,8 @@ their ratio: the confirmation's share of a frame's latency under the machine's l
 
     .venv/bin/python benchmarks/wrong_poses.py cost rec/paper --frames 60
 
-``diagnose`` replays the successes of recordings (detections fixed, no confirmation) and prints,
+``diagnose`` replays the successes of recordings (detections fixed, held to the structure as
+``replay`` holds them) and prints,
 per recording and in total, what the verification weighs: the right successes, those beyond 3 x
 the bound (and of them those resting on a wrong pair), the wrong ones, how many wrong ones an
 efficient localizer (Gaussian at the view's Cramer-Rao covariance, the study's pixel sigma) would
@@ -325,6 +326,9 @@ def diagnosis(rec: dict, est: object) -> dict:
 def diagnose(pairs: list[tuple[Path, Path]], show: int = 40) -> dict[str, int | float]:
     """Replay the successes of each ``(records, study)`` and print what the verification weighs.
 
+    Each frame is localized again and held to the building's structure where the recording allows
+    (as :func:`replay` does), so its successes are the stack's.
+
     Per folder and in total: the successes; the right ones (error at most 3 x the bound); those
     beyond 3 x the bound, and of them those resting on a wrong pair; the wrong ones (beyond the
     limit); the wrong ones an efficient localizer would show by chance (:func:`chance_beyond`,
@@ -341,13 +345,14 @@ def diagnose(pairs: list[tuple[Path, Path]], show: int = 40) -> dict[str, int | 
     beyond = []
     for records, study in pairs:
         rows = _rows_by_centre(study)
+        confirmations = _Confirmations(records)
         c: dict[str, int | float] = dict.fromkeys(keys, 0) | {"chance_wrong": 0.0}
         for path in sorted(records.glob("[0-9]*.pkl")):
             rec = pickle.loads(path.read_bytes())
             row = rows.get((rec["landmarks"], *(round(float(x), 3) for x in camera_center(rec["gt"]))))
             if row is None:
                 continue
-            ok, err, est = _replay_one(rec)
+            ok, err, est = _replay_one(rec, confirmations(rec))
             if not ok:
                 continue
             d = diagnosis(rec, est)
