@@ -38,9 +38,9 @@ their ratio: the confirmation's share of a frame's latency under the machine's l
     .venv/bin/python benchmarks/wrong_poses.py cost rec/paper --frames 60
 
 ``diagnose`` replays the successes of recordings (detections fixed, held to the structure as
-``replay`` holds them) and prints,
-per recording and in total, what the verification weighs: the right successes, those beyond 3 x
-the bound (and of them those resting on a wrong pair), the wrong ones, how many wrong ones an
+``replay`` holds them) and prints, per recording and in total, what the verification weighs: the
+right successes, those beyond 3 x the bound (and of them those resting on a wrong pair), the wrong
+ones, how many wrong ones an
 efficient localizer (Gaussian at the view's Cramer-Rao covariance, the study's pixel sigma) would
 show by chance, and what a bias test at the fit's a posteriori sigma (its residuals' noise, when
 larger than the detector's declared one) would refuse of each; then the successes beyond 3 x the
@@ -142,16 +142,25 @@ def record(into: Path, command: list[str]) -> int:
     return subprocess.call(command, env=env)
 
 
-def _bounds(study: Path) -> dict[tuple, float]:
-    """(method, true centre rounded to 1 mm) -> the view's bound, from every per_image.csv under ``study``."""
+def _view_key(method: str, centre) -> tuple:
+    """A view's key: its method and true camera centre rounded to 1 mm."""
+    return (method, *(round(float(x), 3) for x in centre))
+
+
+def _rows_by_centre(study: Path) -> dict[tuple, dict]:
+    """:func:`_view_key` -> the ``per_image.csv`` row, for every file under ``study``."""
     from uav_struct_env.study.cells import read_records_csv
 
     out = {}
     for path in per_image_files([study]):
         for r in read_records_csv(path):
-            key = (r["method"], *(round(float(r[k]), 3) for k in ("gt_x", "gt_y", "gt_z")))
-            out[key] = float(r["crb_translation_m"])
+            out[_view_key(r["method"], (r["gt_x"], r["gt_y"], r["gt_z"]))] = r
     return out
+
+
+def _bounds(study: Path) -> dict[tuple, float]:
+    """:func:`_view_key` -> the view's bound, from every per_image.csv under ``study``."""
+    return {key: float(r["crb_translation_m"]) for key, r in _rows_by_centre(study).items()}
 
 
 class _Confirmations:
@@ -216,8 +225,7 @@ def replay(records: Path, study: Path, show: int = 40, confirm: bool = True) -> 
     confirmations = _Confirmations(records) if confirm else None
     for path in sorted(records.glob("[0-9]*.pkl")):
         rec = pickle.loads(path.read_bytes())
-        c = camera_center(rec["gt"])
-        bound = bounds.get((rec["landmarks"], *(round(float(x), 3) for x in c)), float("nan"))
+        bound = bounds.get(_view_key(rec["landmarks"], camera_center(rec["gt"])), float("nan"))
         lim = limit_m(bound)
         held = None if confirmations is None else confirmations(rec)
         t0 = time.perf_counter()
@@ -257,17 +265,6 @@ def replay(records: Path, study: Path, show: int = 40, confirm: bool = True) -> 
         print(f"  the confirmation, on the {cms.size} poses it assessed: median {np.median(cms):.1f} ms, "
               f"P99 {np.percentile(cms, 99):.0f} ms")
     return dict(counts)
-
-
-def _rows_by_centre(study: Path) -> dict[tuple, dict]:
-    """(method, true centre rounded to 1 mm) -> the ``per_image.csv`` row, for every file under ``study``."""
-    from uav_struct_env.study.cells import read_records_csv
-
-    out = {}
-    for path in per_image_files([study]):
-        for r in read_records_csv(path):
-            out[(r["method"], *(round(float(r[k]), 3) for k in ("gt_x", "gt_y", "gt_z")))] = r
-    return out
 
 
 def chance_beyond(rec: dict, row: dict, samples: np.ndarray | None = None) -> float:
@@ -315,9 +312,9 @@ def diagnosis(rec: dict, est: object) -> dict:
     posterior = sigma * math.sqrt(float(np.sum(res**2)) / sigma**2 / max(2 * n - 6, 1))
     tol = position_tolerance(loc.K, est.cam_from_world, loc.landmarks_xyz, loc.image_size, sigma,
                              loc.tolerance_m if loc.tolerance_m is not None else 1.0)[0]
-    true_ids, model_ids = rec["true_ids"], np.asarray(rec["model_ids"])
-    wrong = sum(1 for i in np.flatnonzero(m) if true_ids is None or model_ids[a[i]] != true_ids[i])
-    return {"pairs": n, "wrong_pairs": int(wrong), "sigma_px": sigma, "posterior_sigma_px": posterior,
+    true_ids, model_ids = np.asarray(rec["true_ids"]), np.asarray(rec["model_ids"])
+    wrong = int(np.count_nonzero(model_ids[a[m]] != true_ids[m]))
+    return {"pairs": n, "wrong_pairs": wrong, "sigma_px": sigma, "posterior_sigma_px": posterior,
             "tolerance_m": tol, "level_m": protection_level(loc.K, est.cam_from_world, X, BIAS_SHARE * sigma),
             "posterior_level_m": protection_level(loc.K, est.cam_from_world, X,
                                                   BIAS_SHARE * max(sigma, posterior))}
@@ -349,7 +346,7 @@ def diagnose(pairs: list[tuple[Path, Path]], show: int = 40) -> dict[str, int | 
         c: dict[str, int | float] = dict.fromkeys(keys, 0) | {"chance_wrong": 0.0}
         for path in sorted(records.glob("[0-9]*.pkl")):
             rec = pickle.loads(path.read_bytes())
-            row = rows.get((rec["landmarks"], *(round(float(x), 3) for x in camera_center(rec["gt"]))))
+            row = rows.get(_view_key(rec["landmarks"], camera_center(rec["gt"])))
             if row is None:
                 continue
             ok, err, est = _replay_one(rec, confirmations(rec))
