@@ -44,7 +44,7 @@ ones, how many wrong ones an
 efficient localizer (Gaussian at the view's Cramer-Rao covariance, the study's pixel sigma) would
 show by chance, and what a bias test at the fit's a posteriori sigma (its residuals' noise, when
 larger than the detector's declared one) would refuse of each; then the successes beyond 3 x the
-bound, each with its pairs, sigmas, protection levels and tolerance.
+bound (the wrong ones first), each with its pairs, sigmas, protection levels and tolerance.
 
     .venv/bin/python benchmarks/wrong_poses.py diagnose rec/a rec/b --studies results/a results/b
 """
@@ -331,7 +331,7 @@ def diagnose(pairs: list[tuple[Path, Path]], show: int = 40) -> dict[str, int | 
     limit); the wrong ones an efficient localizer would show by chance (:func:`chance_beyond`,
     summed); and what a bias test at the fit's a posteriori sigma would refuse of each group
     (``posterior_level_m > tolerance_m``, :func:`diagnosis`). Then the successes beyond 3 x the
-    bound, worst first. Returns the totals.
+    bound, the wrong ones first, each group worst first (``show`` of them). Returns the totals.
     """
     from localization.geometry.transforms import camera_center
 
@@ -365,7 +365,7 @@ def diagnose(pairs: list[tuple[Path, Path]], show: int = 40) -> dict[str, int | 
             p = chance_beyond(rec, row, samples)
             c["chance_wrong"] += p if math.isfinite(p) else 0.0
             if groups["beyond_3x"]:
-                beyond.append((err / bound, f"{path} {rec['landmarks']}: error {err:.2f} m, "
+                beyond.append((groups["wrong"], err / bound, f"{path} {rec['landmarks']}: error {err:.2f} m, "
                                f"bound {bound:.3f} m, pairs {d['pairs']} ({d['wrong_pairs']} wrong), sigma "
                                f"{d['sigma_px']:.2f} -> {d['posterior_sigma_px']:.2f} px, level "
                                f"{d['level_m']:.2f} -> {d['posterior_level_m']:.2f} m, tolerance "
@@ -374,8 +374,8 @@ def diagnose(pairs: list[tuple[Path, Path]], show: int = 40) -> dict[str, int | 
             total[k] += c[k]
         _print_diagnosis(str(records), c)
     _print_diagnosis("total", total)
-    for _, line in sorted(beyond, reverse=True)[:show]:
-        print("  beyond 3x:", line)
+    for wrong, _, line in sorted(beyond, reverse=True)[:show]:  # the wrong ones first
+        print("  wrong:" if wrong else "  beyond 3x:", line)
     return total
 
 

@@ -58,8 +58,12 @@ def test_the_building_table_refuses_a_folder_that_is_no_study(tmp_path, capsys):
     assert err.out == ""  # refused before any row
 
 
-def _recording(tmp_path, true_ids_shift: int = 0):
-    """One recorded frame of a 3 x 4 column grid seen from 25 m, 0.5 px noise, and its study row."""
+def _recording(tmp_path, true_ids_shift: int = 0, truth_shift_m: float = 0.0):
+    """One recorded frame of a 3 x 4 column grid seen from 25 m, 0.5 px noise, and its study row.
+
+    ``truth_shift_m``: the recorded truth moved along x after the localization (its pose then that
+    far off).
+    """
     import pickle
 
     import numpy as np
@@ -78,6 +82,8 @@ def _recording(tmp_path, true_ids_shift: int = 0):
     prior = paper_prior(truth, 1)
     est = loc.localize(Detections(uv), prior)
     assert est.success
+    truth = truth.copy()
+    truth[:3, 3] -= truth[:3, :3] @ np.array([truth_shift_m, 0.0, 0.0])  # the centre moved by +x
     ids = np.arange(len(xyz))
     true_ids = ids.copy()
     true_ids[0] = (true_ids[0] + true_ids_shift) % len(xyz)  # a pair labelled wrong, the geometry as it was
@@ -135,3 +141,12 @@ def test_diagnose_wants_one_study_per_recording(tmp_path, capsys):
     assert stop.value.code == 2
     err = capsys.readouterr().err
     assert "one --studies folder per recordings folder, got 2 recordings and 1 studies" in err
+
+
+def test_diagnose_lists_a_wrong_success_first(tmp_path, capsys):
+    records, study, rec = _recording(tmp_path, truth_shift_m=2.0)
+    totals = wrong_poses.diagnose([(records, study)])
+    assert totals["successes"] == 1 and totals["wrong"] == 1 and totals["beyond_3x"] == 1
+    assert totals["right"] == 0
+    out = capsys.readouterr().out
+    assert "  wrong: " in out and "error 2.0" in out and "pairs 12 (0 wrong)" in out
