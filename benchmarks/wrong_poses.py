@@ -299,7 +299,7 @@ def diagnosis(rec: dict, est: object) -> dict:
     makes) and ``posterior_level_m`` (at that share of the larger of the two sigmas).
     """
     from localization.geometry.transforms import project
-    from localization.verify import BIAS_SHARE, position_tolerance, protection_level
+    from localization.verify import BIAS_SHARE, CONFIRM_TOLERANCE_M, position_tolerance, protection_level
 
     loc = rec["localizer"]
     a = est.assignment
@@ -311,7 +311,7 @@ def diagnosis(rec: dict, est: object) -> dict:
     n = int(m.sum())
     posterior = sigma * math.sqrt(float(np.sum(res**2)) / sigma**2 / max(2 * n - 6, 1))
     tol = position_tolerance(loc.K, est.cam_from_world, loc.landmarks_xyz, loc.image_size, sigma,
-                             loc.tolerance_m if loc.tolerance_m is not None else 1.0)[0]
+                             loc.tolerance_m if loc.tolerance_m is not None else CONFIRM_TOLERANCE_M)[0]
     true_ids, model_ids = np.asarray(rec["true_ids"]), np.asarray(rec["model_ids"])
     wrong = int(np.count_nonzero(model_ids[a[m]] != true_ids[m]))
     return {"pairs": n, "wrong_pairs": wrong, "sigma_px": sigma, "posterior_sigma_px": posterior,

@@ -474,7 +474,7 @@ def check_options(opt: dict[str, Any]) -> None:
     if opt["max_cycles"] is not None:
         check_option("max_cycles", opt["max_cycles"], 1, integer=True)
     if opt["image_size"] is not None:
-        check_image_size(opt["config"], opt["image_size"])
+        check_image_size_option(opt["config"], opt["image_size"])
     if opt["minutes"] is not None:
         check_option("minutes", opt["minutes"], 0, lo_open=True)
     check_option("learning_rate", opt["learning_rate"], 0, lo_open=True)
@@ -493,8 +493,10 @@ def check_options(opt: dict[str, Any]) -> None:
     check_output_dir(opt["out"], overwrite=opt["overwrite"] or opt["resume"] is not None)
 
 
-def check_image_size(config: str, image_size: Any) -> None:
+def check_image_size_option(config: str, image_size: Any) -> None:
     """``--image-size``: a configuration that observes images, and a size its renderer draws.
+
+    (The size itself: ``uav_struct_env.envs.config.check_image_size``, through ``make_config``.)
 
     Raises:
         ConfigError: naming the configuration without images, or the size and the limit it breaks.
