@@ -799,7 +799,7 @@ def _terms(
 
 def reassociated(
     inputs: VerifyInputs, hypotheses: list[tuple[NDArray[np.int64], NDArray[np.float64], object]],
-    unchanged: bool | NDArray[np.bool_] = False,
+    unchanged: bool = False,
 ) -> list[tuple[int, NDArray[np.int64], NDArray[np.float64], float]]:
     """Rival hypotheses grown whole: every landmark re-associated at the rival's pose.
 
@@ -812,10 +812,8 @@ def reassociated(
     (:func:`localization.associate.assign_kernels.refine_reassign`), to be scored as a
     hypothesis of its own. Returns ``[(k, assignment, cam_from_world, chi-square), ...]`` for
     the rivals (``hypotheses[k]``) that keep at least ``need`` pairs and changed -- with
-    ``unchanged`` (for all, or per hypothesis), also those whose pairs the re-association kept
-    (at their refined pose): a period of most of the layout that pairs exactly the structure's
-    detections is already whole. Each hypothesis grows on its own: a batch gives each the answer
-    it would get alone.
+    ``unchanged``, also those whose pairs the re-association kept (at their refined pose): a
+    period of most of the layout that pairs exactly the structure's detections is already whole.
     """
     if not hypotheses:
         return []
@@ -922,23 +920,20 @@ def _contenders(
 def _rival_refusal(inputs: VerifyInputs) -> Refusal | None:
     """The twins' refusal (:func:`_twin_refusal`), else the layout periods' (:func:`_lattice_refusal`).
 
-    The twins, the offset starts and the periods grow in one batch of re-association
-    (:func:`reassociated`; each start's growth is its own, whatever the batch holds). Of the
-    periods it keeps those the re-association leaves as they were too: a period of most of the
-    layout (a winner one row over, plus a clutter point off the layout's edge, is no exact
-    period) may pair exactly the structure's detections already, and it is scored at its refined
-    pose.
+    The twins and the offset starts grow in one batch of re-association (:func:`reassociated`;
+    each start's growth is its own, whatever the batch holds), the periods in another, which
+    keeps those the re-association leaves as they were: a period of most of the layout (a winner
+    one row over, plus a clutter point off the layout's edge, is no exact period) may pair
+    exactly the structure's detections already, and it is scored at its refined pose.
     """
     twins = twin_hypotheses(inputs)
     starts = twins + offset_starts(inputs)
     exact = lattice_rivals(inputs)
     periods = exact + lattice_rivals(inputs, LATTICE_SHARE, LATTICE_SPACING_SHARE * inputs.spacing_m,
                                      _LATTICE_ANCHORS)
-    n = len(starts)
-    grown = reassociated(inputs, starts + periods, np.arange(n + len(periods)) >= n)
     return (
-        _twin_refusal(inputs, twins + [r[1:] for r in grown if r[0] < n])
-        or _lattice_refusal(inputs, exact, periods, [(k - n, *r) for k, *r in grown if k >= n])
+        _twin_refusal(inputs, twins + [r[1:] for r in reassociated(inputs, starts)])
+        or _lattice_refusal(inputs, exact, periods, reassociated(inputs, periods, unchanged=True))
     )
 
 

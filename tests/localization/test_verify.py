@@ -381,9 +381,8 @@ def _grid_inputs(X, T, rows, uv, **kw):
 
 
 def test_a_batch_of_rivals_grows_each_as_it_would_grow_alone():
-    # the verification grows its twins' offset starts and the layout's periods in one batch of
-    # re-association: each hypothesis must come out as it does alone, to the bit, and the
-    # per-hypothesis "unchanged" keeps the periods the re-association leaves as they were
+    # the verification grows its twins' offset starts in one batch of re-association and the
+    # layout's periods in another: each hypothesis must come out as it does alone, to the bit
     X = np.array([[4.0 * i, 4.0 * j, 3.5] for i in range(6) for j in range(6)])
     T = look_at([10.0, -6.0, 30.0], [10.0, 10.0, 3.5])
     uv, _ = project(PAPER_K, T, X)
@@ -391,21 +390,18 @@ def test_a_batch_of_rivals_grows_each_as_it_would_grow_alone():
     det = np.vstack([uv + rng.normal(0.0, 0.5, uv.shape), uv[:20] + [23.0, -9.0]])  # a ghost copy of 20
     rows = np.r_[np.arange(36), -np.ones(20, dtype=np.int64)]
     inputs = _grid_inputs(X, T, rows, det)
-    starts = offset_starts(inputs)
-    periods = lattice_rivals(inputs, 0.5, 1.0, 3)
-    assert starts and periods
-    hyps = starts + periods
-    keep = np.arange(len(hyps)) >= len(starts)
-    batch = reassociated(inputs, hyps, keep)
-    alone = {k: reassociated(inputs, [hyps[k]], bool(keep[k])) for k in range(len(hyps))}
-    assert [r[0] for r in batch] == [k for k in range(len(hyps)) if alone[k]]
-    for k, a, T_k, chi in batch:
-        _, a1, T1, chi1 = alone[k][0]
-        np.testing.assert_array_equal(a, a1)
-        np.testing.assert_array_equal(T_k, T1)
-        assert chi == chi1
-    # measured: 1 start and 14 periods; all 15 grown, 5 of the periods kept as they were
-    assert len(batch) == len(hyps) > len(reassociated(inputs, hyps)) == len(hyps) - 5
+    hyps = offset_starts(inputs) + lattice_rivals(inputs, 0.5, 1.0, 3)
+    for unchanged in (False, True):
+        batch = reassociated(inputs, hyps, unchanged)
+        alone = {k: reassociated(inputs, [hyps[k]], unchanged) for k in range(len(hyps))}
+        assert [r[0] for r in batch] == [k for k in range(len(hyps)) if alone[k]]
+        for k, a, T_k, chi in batch:
+            _, a1, T1, chi1 = alone[k][0]
+            np.testing.assert_array_equal(a, a1)
+            np.testing.assert_array_equal(T_k, T1)
+            assert chi == chi1
+    # measured: 1 start and 14 periods; 10 change, the 5 others are kept only when asked
+    assert len(hyps) == 15 == len(reassociated(inputs, hyps, True)) == len(reassociated(inputs, hyps)) + 5
 
 
 def test_a_copys_offset_wins_the_vote_over_a_grids_neighbours():
