@@ -330,8 +330,10 @@ def diagnose(pairs: list[tuple[Path, Path]], show: int = 40) -> dict[str, int | 
     beyond 3 x the bound, and of them those resting on a wrong pair; the wrong ones (beyond the
     limit); the wrong ones an efficient localizer would show by chance (:func:`chance_beyond`,
     summed); and what a bias test at the fit's a posteriori sigma would refuse of each group
-    (``posterior_level_m > tolerance_m``, :func:`diagnosis`). Then the successes beyond 3 x the
-    bound, the wrong ones first, each group worst first (``show`` of them). Returns the totals.
+    (``posterior_level_m > tolerance_m``, :func:`diagnosis`); the successes' median error, in
+    metres and in their bounds. Then the successes beyond 3 x the bound, the wrong ones first,
+    each group worst first (``show`` of them). Returns the totals (the medians as
+    ``median_error_m`` and ``median_error_bounds``, NaN without a success).
     """
     from localization.geometry.transforms import camera_center
 
@@ -340,10 +342,12 @@ def diagnose(pairs: list[tuple[Path, Path]], show: int = 40) -> dict[str, int | 
             "refused_beyond_3x", "refused_beyond_3x_wrong_pair", "refused_wrong")
     total: dict[str, int | float] = dict.fromkeys(keys, 0) | {"chance_wrong": 0.0}
     beyond = []
+    errors: list[tuple[float, float]] = []  # (error m, error / bound) of every success
     for records, study in pairs:
         rows = _rows_by_centre(study)
         confirmations = _Confirmations(records)
         c: dict[str, int | float] = dict.fromkeys(keys, 0) | {"chance_wrong": 0.0}
+        first = len(errors)
         for path in sorted(records.glob("[0-9]*.pkl")):
             rec = pickle.loads(path.read_bytes())
             row = rows.get(_view_key(rec["landmarks"], camera_center(rec["gt"])))
@@ -354,6 +358,7 @@ def diagnose(pairs: list[tuple[Path, Path]], show: int = 40) -> dict[str, int | 
                 continue
             d = diagnosis(rec, est)
             bound = float(row["crb_translation_m"])
+            errors.append((err, err / bound))
             refused = d["posterior_level_m"] > d["tolerance_m"]
             groups = {"successes": True, "right": err <= FACTOR * bound, "beyond_3x": err > FACTOR * bound,
                       "beyond_3x_wrong_pair": err > FACTOR * bound and d["wrong_pairs"] > 0,
@@ -372,18 +377,28 @@ def diagnose(pairs: list[tuple[Path, Path]], show: int = 40) -> dict[str, int | 
                                f"{d['tolerance_m']:.2f} m"))
         for k in total:
             total[k] += c[k]
-        _print_diagnosis(str(records), c)
+        _print_diagnosis(str(records), c | _medians(errors[first:]))
+    total |= _medians(errors)
     _print_diagnosis("total", total)
     for wrong, _, line in sorted(beyond, reverse=True)[:show]:  # the wrong ones first
         print("  wrong:" if wrong else "  beyond 3x:", line)
     return total
 
 
+def _medians(errors: list[tuple[float, float]]) -> dict[str, float]:
+    """``median_error_m``, ``median_error_bounds`` of ``[(error m, error / bound), ...]``; NaN if empty."""
+    if not errors:
+        return {"median_error_m": float("nan"), "median_error_bounds": float("nan")}
+    m, b = np.median(np.asarray(errors), axis=0)
+    return {"median_error_m": float(m), "median_error_bounds": float(b)}
+
+
 def _print_diagnosis(name: str, c: dict) -> None:
     print(f"{name:<48} successes {c['successes']:>4}: right {c['right']} (refused {c['refused_right']}), "
           f"beyond 3x {c['beyond_3x']} (refused {c['refused_beyond_3x']}; with a wrong pair "
           f"{c['beyond_3x_wrong_pair']}, refused {c['refused_beyond_3x_wrong_pair']}), wrong {c['wrong']} "
-          f"(refused {c['refused_wrong']}; by chance {c['chance_wrong']:.2f})")
+          f"(refused {c['refused_wrong']}; by chance {c['chance_wrong']:.2f}), median error "
+          f"{c['median_error_m']:.4f} m ({c['median_error_bounds']:.3f}x the bound)")
 
 
 def cost(records: Path, frames: int = 60) -> tuple[float, float]:

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from localization.metrics import pose_errors
+
 _PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "wrong_poses.py"
 _SPEC = importlib.util.spec_from_file_location("wrong_poses", _PATH)
 wrong_poses = importlib.util.module_from_spec(_SPEC)
@@ -122,7 +124,11 @@ def test_diagnose_counts_a_right_success_and_its_fit(tmp_path, capsys):
     # the fit's residuals show the 0.5 px noise (12 pairs, 18 degrees of freedom), not the declared 0.7
     assert 0.3 < d["posterior_sigma_px"] < 0.7
     assert d["posterior_level_m"] == pytest.approx(d["level_m"])  # the declared sigma is the larger
-    assert "successes    1: right 1 (refused 0)" in capsys.readouterr().out
+    err = pose_errors(est.cam_from_world, rec["gt"])[0]
+    assert totals["median_error_m"] == err and totals["median_error_bounds"] == err / 0.05  # one success
+    out = capsys.readouterr().out
+    assert "successes    1: right 1 (refused 0)" in out
+    assert f"median error {err:.4f} m ({err / 0.05:.3f}x the bound)" in out
 
 
 def test_diagnose_names_a_wrong_pair_and_scales_the_level_with_a_loose_fit(tmp_path):
