@@ -459,7 +459,11 @@ class Localizer:
             return self._failed(frame, pose, timings, t0)
         failure = self._check_pose(pose, assoc.n_hypotheses)
         if failure is None:
-            failure = self._verify(frame, pose, assoc.n_hypotheses, timings)
+            failure, verified = self._verify(frame, pose, assoc.n_hypotheses, timings)
+            if failure is None and verified is not None:
+                t3 = time.perf_counter()
+                pose = self._without_outliers(frame, pose, verified)
+                timings["verify"] += time.perf_counter() - t3
         if failure is None and frame.deadline is not None and frame.deadline.passed():
             # past the deadline the verification's own search may have been cut short
             reason = frame.deadline.reason("the pose was confirmed")
@@ -652,40 +656,73 @@ class Localizer:
 
     def _verify(
         self, frame: _Frame, pose: _Pose, n_hypotheses: int, timings: dict[str, float]
-    ) -> _Failure | None:
+    ) -> tuple[_Failure | None, VerifyInputs | None]:
         """Why the detections do not confirm this pose (:mod:`localization.verify`), else None.
 
-        Robust mode with ``verify`` only; records the ``verify`` timing.
+        Robust mode with ``verify`` only; records the ``verify`` timing. Returns ``(failure,
+        inputs)``: the verification's inputs (None when it did not run), which hold what its
+        tests computed.
         """
         timings["verify"] = 0.0
         if self.association != "robust" or not self.verify:
-            return None
+            return None, None
         t = time.perf_counter()
-        refusal = verify_pose(
-            VerifyInputs(
-                detections_uv=frame.detections_uv,
-                landmarks_xyz=self.landmarks_xyz,
-                K=self.K,
-                image_size=self.image_size,
-                cam_from_world=pose.cam_from_world,
-                assignment=pose.assignment,
-                covariance=pose.covariance,
-                prior_cam_from_world=frame.prior,
-                prior_sigmas=frame.prior_sigmas,
-                pixel_sigma=self.pixel_sigma,
-                gate_px=self.gate_px if self.gate_px is not None else max(5.0 * self.pixel_sigma, 3.0),
-                need=max(self.min_correspondences, 3),
-                fit_sigma=self.fit_sigma_px,
-                tolerance_m=self.tolerance_m,
-                search=lambda keep: self._search(frame, keep),
-                landmark_spacing_m=self._landmark_spacing_m,
-            )
+        inputs = VerifyInputs(
+            detections_uv=frame.detections_uv,
+            landmarks_xyz=self.landmarks_xyz,
+            K=self.K,
+            image_size=self.image_size,
+            cam_from_world=pose.cam_from_world,
+            assignment=pose.assignment,
+            covariance=pose.covariance,
+            prior_cam_from_world=frame.prior,
+            prior_sigmas=frame.prior_sigmas,
+            pixel_sigma=self.pixel_sigma,
+            gate_px=self.gate_px if self.gate_px is not None else max(5.0 * self.pixel_sigma, 3.0),
+            need=max(self.min_correspondences, 3),
+            fit_sigma=self.fit_sigma_px,
+            tolerance_m=self.tolerance_m,
+            search=lambda keep: self._search(frame, keep),
+            landmark_spacing_m=self._landmark_spacing_m,
         )
+        refusal = verify_pose(inputs)
         timings["verify"] = time.perf_counter() - t
         if refusal is None:
-            return None
+            return None, inputs
         refused = pose.cam_from_world.copy()
-        return _Failure(refusal.code, refusal.reason, pose.assignment, n_hypotheses, refused)
+        return _Failure(refusal.code, refusal.reason, pose.assignment, n_hypotheses, refused), inputs
+
+    def _without_outliers(self, frame: _Frame, pose: _Pose, verified: VerifyInputs) -> _Pose:
+        """The verified pose without the pairs its outlier test dropped, where it dropped any.
+
+        The verification refits the pose without the pairs beyond the others' leave-one-out
+        quantile (:func:`localization.verify.without_outliers`) and passes it only when that
+        keeps the camera centre inside the pose's 99.9 % ellipsoid; the refit is then the
+        better pose -- one or two detections a few pixels off their corners no longer pull it
+        -- and least squares on Gaussian pixels at the declared sigma is left alone (a pair is
+        dropped with probability 0.001). Reported with those detections unassigned, refined
+        and measured on the rest (:func:`~localization.pose.finish.finish_pose`); the pose as
+        it was if the refit puts a landmark behind the camera.
+        """
+        T, a, dropped = verified.without_outliers
+        if dropped == 0:
+            return pose
+        done = finish_pose(
+            FinishInputs(
+                K=self.K,
+                start_cam_from_world=T,
+                landmarks_xyz=self.landmarks_xyz,
+                detections_uv=frame.detections_uv,
+                assignment=a,
+                pixel_sigma=self.pixel_sigma,
+                prior_cam_from_world=frame.prior,
+                prior_sigmas=frame.prior_sigmas,
+            )
+        )
+        if not done.in_front:
+            return pose
+        return _Pose(done.cam_from_world, a, int(np.count_nonzero(a >= 0)), done.rmse_px, done.covariance,
+                     done.spread_px, done.prior_mahalanobis_sq)
 
     def _search(
         self, frame: _Frame, keep: NDArray[np.bool_]

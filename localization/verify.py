@@ -160,6 +160,7 @@ __all__ = [
     "rival_search",
     "twin_hypotheses",
     "verify_pose",
+    "without_outliers",
 ]
 
 
@@ -318,6 +319,11 @@ class VerifyInputs:
         """
         return position_tolerance(self.K, self.cam_from_world, self.landmarks_xyz, self.image_size,
                                   self.fit_sigma_px, self.tolerance_m or 0.0)
+
+    @cached_property
+    def without_outliers(self) -> tuple[NDArray[np.float64], NDArray[np.int64], int]:
+        """:func:`without_outliers` of this pose, made once (the outlier test and the localizer read it)."""
+        return without_outliers(self)
 
     @cached_property
     def worst_leverage_m(self) -> float:
@@ -602,16 +608,14 @@ def _refit(
     return to_transforms(R, t)[0]
 
 
-def _outlier_refusal(inputs: VerifyInputs) -> Refusal | None:
-    """The refusal when pairs the others reject (:func:`leave_one_out_chi2`) hold the pose up.
+def without_outliers(inputs: VerifyInputs) -> tuple[NDArray[np.float64], NDArray[np.int64], int]:
+    """The winner refit without the pairs the others reject: ``(cam_from_world, assignment, dropped)``.
 
-    The worst rejected pair is dropped and the pose refitted on the rest, again while one is
-    rejected and more than ``need`` pairs remain; the pose fails as
-    :attr:`~localization.failure.FailureCode.UNSUPPORTED` when the rest's pose has its camera
-    centre outside the winner's 99.9 % position ellipsoid (:data:`DISTINCT_POSITION_SQ`; the
-    winner's covariance rescaled from ``pixel_sigma`` to the detector's ``fit_sigma``): the
-    winner then rests on wrong pairs. A right pose with a stray pair among many keeps its centre
-    and passes, unchanged.
+    The worst pair beyond the others' leave-one-out :data:`OUTLIER_QUANTILE`
+    (:func:`leave_one_out_chi2` at the detector's fit sigma) is dropped and the pose refitted on
+    the rest, again while one is rejected and more than ``need`` pairs remain (a minimal fit has
+    its own test, :func:`minimal_fit_chi2_limit`). With nothing dropped, the winner's pose and
+    assignment. Made once per pose (:attr:`VerifyInputs.without_outliers`).
     """
     rows = np.flatnonzero(inputs.assignment >= 0)
     ids = inputs.assignment[rows]
@@ -628,6 +632,22 @@ def _outlier_refusal(inputs: VerifyInputs) -> Refusal | None:
         keep = np.arange(rows.size) != worst
         rows, ids, dropped = rows[keep], ids[keep], dropped + 1
         T = _refit(inputs, rows, ids)
+    a = np.full_like(inputs.assignment, -1)
+    a[rows] = ids
+    return T, a, dropped
+
+
+def _outlier_refusal(inputs: VerifyInputs) -> Refusal | None:
+    """The refusal when pairs the others reject (:func:`leave_one_out_chi2`) hold the pose up.
+
+    The pose refit without them (:func:`without_outliers`) fails the pose as
+    :attr:`~localization.failure.FailureCode.UNSUPPORTED` when its camera centre lies outside
+    the winner's 99.9 % position ellipsoid (:data:`DISTINCT_POSITION_SQ`; the winner's
+    covariance rescaled from ``pixel_sigma`` to the detector's ``fit_sigma``): the winner then
+    rests on wrong pairs. A right pose with a stray pair among many keeps its centre and passes
+    (and the localizer reports the refit: :meth:`localization.Localizer.localize`).
+    """
+    T, _, dropped = inputs.without_outliers
     if dropped == 0:
         return None
     dc = pose_difference(T, inputs.cam_from_world)[:3]

@@ -340,12 +340,15 @@ def test_a_pose_resting_on_displaced_pairs_fails_and_among_many_it_stands():
     assert not est.success and est.failure_code is FailureCode.UNSUPPORTED
     assert f"leave-one-out {OUTLIER_QUANTILE:g} quantile" in est.failure_reason
     # the same two displaced among twelve: dropping them leaves the centre inside the
-    # ellipsoid, and the pose stands, unchanged by the verification
+    # ellipsoid, and the pose stands, reported as refit without the pairs the test dropped
     X, T, det = _displaced(list(range(12)), 4.0)
     est = Localizer(X, PAPER_K, image_size=PAPER_IMAGE_SIZE).localize(det, paper_prior(T, 3))
     plain = Localizer(X, PAPER_K, image_size=PAPER_IMAGE_SIZE, verify=False).localize(det, paper_prior(T, 3))
-    assert est.success and np.linalg.norm(est.position - camera_center(T)) < 0.3
-    np.testing.assert_array_equal(est.cam_from_world, plain.cam_from_world)
+    err, plain_err = (np.linalg.norm(e.position - camera_center(T)) for e in (est, plain))
+    assert est.success and err < 0.5 * plain_err  # measured 0.08 against 0.19 m
+    # detection 0, displaced, unassigned (detection 1 is beyond the gate already); the rest as paired
+    np.testing.assert_array_equal(np.flatnonzero(est.assignment != plain.assignment), [0])
+    assert est.assignment[0] == -1 and est.n_inliers == plain.n_inliers - 1 == 10
 
 
 def test_a_period_of_the_layout_gives_rivals_with_the_same_residuals():
