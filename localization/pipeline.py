@@ -413,7 +413,9 @@ class Localizer:
         One sequence for both association modes: validate the inputs, check the detections can
         give a pose, associate them with the landmarks (:meth:`associate`), finish a pose on the
         association's pairs (the mode's way: PnP on them for ``paper``, the refinement of the
-        association's own pose for ``robust``), check that pose, build the estimate.
+        association's own pose for ``robust``), check that pose (in ``robust`` mode, verify it:
+        :mod:`localization.verify`; a verified pose whose outlier test dropped pairs is
+        reported refit without them, those detections unassigned), build the estimate.
 
         Args:
             detections_uv: (N, 2) pixel detections (or a :class:`Detections`); rows with NaN are

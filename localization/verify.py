@@ -49,11 +49,12 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   seven pairs with one to three wrong, loose (1-2.5 px RMS) but within the association's fit
   test at ``pixel_sigma``. Each pair's residual against the pose the other pairs give is a
   2-dof chi-square for a right pair; the worst beyond :data:`OUTLIER_QUANTILE` is dropped and
-  the pose refitted, while more than ``need`` pairs remain, and the pose fails as
-  ``UNSUPPORTED`` when the refitted camera centre leaves the winner's position ellipsoid. The
-  residuals are scaled by the detector's own calibrated noise when it declares one
-  (``fit_sigma``, :data:`localization.detect.learned.FIT_PIXEL_SIGMA_PX`), which the
-  minimal-fit test uses too.
+  the pose refitted, while more than ``need`` pairs remain (:func:`without_outliers`), and the
+  pose fails as ``UNSUPPORTED`` when the refitted camera centre leaves the winner's position
+  ellipsoid. When it stays inside and every other test passes, the localizer reports the refit
+  (:meth:`localization.Localizer.localize`): the stray pairs no longer pull it. The residuals
+  are scaled by the detector's own calibrated noise when it declares one (``fit_sigma``,
+  :data:`localization.detect.learned.FIT_PIXEL_SIGMA_PX`), which the minimal-fit test uses too.
 * *A period of the layout* (:func:`lattice_rivals`). On a regular grid the same detections
   pair as well with the landmarks one period over, seen from a camera moved by the period: the
   residuals are identical and only the prior (and the landmarks each predicts) tell them
