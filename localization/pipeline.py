@@ -704,7 +704,9 @@ class Localizer:
         -- and least squares on Gaussian pixels at the declared sigma is left alone (a pair is
         dropped with probability 0.001). Reported with those detections unassigned, refined
         and measured on the rest (:func:`~localization.pose.finish.finish_pose`); the pose as
-        it was if the refit puts a landmark behind the camera.
+        it was if the refit puts a landmark behind the camera, has no finite covariance (the rest
+        a degenerate layout: four corners of a grid on one line) or fails the checks every pose
+        passes (:meth:`_check_pose`).
         """
         T, a, dropped = verified.without_outliers
         if dropped == 0:
@@ -721,10 +723,11 @@ class Localizer:
                 prior_sigmas=frame.prior_sigmas,
             )
         )
-        if not done.in_front:
+        refit = _Pose(done.cam_from_world, a, int(np.count_nonzero(a >= 0)), done.rmse_px, done.covariance,
+                      done.spread_px, done.prior_mahalanobis_sq)
+        if not (done.in_front and np.all(np.isfinite(done.covariance))) or self._check_pose(refit, 0):
             return pose
-        return _Pose(done.cam_from_world, a, int(np.count_nonzero(a >= 0)), done.rmse_px, done.covariance,
-                     done.spread_px, done.prior_mahalanobis_sq)
+        return refit
 
     def _search(
         self, frame: _Frame, keep: NDArray[np.bool_]

@@ -73,6 +73,20 @@ def test_fuzz_full_has_no_confident_wrong_pose_and_a_calibrated_covariance(start
     _check(_run(range(start, start + SLICE)))
 
 
+@pytest.mark.parametrize("k", [5079, 8493])
+def test_a_refit_without_outliers_on_a_degenerate_rest_keeps_the_verified_pose(k):
+    # a regular coplanar grid: the outlier test drops pairs and the rest lie so that their
+    # covariance is singular (it was reported inf, the NEES NaN); the verified pose stands instead
+    case = draw_case(np.random.default_rng((19, k)))
+    est = _localize(case)
+    assert est.success and np.all(np.isfinite(est.covariance))
+    loc = Localizer(case.landmarks_xyz, case.K, association="robust", image_size=case.image_size,
+                    pixel_sigma=case.pixel_sigma, verify=False)
+    plain = loc.localize(case.detections_uv, case.prior_cam_from_world)
+    np.testing.assert_array_equal(est.cam_from_world, plain.cam_from_world)
+    np.testing.assert_array_equal(est.assignment, plain.assignment)
+
+
 def test_issue_19_reproduction_localizes_the_only_assignment_that_fits():
     # As issue 19 states it: a 3 x 3 grid of coplanar landmarks, a long lens with an off-centre
     # principal point, six correct detections, a prior 2.6 m / 2.8 deg off. The localizer kept
