@@ -52,7 +52,8 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   the pose refitted, while more than ``need`` pairs remain (:func:`without_outliers`), and the
   pose fails as ``UNSUPPORTED`` when the refitted camera centre leaves the winner's position
   ellipsoid. When it stays inside and every other test passes, the localizer reports the refit
-  (:meth:`localization.Localizer.localize`): the stray pairs no longer pull it. The residuals
+  where it is a pose at all (a finite covariance: :meth:`localization.Localizer.localize`): the
+  stray pairs no longer pull it. The residuals
   are scaled by the detector's own calibrated noise when it declares one (``fit_sigma``,
   :data:`localization.detect.learned.FIT_PIXEL_SIGMA_PX`), which the minimal-fit test uses too.
 * *A period of the layout* (:func:`lattice_rivals`). On a regular grid the same detections
