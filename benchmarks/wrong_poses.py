@@ -312,8 +312,10 @@ def diagnosis(rec: dict, est: object) -> dict:
     posterior = sigma * math.sqrt(float(np.sum(res**2)) / sigma**2 / max(2 * n - 6, 1))
     tol = position_tolerance(loc.K, est.cam_from_world, loc.landmarks_xyz, loc.image_size, sigma,
                              loc.tolerance_m if loc.tolerance_m is not None else CONFIRM_TOLERANCE_M)[0]
-    true_ids, model_ids = np.asarray(rec["true_ids"]), np.asarray(rec["model_ids"])
-    wrong = int(np.count_nonzero(model_ids[a[m]] != true_ids[m]))
+    if rec["true_ids"] is None:  # a detector without ground truth: no pair can be shown right
+        wrong = n
+    else:
+        wrong = int(np.count_nonzero(np.asarray(rec["model_ids"])[a[m]] != np.asarray(rec["true_ids"])[m]))
     return {"pairs": n, "wrong_pairs": wrong, "sigma_px": sigma, "posterior_sigma_px": posterior,
             "tolerance_m": tol, "level_m": protection_level(loc.K, est.cam_from_world, X, BIAS_SHARE * sigma),
             "posterior_level_m": protection_level(loc.K, est.cam_from_world, X,

@@ -135,6 +135,8 @@ def test_diagnose_names_a_wrong_pair_and_scales_the_level_with_a_loose_fit(tmp_p
     records, study, rec = _recording(tmp_path, true_ids_shift=1)
     _, _, est = wrong_poses._replay_one(rec)
     assert wrong_poses.diagnosis(rec, est)["wrong_pairs"] == 1
+    # a recording without ground truth (a detector that knows none): no pair can be shown right
+    assert wrong_poses.diagnosis(rec | {"true_ids": None}, est)["wrong_pairs"] == 12
     rec["localizer"].fit_sigma_px = 0.2  # a detector declaring 0.2 px: the residuals show more
     d = wrong_poses.diagnosis(rec, est)
     assert d["posterior_sigma_px"] > 0.3
