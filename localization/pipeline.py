@@ -725,9 +725,8 @@ class Localizer:
         )
         refit = _Pose(done.cam_from_world, a, int(np.count_nonzero(a >= 0)), done.rmse_px, done.covariance,
                       done.spread_px, done.prior_mahalanobis_sq)
-        if not (done.in_front and np.all(np.isfinite(done.covariance))) or self._check_pose(refit, 0):
-            return pose
-        return refit
+        is_pose = done.in_front and np.all(np.isfinite(done.covariance))
+        return refit if is_pose and self._check_pose(refit, 0) is None else pose
 
     def _search(
         self, frame: _Frame, keep: NDArray[np.bool_]

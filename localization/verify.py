@@ -53,9 +53,9 @@ it, and turns it into a failure with a reason when the detections cannot confirm
   pose fails as ``UNSUPPORTED`` when the refitted camera centre leaves the winner's position
   ellipsoid. When it stays inside and every other test passes, the localizer reports the refit
   where it is a pose at all (a finite covariance: :meth:`localization.Localizer.localize`): the
-  stray pairs no longer pull it. The residuals
-  are scaled by the detector's own calibrated noise when it declares one (``fit_sigma``,
-  :data:`localization.detect.learned.FIT_PIXEL_SIGMA_PX`), which the minimal-fit test uses too.
+  stray pairs no longer pull it. The residuals are scaled by the detector's own calibrated noise
+  when it declares one (``fit_sigma``, :data:`localization.detect.learned.FIT_PIXEL_SIGMA_PX`),
+  which the minimal-fit test uses too.
 * *A period of the layout* (:func:`lattice_rivals`). On a regular grid the same detections
   pair as well with the landmarks one period over, seen from a camera moved by the period: the
   residuals are identical and only the prior (and the landmarks each predicts) tell them
